@@ -1,0 +1,13 @@
+"""lubcontact: rigid grains in a viscous fluid with the gluey contact model."""
+from .cones import ConeKind, Cones
+from .contacts import Contacts, find_contacts
+from .integrator import Simulation, Trajectory
+from .laws import GlueyLubrication, Inelastic, Law
+from .problem import StepProblem
+from .scene import Grains, Planes, Scene, Schedule
+from .solvers import SolveResult, SolverError, methods, solve
+
+__version__ = "0.1.0"
+__all__ = ["ConeKind", "Cones", "Contacts", "find_contacts", "Simulation", "Trajectory",
+           "GlueyLubrication", "Inelastic", "Law", "StepProblem", "Grains", "Planes", "Scene",
+           "Schedule", "SolveResult", "SolverError", "methods", "solve"]

@@ -1,0 +1,76 @@
+"""Input validation shared by every public constructor.
+
+Every failure raises ``ValueError`` with a message that names the field and
+shows the offending value, so that a user can find the mistake in their input.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+
+def _show(value: np.ndarray | float) -> str:
+    arr = np.asarray(value)
+    if arr.size <= 6:
+        return np.array2string(arr, precision=6) if arr.ndim else repr(float(arr))
+    return f"array of shape {arr.shape}"
+
+
+def as_array(field: str, value, shape: tuple[int | None, ...] | None = None,
+             dtype=float) -> np.ndarray:
+    """Convert ``value`` to an array, checking its shape and finiteness.
+
+    Parameters
+    ----------
+    field : str
+        Name reported in the error message.
+    value : array_like
+        The input.
+    shape : tuple of int or None, optional
+        Expected shape; ``None`` entries match any length.
+    dtype : numpy dtype, optional
+        Target dtype (default float).
+    """
+    try:
+        arr = np.array(value, dtype=dtype)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{field}: cannot convert {value!r} to an array of {dtype.__name__}") from exc
+    if shape is not None:
+        ok = arr.ndim == len(shape) and all(
+            want is None or want == got for want, got in zip(shape, arr.shape))
+        if not ok:
+            want = "(" + ", ".join("n" if s is None else str(s) for s in shape) + ")"
+            raise ValueError(f"{field}: expected shape {want}, got {arr.shape}")
+    if arr.dtype.kind == "f" and not np.all(np.isfinite(arr)):
+        bad = np.flatnonzero(~np.isfinite(arr.ravel()))
+        raise ValueError(f"{field}: non-finite value {arr.ravel()[bad[0]]} at flat index {bad[0]}")
+    return arr
+
+
+def positive(field: str, value, shape: tuple[int | None, ...] | None = None) -> np.ndarray:
+    """Like :func:`as_array` and require every entry to be strictly positive."""
+    arr = as_array(field, value, shape)
+    if np.any(arr <= 0):
+        bad = np.flatnonzero(arr.ravel() <= 0)
+        raise ValueError(f"{field}: must be > 0, got {arr.ravel()[bad[0]]} at index {bad[0]}")
+    return arr
+
+
+def positive_scalar(field: str, value) -> float:
+    """A finite, strictly positive float."""
+    return float(positive(field, value, shape=()))
+
+
+def nonnegative(field: str, value, shape: tuple[int | None, ...] | None = None) -> np.ndarray:
+    """Like :func:`as_array` and require every entry to be >= 0."""
+    arr = as_array(field, value, shape)
+    if np.any(arr < 0):
+        bad = np.flatnonzero(arr.ravel() < 0)
+        raise ValueError(f"{field}: must be >= 0, got {arr.ravel()[bad[0]]} at index {bad[0]}")
+    return arr
+
+
+def require(condition: bool, field: str, message: str, value=None) -> None:
+    """Raise ``ValueError`` naming ``field`` unless ``condition`` holds."""
+    if not condition:
+        shown = "" if value is None else f", got {_show(value)}"
+        raise ValueError(f"{field}: {message}{shown}")

@@ -1,0 +1,296 @@
+"""Per-contact force sets (cones): one description for projection, cvxpy and residuals.
+
+A force vector ``lam`` of a step problem is laid out as
+``[lam_n (nc), lam_T (nt * tangent_dim)]``: one normal component per contact,
+then the tangential components of the contacts listed in ``Cones.tangential``
+(in that order). Force sets, by kind:
+
+=========  ===============================================  ======================
+kind       force set ``K_c``                                 velocity set ``K_c*``
+=========  ===============================================  ======================
+NONNEG     ``lam_n >= 0``                                    ``g_n >= 0``
+FREE       ``lam_n`` in R                                    ``g_n = 0``
+NONPOS     ``lam_n <= 0`` (pulled, frictionless)             ``g_n <= 0``
+COULOMB    ``|lam_T| <= mu lam_n``                           ``g_n >= mu |g_T|``
+UNION      COULOMB cone union ``{lam_n <= 0, lam_T = 0}``    (not convex)
+=========  ===============================================  ======================
+
+Tangential components of a contact whose kind is not COULOMB or UNION are
+forced to zero (their velocity rows are unconstrained).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from enum import IntEnum
+
+import numpy as np
+
+
+class ConeKind(IntEnum):
+    NONNEG = 0
+    FREE = 1
+    NONPOS = 2
+    COULOMB = 3
+    UNION = 4
+
+
+def project_friction_cone(normal: np.ndarray, tangential: np.ndarray, mu: np.ndarray):
+    """Euclidean projection onto ``{|t| <= mu n}``, vectorised.
+
+    Parameters
+    ----------
+    normal : ndarray, shape (m,)
+    tangential : ndarray, shape (m, k)
+    mu : ndarray, shape (m,)
+        Friction coefficients, >= 0 (mu = 0 gives the half-line ``n >= 0``).
+
+    Returns
+    -------
+    (ndarray (m,), ndarray (m, k))
+    """
+    norm_t = np.linalg.norm(tangential, axis=1)
+    inside = norm_t <= mu * normal
+    polar = mu * norm_t <= -normal
+    scale = (normal + mu * norm_t) / (1.0 + mu * mu)
+    new_n = np.where(inside, normal, np.where(polar, 0.0, scale))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        direction = np.where(norm_t[:, None] > 0, tangential / norm_t[:, None], 0.0)
+    new_t = np.where(inside[:, None], tangential,
+                     np.where(polar[:, None], 0.0, (mu * scale)[:, None] * direction))
+    return new_n, new_t
+
+
+@dataclass
+class Cones:
+    """Force sets of every contact of a step problem.
+
+    Attributes
+    ----------
+    kinds : ndarray of int8, shape (nc,)
+        :class:`ConeKind` per contact.
+    mu : ndarray, shape (nc,)
+        Friction coefficients (ignored unless the kind is COULOMB or UNION).
+    tangential : ndarray of int, shape (nt,)
+        Contacts that have tangential force rows, in row order.
+    tangent_dim : int
+        Tangential components per contact (dim - 1).
+    """
+
+    kinds: np.ndarray
+    mu: np.ndarray
+    tangential: np.ndarray
+    tangent_dim: int
+
+    @classmethod
+    def frictionless(cls, kinds: np.ndarray, tangent_dim: int) -> "Cones":
+        kinds = np.asarray(kinds, dtype=np.int8)
+        return cls(kinds=kinds, mu=np.zeros(len(kinds)), tangential=np.zeros(0, dtype=int),
+                   tangent_dim=tangent_dim)
+
+    @property
+    def count(self) -> int:
+        return self.kinds.shape[0]
+
+    @property
+    def n_rows(self) -> int:
+        return self.count + self.tangential.shape[0] * self.tangent_dim
+
+    @property
+    def has_friction(self) -> bool:
+        return self.tangential.shape[0] > 0
+
+    @property
+    def is_convex(self) -> bool:
+        return not np.any(self.kinds == ConeKind.UNION)
+
+    def mask(self, kind: ConeKind) -> np.ndarray:
+        return self.kinds == kind
+
+    def split(self, forces: np.ndarray):
+        """Normal part (nc,) and tangential part (nt, tangent_dim) of a force vector."""
+        nc = self.count
+        return forces[:nc], forces[nc:].reshape(-1, self.tangent_dim)
+
+    def join(self, normal: np.ndarray, tangential: np.ndarray) -> np.ndarray:
+        return np.concatenate([normal, np.reshape(tangential, -1)])
+
+    def with_branches(self, pulled: np.ndarray) -> "Cones":
+        """Convex cones with each UNION contact replaced by one of its pieces.
+
+        Parameters
+        ----------
+        pulled : ndarray of bool, shape (nc,)
+            True: the pulled piece (NONPOS); False: the pushed piece (COULOMB).
+        """
+        kinds = self.kinds.copy()
+        union = kinds == ConeKind.UNION
+        kinds[union & pulled] = ConeKind.NONPOS
+        kinds[union & ~pulled] = ConeKind.COULOMB
+        return Cones(kinds=kinds, mu=self.mu, tangential=self.tangential, tangent_dim=self.tangent_dim)
+
+    def project(self, forces: np.ndarray) -> np.ndarray:
+        """Euclidean projection of ``forces`` onto the product of the force sets.
+
+        For UNION contacts this is the nearer of the projections onto the two
+        pieces (a projection onto a non-convex set, unique almost everywhere).
+        """
+        normal, tangential = self.split(forces)
+        kinds = self.kinds
+        new_n = normal.copy()
+        new_n[kinds == ConeKind.NONNEG] = np.maximum(normal[kinds == ConeKind.NONNEG], 0.0)
+        new_n[kinds == ConeKind.NONPOS] = np.minimum(normal[kinds == ConeKind.NONPOS], 0.0)
+        new_t = np.zeros_like(tangential)
+        if self.has_friction:
+            idx = self.tangential
+            t_kind = kinds[idx]
+            cone_n, cone_t = project_friction_cone(normal[idx], tangential, self.mu[idx])
+            coulomb = t_kind == ConeKind.COULOMB
+            new_n[idx[coulomb]] = cone_n[coulomb]
+            new_t[coulomb] = cone_t[coulomb]
+            union = t_kind == ConeKind.UNION
+            if np.any(union):
+                pull_n = np.minimum(normal[idx[union]], 0.0)
+                d_cone = (cone_n[union] - normal[idx[union]]) ** 2 + \
+                    np.sum((cone_t[union] - tangential[union]) ** 2, axis=1)
+                d_pull = (pull_n - normal[idx[union]]) ** 2 + np.sum(tangential[union] ** 2, axis=1)
+                take_cone = d_cone <= d_pull
+                new_n[idx[union]] = np.where(take_cone, cone_n[union], pull_n)
+                new_t[union] = np.where(take_cone[:, None], cone_t[union], 0.0)
+        return self.join(new_n, new_t)
+
+    def natural_residual(self, forces: np.ndarray, gradient: np.ndarray) -> float:
+        """``|lam - P_K(lam - grad)|``, the natural-map residual (Euclidean norm)."""
+        return float(np.linalg.norm(forces - self.project(forces - gradient)))
+
+    def velocity_violation(self, constraint: np.ndarray) -> np.ndarray:
+        """How far each contact's ``g_c`` lies outside ``K_c*`` (>= 0, length units).
+
+        Parameters
+        ----------
+        constraint : ndarray, shape (n_rows,)
+            ``g = D + s + dt H v`` laid out like a force vector.
+        """
+        g_n, g_t = self.split(constraint)
+        kinds = self.kinds
+        violation = np.zeros(self.count)
+        violation[kinds == ConeKind.NONNEG] = np.maximum(-g_n[kinds == ConeKind.NONNEG], 0.0)
+        violation[kinds == ConeKind.NONPOS] = np.maximum(g_n[kinds == ConeKind.NONPOS], 0.0)
+        violation[kinds == ConeKind.FREE] = np.abs(g_n[kinds == ConeKind.FREE])
+        if self.has_friction:
+            idx = self.tangential
+            cone = (kinds[idx] == ConeKind.COULOMB) | (kinds[idx] == ConeKind.UNION)
+            slip = self.mu[idx] * np.linalg.norm(g_t, axis=1)
+            violation[idx[cone]] = np.maximum(slip[cone] - g_n[idx[cone]], 0.0)
+        return violation
+
+    # -- cvxpy ------------------------------------------------------------------------------
+    def cvxpy_force_constraints(self, normal, tangential, polyhedral: bool = False) -> list:
+        """cvxpy constraints ``lam_c in K_c`` on expressions of the force components.
+
+        Parameters
+        ----------
+        normal : cvxpy expression, shape (nc,)
+        tangential : cvxpy expression, shape (nt * tangent_dim,) or None
+        polyhedral : bool
+            In 2D, write each friction cone as two half-planes (a QP) instead
+            of a second-order cone.
+        """
+        import cvxpy as cp
+
+        self._require_convex()
+        kinds = self.kinds
+        constraints = []
+        for kind, sense in ((ConeKind.NONNEG, 1.0), (ConeKind.NONPOS, -1.0)):
+            rows = np.flatnonzero(kinds == kind)
+            if rows.size:
+                constraints.append(sense * normal[rows] >= 0)
+        if self.has_friction:
+            coulomb = kinds[self.tangential] == ConeKind.COULOMB
+            cone_contacts = self.tangential[coulomb]
+            if cone_contacts.size:
+                t_rows = self._tangent_rows(np.flatnonzero(coulomb))
+                constraints += _cone_constraints(cp, cp.multiply(self.mu[cone_contacts], normal[cone_contacts]),
+                                                 tangential, t_rows, self.tangent_dim, polyhedral)
+            zero_rows = self._tangent_rows(np.flatnonzero(~coulomb))
+            if zero_rows.size:
+                constraints.append(tangential[zero_rows.ravel()] == 0)
+        return constraints
+
+    def cvxpy_velocity_constraints(self, normal, tangential, polyhedral: bool = False) -> list:
+        """cvxpy constraints ``g_c in K_c*`` on the primal's constraint expressions.
+
+        Returns the constraints in the order ``[NONNEG, FREE, NONPOS, COULOMB]``
+        (each present only when that kind occurs) so that
+        :meth:`forces_from_duals` can read the multipliers back.
+        """
+        import cvxpy as cp
+
+        self._require_convex()
+        kinds = self.kinds
+        constraints = []
+        for kind in (ConeKind.NONNEG, ConeKind.FREE, ConeKind.NONPOS):
+            rows = np.flatnonzero(kinds == kind)
+            if rows.size:
+                expr = normal[rows]
+                constraints.append(expr >= 0 if kind == ConeKind.NONNEG else
+                                   expr == 0 if kind == ConeKind.FREE else expr <= 0)
+        coulomb = self._coulomb_positions()
+        if coulomb.size:
+            cone_contacts = self.tangential[coulomb]
+            t_rows = self._tangent_rows(coulomb)
+            constraints += _cone_constraints(cp, normal[cone_contacts], tangential, t_rows,
+                                             self.tangent_dim, polyhedral, scale=self.mu[cone_contacts])
+        return constraints
+
+    def forces_from_duals(self, constraints: list, polyhedral: bool = False) -> np.ndarray:
+        """Contact forces from the multipliers of :meth:`cvxpy_velocity_constraints`."""
+        kinds = self.kinds
+        normal = np.zeros(self.count)
+        tangential = np.zeros((self.tangential.shape[0], self.tangent_dim))
+        position = 0
+        for kind, sign in ((ConeKind.NONNEG, 1.0), (ConeKind.FREE, -1.0), (ConeKind.NONPOS, -1.0)):
+            rows = np.flatnonzero(kinds == kind)
+            if rows.size:
+                normal[rows] = sign * np.asarray(constraints[position].dual_value).ravel()
+                position += 1
+        coulomb = self._coulomb_positions()
+        if coulomb.size:
+            cone_contacts = self.tangential[coulomb]
+            mu = self.mu[cone_contacts]
+            if polyhedral:
+                upper = np.asarray(constraints[position].dual_value).ravel()
+                lower = np.asarray(constraints[position + 1].dual_value).ravel()
+                normal[cone_contacts] = upper + lower
+                tangential[coulomb, 0] = mu * (lower - upper)
+            else:
+                dual_t, dual_x = constraints[position].dual_value
+                normal[cone_contacts] = np.ravel(dual_t)
+                tangential[coulomb] = mu[:, None] * np.reshape(dual_x, (self.tangent_dim, -1)).T
+        return self.join(normal, tangential)
+
+    def _coulomb_positions(self) -> np.ndarray:
+        if not self.has_friction:
+            return np.zeros(0, dtype=int)
+        return np.flatnonzero(self.kinds[self.tangential] == ConeKind.COULOMB)
+
+    def _tangent_rows(self, positions: np.ndarray) -> np.ndarray:
+        """Row indices into the tangential block, shape (len(positions), tangent_dim)."""
+        return positions[:, None] * self.tangent_dim + np.arange(self.tangent_dim)
+
+    def _require_convex(self) -> None:
+        if not self.is_convex:
+            raise ValueError("cones.kinds: UNION contacts are not convex; fix a branch first "
+                             "with Cones.with_branches")
+
+
+def _cone_constraints(cp, bound, tangential, t_rows, tangent_dim, polyhedral, scale=None):
+    """``|scale * x_T| <= bound`` for each contact, as SOC or (2D) as two half-planes."""
+    t_expr = tangential[t_rows.ravel()]
+    if scale is not None:
+        t_expr = cp.multiply(np.repeat(scale, tangent_dim), t_expr)
+    if polyhedral:
+        if tangent_dim != 1:
+            raise ValueError(f"polyhedral: friction cones are polyhedral only in 2D, "
+                             f"tangent_dim={tangent_dim}")
+        return [bound - t_expr >= 0, bound + t_expr >= 0]
+    return [cp.SOC(bound, cp.reshape(t_expr, (tangent_dim, -1), order="F"), axis=0)]

@@ -1,0 +1,191 @@
+"""Contact detection and contact Jacobians.
+
+Bodies are numbered globally: free grains ``0..N-1``, fixed grains
+``N..N+F-1``, planes ``N+F..N+F+P-1``. Each contact joins a body ``a`` (any
+kind) to a free grain ``b``; its normal points from ``a`` to ``b`` and the
+relative velocity is ``u = v_b(contact point) - v_a(contact point)``. A
+positive normal force pushes the bodies apart.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.spatial import cKDTree
+
+from .geometry import lever_coefficients, tangent_basis
+from .scene import Scene, n_rotations
+
+
+@dataclass
+class Contacts:
+    """Candidate contacts of one configuration, all arrays of length ``nc``.
+
+    Attributes
+    ----------
+    body_a, body_b : ndarray of int
+        Global body numbers; ``body_b`` is always a free grain.
+    keys : ndarray of int64
+        Pair identity ``body_a * n_bodies + body_b``, sorted increasingly.
+    gaps : ndarray
+        Signed distances ``D`` (length); negative means overlap.
+    normals : ndarray, shape (nc, dim)
+        Unit normals from ``a`` to ``b``.
+    points : ndarray, shape (nc, dim)
+        Contact points (middle of the gap).
+    radius_a, radius_b : ndarray
+        Radii (0 for a plane).
+    n_grains : int
+        Number of free grains (columns of the Jacobians are built from it).
+    """
+
+    body_a: np.ndarray
+    body_b: np.ndarray
+    keys: np.ndarray
+    gaps: np.ndarray
+    normals: np.ndarray
+    points: np.ndarray
+    radius_a: np.ndarray
+    radius_b: np.ndarray
+    n_grains: int
+
+    @property
+    def count(self) -> int:
+        return self.gaps.shape[0]
+
+    @property
+    def dim(self) -> int:
+        return self.normals.shape[1]
+
+    @property
+    def a_is_free(self) -> np.ndarray:
+        return self.body_a < self.n_grains
+
+    @property
+    def effective_radius(self) -> np.ndarray:
+        """``r`` for a plane contact, ``r_a r_b / (r_a + r_b)`` for two grains."""
+        plane = self.radius_a == 0
+        ra = np.where(plane, 1.0, self.radius_a)
+        return np.where(plane, self.radius_b, ra * self.radius_b / (ra + self.radius_b))
+
+    @property
+    def smaller_radius(self) -> np.ndarray:
+        return np.where(self.radius_a > 0, np.minimum(self.radius_a, self.radius_b), self.radius_b)
+
+
+def find_contacts(scene: Scene, d_max: float) -> Contacts:
+    """All pairs with gap ``D < d_max``, found with a k-d tree (no O(N^2) search).
+
+    Parameters
+    ----------
+    scene : Scene
+    d_max : float
+        Detection distance (length), >= 0.
+    """
+    grains = scene.grains
+    n, dim = grains.count, grains.dim
+    centres = np.vstack([grains.positions, scene.fixed_positions])
+    radii = np.concatenate([grains.radii, scene.fixed_radii])
+    parts = [_grain_pairs(centres, radii, n, d_max), _plane_pairs(scene, n + len(scene.fixed_radii), d_max)]
+    a = np.concatenate([p[0] for p in parts])
+    b = np.concatenate([p[1] for p in parts])
+    gaps = np.concatenate([p[2] for p in parts])
+    normals = np.vstack([p[3] for p in parts]).reshape(-1, dim)
+    radius_a = np.concatenate([p[4] for p in parts])
+    n_bodies = n + len(scene.fixed_radii) + scene.planes.count
+    keys = a.astype(np.int64) * n_bodies + b
+    order = np.argsort(keys, kind="stable")
+    a, b, gaps, normals, radius_a, keys = a[order], b[order], gaps[order], normals[order], \
+        radius_a[order], keys[order]
+    radius_b = grains.radii[b]
+    points = grains.positions[b] - (radius_b + 0.5 * gaps)[:, None] * normals
+    return Contacts(body_a=a, body_b=b, keys=keys, gaps=gaps, normals=normals, points=points,
+                    radius_a=radius_a, radius_b=radius_b, n_grains=n)
+
+
+def _grain_pairs(centres, radii, n_free, d_max):
+    dim = centres.shape[1]
+    empty = (np.zeros(0, int), np.zeros(0, int), np.zeros(0), np.zeros((0, dim)), np.zeros(0))
+    if len(radii) < 2 or n_free == 0:
+        return empty
+    tree = cKDTree(centres)
+    pairs = tree.query_pairs(2.0 * radii.max() + d_max, output_type="ndarray")
+    if pairs.size == 0:
+        return empty
+    i, j = pairs[:, 0], pairs[:, 1]          # i < j, so a fixed grain can only be j
+    keep = i < n_free
+    i, j = i[keep], j[keep]
+    delta = centres[j] - centres[i]
+    dist = np.linalg.norm(delta, axis=1)
+    gaps = dist - radii[i] - radii[j]
+    keep = gaps < d_max
+    i, j, delta, dist, gaps = i[keep], j[keep], delta[keep], dist[keep], gaps[keep]
+    fixed_j = j >= n_free                    # orient so that b is always free
+    a = np.where(fixed_j, j, i)
+    b = np.where(fixed_j, i, j)
+    normals = np.where(fixed_j[:, None], -delta, delta) / dist[:, None]
+    return a, b, gaps, normals, radii[a]
+
+
+def _plane_pairs(scene, first_plane_id, d_max):
+    planes, grains = scene.planes, scene.grains
+    offsets = np.einsum("pd,pd->p", planes.points, planes.normals)
+    gaps = grains.positions @ planes.normals.T - offsets[None, :] - grains.radii[:, None]
+    b, p = np.nonzero(gaps < d_max)
+    return (first_plane_id + p, b, gaps[b, p], planes.normals[p], np.zeros(len(b)))
+
+
+def dof_count(n_grains: int, dim: int, rotations: bool) -> int:
+    """Length of the generalised velocity ``[v (N*dim), omega (N*nrot)]``."""
+    return n_grains * (dim + (n_rotations(dim) if rotations else 0))
+
+
+def normal_jacobian(contacts: Contacts, rotations: bool) -> sp.csr_matrix:
+    """Rows ``B`` with ``(B v)_c = u_n,c``, shape (nc, n_dof)."""
+    nc, dim, n = contacts.count, contacts.dim, contacts.n_grains
+    free_a = contacts.a_is_free
+    rows = np.concatenate([np.repeat(np.arange(nc), dim), np.repeat(np.flatnonzero(free_a), dim)])
+    cols = np.concatenate([(contacts.body_b[:, None] * dim + np.arange(dim)).ravel(),
+                           (contacts.body_a[free_a, None] * dim + np.arange(dim)).ravel()])
+    vals = np.concatenate([contacts.normals.ravel(), -contacts.normals[free_a].ravel()])
+    shape = (nc, dof_count(n, dim, rotations))
+    return sp.csr_matrix((vals, (rows, cols)), shape=shape)
+
+
+def tangential_jacobian(contacts: Contacts, which: np.ndarray) -> sp.csr_matrix:
+    """Rows ``T`` with ``(T v)`` = tangential relative velocity, for contacts ``which``.
+
+    Always built with rotational columns (friction needs them).
+
+    Parameters
+    ----------
+    which : ndarray of int
+        Indices of the contacts that get tangential rows, in row order.
+
+    Returns
+    -------
+    scipy.sparse.csr_matrix, shape (len(which) * (dim - 1), n_dof)
+    """
+    dim, n = contacts.dim, contacts.n_grains
+    nt, nrot = dim - 1, n_rotations(dim)
+    normals = contacts.normals[which]
+    tangents = tangent_basis(normals)                       # (m, nt, dim)
+    levers = lever_coefficients(normals, tangents)          # (m, nt, nrot)
+    a, b = contacts.body_a[which], contacts.body_b[which]
+    ra, rb = contacts.radius_a[which], contacts.radius_b[which]
+    free_a = a < n
+    row = np.arange(len(which) * nt).reshape(len(which), nt)
+    rot0 = n * dim
+    blocks = [
+        (row[:, :, None], b[:, None, None] * dim + np.arange(dim), tangents),
+        (row[:, :, None], rot0 + b[:, None, None] * nrot + np.arange(nrot), -rb[:, None, None] * levers),
+        (row[free_a, :, None], a[free_a, None, None] * dim + np.arange(dim), -tangents[free_a]),
+        (row[free_a, :, None], rot0 + a[free_a, None, None] * nrot + np.arange(nrot),
+         -ra[free_a, None, None] * levers[free_a]),
+    ]
+    rows = np.concatenate([np.broadcast_to(r, v.shape).ravel() for r, _, v in blocks])
+    cols = np.concatenate([np.broadcast_to(c, v.shape).ravel() for _, c, v in blocks])
+    vals = np.concatenate([v.ravel() for _, _, v in blocks])
+    shape = (len(which) * nt, dof_count(n, dim, True))
+    return sp.csr_matrix((vals, (rows, cols)), shape=shape)

@@ -1,0 +1,10 @@
+"""Solvers for step problems: reference (cvxpy + Clarabel) and fast methods.
+
+Use :func:`solve` with a registered method name; :func:`methods` lists them.
+"""
+from .base import (CONVERGED, DIVERGED, FAILED, INACCURATE, MAX_ITER, SolveResult, SolverError,
+                   SolverWarning, check_status, methods, register, solve)
+from . import reference  # noqa: F401  (registers the reference methods)
+
+__all__ = ["solve", "methods", "register", "check_status", "SolveResult", "SolverError",
+           "SolverWarning", "CONVERGED", "DIVERGED", "FAILED", "INACCURATE", "MAX_ITER"]
