@@ -38,14 +38,19 @@ def disk_on_incline(angle: float, height: float = 0.1, radius: float = 1.0, mass
                                   "height": height, "t_inversion": t_inversion})
 
 
-def two_grains(push_time: float = 1.0, force: float = 1.0, gap: float = 0.05, radius: float = 0.5,
-               mass: float = 1.0) -> Scene:
-    """Two disks on the x axis pushed together with ``force`` until ``push_time``, then pulled."""
+def two_grains(push_time: float = 1.0, push_force: float = 1.0, pull_force: float = 1.0,
+               gap: float = 0.05, radius: float = 0.5, mass: float = 1.0) -> Scene:
+    """Two disks on the x axis pushed together until ``push_time``, then pulled apart.
+
+    Each grain feels ``push_force`` towards the other, then ``pull_force`` away.
+    """
     positions = [[-(radius + gap / 2), 0.0], [radius + gap / 2, 0.0]]
     grains = Grains.create(positions, radius, masses=mass)
-    push = np.array([[force, 0.0], [-force, 0.0]])
-    return Scene.create(grains, external_force=Schedule(times=(0.0, push_time), values=(push, -push)),
-                        metadata={"name": "two_grains", "push_time": push_time, "force": force})
+    towards = np.array([[1.0, 0.0], [-1.0, 0.0]])
+    schedule = Schedule(times=(0.0, push_time), values=(push_force * towards, -pull_force * towards))
+    return Scene.create(grains, external_force=schedule,
+                        metadata={"name": "two_grains", "push_time": push_time,
+                                  "push_force": push_force, "pull_force": pull_force})
 
 
 def settling_pile(n_grains: int = 200, radius: float = 0.5, polydispersity: float = 0.2,
