@@ -5,6 +5,13 @@ Bodies are numbered globally: free grains ``0..N-1``, fixed grains
 kind) to a free grain ``b``; its normal points from ``a`` to ``b`` and the
 relative velocity is ``u = v_b(contact point) - v_a(contact point)``. A
 positive normal force pushes the bodies apart.
+
+Periodic scenes (``scene.period`` = L along x): grains and fixed grains within
+reach of either end are copied as ghost images shifted by +/- L before the
+neighbour search; a pair found through an image is mapped back to the original
+bodies and measured with the minimum-image separation, so its key is the same
+on both sides of the boundary and the pair keeps its gluey state when a grain
+crosses it.
 """
 from __future__ import annotations
 
@@ -87,7 +94,7 @@ def find_contacts(scene: Scene, d_max: float) -> Contacts:
     n, dim = grains.count, grains.dim
     centres = np.vstack([grains.positions, scene.fixed_positions])
     radii = np.concatenate([grains.radii, scene.fixed_radii])
-    parts = [_grain_pairs(centres, radii, n, d_max), _plane_pairs(scene, n + len(scene.fixed_radii), d_max)]
+    parts = [_grain_pairs(centres, radii, n, d_max, scene.period), _plane_pairs(scene, n + len(scene.fixed_radii), d_max)]
     a = np.concatenate([p[0] for p in parts])
     b = np.concatenate([p[1] for p in parts])
     gaps = np.concatenate([p[2] for p in parts])
@@ -104,19 +111,26 @@ def find_contacts(scene: Scene, d_max: float) -> Contacts:
                     radius_a=radius_a, radius_b=radius_b, n_grains=n)
 
 
-def _grain_pairs(centres, radii, n_free, d_max):
+def _grain_pairs(centres, radii, n_free, d_max, period=None):
     dim = centres.shape[1]
     empty = (np.zeros(0, int), np.zeros(0, int), np.zeros(0), np.zeros((0, dim)), np.zeros(0))
     if len(radii) < 2 or n_free == 0:
         return empty
-    tree = cKDTree(centres)
-    pairs = tree.query_pairs(2.0 * radii.max() + d_max, output_type="ndarray")
+    reach = 2.0 * radii.max() + d_max
+    points, owner = _with_ghosts(centres, reach, period)
+    pairs = cKDTree(points).query_pairs(reach, output_type="ndarray")
     if pairs.size == 0:
         return empty
-    i, j = pairs[:, 0], pairs[:, 1]          # i < j, so a fixed grain can only be j
-    keep = i < n_free
+    first, second = owner[pairs[:, 0]], owner[pairs[:, 1]]
+    i, j = np.minimum(first, second), np.maximum(first, second)   # a fixed grain can only be j
+    keep = (i < n_free) & (i != j)
     i, j = i[keep], j[keep]
+    if period is not None:                   # a pair seen directly and through images: once
+        _, unique = np.unique(i * len(radii) + j, return_index=True)
+        i, j = i[unique], j[unique]
     delta = centres[j] - centres[i]
+    if period is not None:
+        delta[:, 0] -= period * np.round(delta[:, 0] / period)
     dist = np.linalg.norm(delta, axis=1)
     gaps = dist - radii[i] - radii[j]
     keep = gaps < d_max
@@ -126,6 +140,31 @@ def _grain_pairs(centres, radii, n_free, d_max):
     b = np.where(fixed_j, i, j)
     normals = np.where(fixed_j[:, None], -delta, delta) / dist[:, None]
     return a, b, gaps, normals, radii[a]
+
+
+def _with_ghosts(centres, reach, period):
+    """Centres plus their periodic images near the ends of ``[0, period)``, and the owner of each.
+
+    Raises
+    ------
+    ValueError
+        If the period is not larger than twice the search reach (the minimum
+        image would be ambiguous).
+    """
+    owner = np.arange(len(centres))
+    if period is None:
+        return centres, owner
+    if not period > 2.0 * reach:
+        raise ValueError(f"period: must exceed twice the contact reach 2 (2 r_max + d_max) = "
+                         f"{2.0 * reach:.6g}, got {period}")
+    x = np.mod(centres[:, 0], period)
+    wrapped = centres.copy()
+    wrapped[:, 0] = x
+    near_start, near_end = np.flatnonzero(x < reach), np.flatnonzero(x >= period - reach)
+    shift = np.zeros(centres.shape[1])
+    shift[0] = period
+    points = np.vstack([wrapped, wrapped[near_start] + shift, wrapped[near_end] - shift])
+    return points, np.concatenate([owner, near_start, near_end])
 
 
 def _plane_pairs(scene, first_plane_id, d_max):

@@ -212,6 +212,11 @@ class Scene:
     overlap_tolerance : float
         Largest initial overlap allowed, as a fraction of the smaller radius
         of the pair (default 1e-6).
+    period : float or None
+        Length ``L`` of the periodic direction x, or None (not periodic). When
+        set, x lives in ``[0, L)``: contacts see periodic images (a pair keeps
+        its key across the boundary) and :meth:`wrap_positions` folds the
+        centres back after each step.
     """
 
     grains: Grains
@@ -224,21 +229,22 @@ class Scene:
     time: float = 0.0
     overlap_tolerance: float = 1e-6
     metadata: dict = field(default_factory=dict)
+    period: float | None = None
 
     @classmethod
     def create(cls, grains: Grains, *, plane_points=(), plane_normals=(), fixed_positions=None,
                fixed_radii=None, gravity=None, fluid_density: float = 0.0,
                external_force: ForceLike = None, time: float = 0.0,
                overlap_tolerance: float = 1e-6, check_overlaps: bool = True,
-               metadata: dict | None = None) -> "Scene":
+               metadata: dict | None = None, period: float | None = None) -> "Scene":
         """Validate and assemble a scene.
 
         Raises
         ------
         ValueError
             On wrong shapes or non-finite values, a negative fluid density or
-            overlap tolerance, buoyancy without grain densities, or an initial
-            overlap deeper than ``overlap_tolerance``.
+            overlap tolerance, buoyancy without grain densities, a non-positive
+            period, or an initial overlap deeper than ``overlap_tolerance``.
         """
         dim = grains.dim
         planes = Planes.create(plane_points, plane_normals, dim)
@@ -260,7 +266,11 @@ class Scene:
                     fixed_radii=np.array(fixed_radii, dtype=float), gravity=gravity,
                     fluid_density=fluid_density, external_force=external_force,
                     time=float(checks.as_array("time", time, shape=())),
-                    overlap_tolerance=overlap_tolerance, metadata=dict(metadata or {}))
+                    overlap_tolerance=overlap_tolerance, metadata=dict(metadata or {}),
+                    period=None if period is None else checks.positive_scalar("period", period))
+        if scene.period is not None:
+            scene.fixed_positions[:, 0] = np.mod(scene.fixed_positions[:, 0], scene.period)
+            scene.wrap_positions()
         scene.external_forces()  # validates the shape of the external force once
         if check_overlaps:
             scene.check_overlaps()
@@ -295,6 +305,13 @@ class Scene:
                 raise ValueError(f"external_force: non-finite value at t={t}")
             force = force + value
         return force
+
+    def wrap_positions(self) -> None:
+        """Fold the grains' x coordinates into ``[0, period)`` (no-op when not periodic)."""
+        if self.period is not None:
+            x = self.grains.positions[:, 0]
+            x[:] = np.mod(x, self.period)
+            x[x >= self.period] = 0.0       # mod of a tiny negative number can round up to L
 
     def check_overlaps(self) -> None:
         """Raise ``ValueError`` if any initial overlap exceeds the tolerance."""
