@@ -6,9 +6,19 @@ Registered names:
 - ``clarabel-primal``: the primal form (over velocities) through cvxpy, forces
   read from the constraint multipliers.
 
+Non-convex (UNION) contacts, gluey + friction at gamma_min, are solved by the
+branch rule of :func:`solve_branches`: fix each UNION contact on one piece
+(pushed: Coulomb cone; pulled: ``lam_n <= 0``), starting from the sign of the
+warm start's normal force (pushed when none), solve the convex problem, flip
+every contact that violates the optimality condition of the union, re-solve;
+at most ``max_branch_rounds`` rounds.
+
 Clarabel runs with ``direct_solve_method="qdldl"`` (the automatic choice picked a
 slower multithreaded factorisation, MODEL.md section 9) and equal absolute and
-relative gap/feasibility tolerances ``tol``.
+relative gap/feasibility tolerances ``tol``. An interior-point gap ``tol`` only
+bounds velocities to about ``sqrt(tol)``, so frictionless solutions are then
+polished on their active set (:mod:`lubcontact.solvers.polish`) to reach
+velocities accurate to about 1e-12 (``polish=False`` turns this off).
 """
 from __future__ import annotations
 
@@ -19,7 +29,9 @@ import numpy as np
 
 from .. import symbolic
 from ..problem import StepProblem
+from ..cones import ConeKind
 from .base import CONVERGED, FAILED, INACCURATE, MAX_ITER, MethodOutput, register
+from .polish import polish as polish_active_set
 
 _STATUS = {cp.OPTIMAL: CONVERGED, cp.OPTIMAL_INACCURATE: INACCURATE,
            cp.USER_LIMIT: MAX_ITER}
@@ -32,7 +44,7 @@ def clarabel_settings(tol: float, max_iter: int) -> dict:
 
 
 def _solve_symbolic(step: StepProblem, form: str, tol: float, max_iter: int,
-                    polyhedral: bool) -> MethodOutput:
+                    polyhedral: bool, polish: bool = True) -> MethodOutput:
     start = time.perf_counter()
     if step.n_rows == 0:
         return MethodOutput(np.zeros(0), CONVERGED, 0, 0.0, 0.0)
@@ -46,23 +58,99 @@ def _solve_symbolic(step: StepProblem, form: str, tol: float, max_iter: int,
                             time.perf_counter() - built, info={"error": str(exc)})
     stats = symbolic_form.problem.solver_stats
     status = _STATUS.get(symbolic_form.problem.status, FAILED)
-    forces = (symbolic_form.forces(step) if status != FAILED else np.full(step.n_rows, np.nan))
+    if status == FAILED:
+        return MethodOutput(np.full(step.n_rows, np.nan), FAILED, int(stats.num_iters or 0),
+                            built - start, float(stats.solve_time or 0.0),
+                            info={"raw_status": symbolic_form.problem.status, "form": form})
+    forces, velocities = symbolic_form.forces(step), symbolic_form.velocities(step)
+    polished = False
+    if polish:
+        forces, polished = polish_active_set(step, forces)
+        velocities = step.velocity(forces) if polished else velocities
     return MethodOutput(forces=forces, status=status, iterations=int(stats.num_iters or 0),
                         setup_time=built - start + (stats.setup_time or 0.0),
                         solve_time=float(stats.solve_time or 0.0),
-                        info={"raw_status": symbolic_form.problem.status, "form": form},
-                        velocities=symbolic_form.velocities(step) if status != FAILED else None)
+                        info={"raw_status": symbolic_form.problem.status, "form": form,
+                              "polished": polished},
+                        velocities=velocities)
+
+
+def union_violation(step: StepProblem, forces: np.ndarray) -> np.ndarray:
+    """Per contact, ``|lam_c - P_Kc(lam_c - g_c)|`` with ``K_c`` the (possibly non-convex) set.
+
+    Zero (up to solver accuracy) on every contact at a stationary point of the
+    original problem; for a UNION contact, the projection is onto the union.
+
+    Returns
+    -------
+    ndarray, shape (nc,)
+    """
+    cones = step.cones
+    difference = forces - cones.project(forces - step.gradient(forces))
+    normal, tangential = cones.split(difference)
+    violation = normal**2
+    if cones.has_friction:
+        violation[cones.tangential] += np.sum(tangential**2, axis=1)
+    return np.sqrt(violation)
+
+
+def solve_branches(step: StepProblem, form: str, tol: float, max_iter: int, polyhedral: bool,
+                   warm_start: np.ndarray | None, max_branch_rounds: int) -> MethodOutput:
+    """The branch rule for UNION contacts (module docstring).
+
+    A contact is flipped when its union violation exceeds
+    ``max(1e3 tol, 1e-7)`` (normalised units). ``info`` reports the rounds,
+    the flips per round and the pulled branches; the status is
+    ``inaccurate`` if contacts were still inconsistent after the last round.
+    """
+    union = step.cones.kinds == ConeKind.UNION
+    pulled = np.zeros(step.n_contacts, dtype=bool)
+    if warm_start is not None:
+        pulled = union & (warm_start[: step.n_contacts] < 0)
+    threshold = max(1e3 * tol, 1e-7)
+    flips, setup, solve_time, iterations = [], 0.0, 0.0, 0
+    for _ in range(max_branch_rounds):
+        branch = step.with_cones(step.cones.with_branches(pulled))
+        out = _solve_symbolic(branch, form, tol, max_iter, polyhedral)
+        setup, solve_time = setup + out.setup_time, solve_time + out.solve_time
+        iterations += out.iterations
+        if out.status == FAILED:
+            break
+        inconsistent = union & (union_violation(step, out.forces) > threshold)
+        flips.append(int(np.count_nonzero(inconsistent)))
+        if not inconsistent.any():
+            break
+        pulled = pulled ^ inconsistent
+    status = out.status
+    if flips and flips[-1] > 0 and status == CONVERGED:
+        status = INACCURATE
+    info = dict(out.info, branch_rounds=len(flips), branch_flips=flips,
+                pulled=np.flatnonzero(union & pulled))
+    return MethodOutput(forces=out.forces, status=status, iterations=iterations, setup_time=setup,
+                        solve_time=solve_time, info=info, velocities=out.velocities)
+
+
+def _solve(step: StepProblem, form: str, tol: float, max_iter: int, polyhedral: bool,
+           warm_start: np.ndarray | None, max_branch_rounds: int) -> MethodOutput:
+    if step.cones.is_convex:
+        return _solve_symbolic(step, form, tol, max_iter, polyhedral)
+    return solve_branches(step, form, tol, max_iter, polyhedral, warm_start, max_branch_rounds)
 
 
 @register("clarabel")
 def clarabel_dual(step: StepProblem, *, tol: float = 1e-10, max_iter: int = 200,
-                  warm_start=None, polyhedral: bool = False) -> MethodOutput:
-    """Clarabel on the symbolic dual form (``warm_start`` is ignored)."""
-    return _solve_symbolic(step, "dual", tol, max_iter, polyhedral)
+                  warm_start=None, polyhedral: bool = False,
+                  max_branch_rounds: int = 8) -> MethodOutput:
+    """Clarabel on the symbolic dual form.
+
+    ``warm_start`` only chooses the initial branch of UNION contacts.
+    """
+    return _solve(step, "dual", tol, max_iter, polyhedral, warm_start, max_branch_rounds)
 
 
 @register("clarabel-primal")
 def clarabel_primal(step: StepProblem, *, tol: float = 1e-10, max_iter: int = 200,
-                    warm_start=None, polyhedral: bool = False) -> MethodOutput:
-    """Clarabel on the symbolic primal form (``warm_start`` is ignored)."""
-    return _solve_symbolic(step, "primal", tol, max_iter, polyhedral)
+                    warm_start=None, polyhedral: bool = False,
+                    max_branch_rounds: int = 8) -> MethodOutput:
+    """Clarabel on the symbolic primal form (``warm_start`` as for ``clarabel``)."""
+    return _solve(step, "primal", tol, max_iter, polyhedral, warm_start, max_branch_rounds)
