@@ -163,6 +163,31 @@ class StepProblem:
                            jacobian=jacobian, gaps=self.gaps / length, cones=self.cones, dt=1.0,
                            shift=self.shift / length, keys=self.keys, scaling=scaling)
 
+    def to_arrays(self) -> dict[str, np.ndarray]:
+        """Plain arrays describing the problem (for ``np.savez``); see :meth:`from_arrays`."""
+        h = self.jacobian
+        arrays = dict(mass=self.mass, free_velocity=self.free_velocity, gaps=self.gaps,
+                      shift=self.shift, dt=np.array(self.dt), h_data=h.data, h_indices=h.indices,
+                      h_indptr=h.indptr, h_shape=np.array(h.shape), cone_kinds=self.cones.kinds,
+                      cone_mu=self.cones.mu, cone_tangential=self.cones.tangential,
+                      tangent_dim=np.array(self.cones.tangent_dim))
+        if self.keys is not None:
+            arrays["keys"] = self.keys
+        return arrays
+
+    @classmethod
+    def from_arrays(cls, arrays) -> "StepProblem":
+        """Rebuild a problem written by :meth:`to_arrays` (a dict or an ``NpzFile``)."""
+        jacobian = sp.csr_matrix((arrays["h_data"], arrays["h_indices"], arrays["h_indptr"]),
+                                 shape=tuple(arrays["h_shape"]))
+        cones = Cones(kinds=np.asarray(arrays["cone_kinds"], dtype=np.int8), mu=arrays["cone_mu"],
+                      tangential=np.asarray(arrays["cone_tangential"], dtype=int),
+                      tangent_dim=int(arrays["tangent_dim"]))
+        keys = arrays["keys"] if "keys" in arrays else None
+        return cls(mass=arrays["mass"], free_velocity=arrays["free_velocity"], jacobian=jacobian,
+                   gaps=arrays["gaps"], cones=cones, dt=float(arrays["dt"]), shift=arrays["shift"],
+                   keys=keys)
+
     def with_shift(self, shift: np.ndarray) -> "StepProblem":
         """A copy with another shift ``s`` (same matrices)."""
         return replace(self, shift=np.asarray(shift, dtype=float).copy())
