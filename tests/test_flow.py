@@ -1,0 +1,170 @@
+"""Flow experiment: scenes, measurements, checkpoint/resume (short runs only)."""
+import json
+
+import numpy as np
+import pytest
+
+from lubcontact import experiment, flow, measure
+from lubcontact.scene import Grains, Scene
+
+
+# -- scenes ---------------------------------------------------------------------------------------
+def test_sedimentation_scene_is_periodic_polydisperse_and_clear_of_the_bed():
+    params = flow.poster_parameters()
+    scene = flow.sedimentation(120, params, seed=4)
+    r = params.radius
+    assert scene.grains.count == 120 and scene.period == pytest.approx(40 * r)
+    assert np.all(np.abs(scene.grains.radii / r - 1.0) <= 0.2)
+    assert scene.grains.radii.std() > 0.05 * r
+    # the bed closes exactly on the period and rests on y = 0
+    np.testing.assert_allclose(2 * scene.fixed_radii.sum(), scene.period, rtol=1e-12)
+    np.testing.assert_allclose(scene.fixed_positions[:, 1], scene.fixed_radii)
+    # buoyant weight (rho_p - rho_f) V g, inertia with rho_p
+    volume = np.pi * scene.grains.radii**2
+    np.testing.assert_allclose(scene.weights()[:, 1], -(2500 - 1500) * volume * 9.81)
+    np.testing.assert_allclose(scene.grains.masses, 2500 * volume)
+    # no initial contact at all (the grains start apart)
+    from lubcontact import find_contacts
+    assert find_contacts(scene, d_max=0.0).count == 0
+
+
+def test_inclined_flow_tilts_gravity_downhill():
+    settled = flow.sedimentation(20, flow.dimensionless_parameters(), seed=1)
+    settled.grains.velocities[:] = 1.0
+    scene = flow.inclined_flow(settled, 22.0)
+    theta = np.radians(22.0)
+    np.testing.assert_allclose(scene.gravity, [np.sin(theta), -np.cos(theta)], atol=1e-15)
+    assert np.all(scene.grains.velocities == 0) and np.all(settled.grains.velocities == 1.0)
+    assert scene.period == settled.period and scene.metadata["angle_deg"] == 22.0
+    with pytest.raises(ValueError, match="angle_deg"):
+        flow.inclined_flow(settled, 95.0)
+
+
+def test_poster_gamma_min_from_roughness():
+    """gamma_min = 6 pi eta r_eff^2 ln(eps / r_eff) for two 1 mm grains (r_eff = 0.5 mm)."""
+    law = flow.poster_parameters().law("gluey")
+    scene = Scene.create(Grains.create([[0.0, 0.0], [2.0e-3, 0.0]], 1e-3, densities=2500.0))
+    from lubcontact import find_contacts
+    contacts = find_contacts(scene, d_max=1e-4)
+    expected = 6 * np.pi * 1e-3 * 0.5e-3**2 * np.log(1e-6 / 0.5e-3)
+    np.testing.assert_allclose(law.gamma_min(contacts), [expected], rtol=1e-12)
+
+
+# -- measurements ---------------------------------------------------------------------------------
+def test_slab_areas_add_up_to_the_disk_and_match_a_half_disk():
+    heights, radii = np.array([0.3, 2.0]), np.array([0.7, 1.1])
+    edges = np.linspace(-1.0, 4.0, 23)
+    areas = measure.slab_areas(heights, radii, edges)
+    np.testing.assert_allclose(areas.sum(axis=1), np.pi * radii**2, rtol=1e-13)
+    below_centre = measure.slab_areas(heights, radii, np.array([-10.0, 0.3]))[0, 0]
+    assert below_centre == pytest.approx(0.5 * np.pi * 0.7**2, rel=1e-13)
+
+
+def test_profile_of_a_square_lattice_and_flow_rate():
+    """Disks r = 0.5 on a unit square lattice fill pi/4 of every full slab."""
+    ix, iy = np.meshgrid(np.arange(10), np.arange(5))
+    centres = np.stack([ix.ravel() + 0.5, iy.ravel() + 0.5], axis=1)
+    speeds = 0.1 * centres[:, 1]                       # shear: u = 0.1 y at the centres
+    grains = Grains.create(centres, 0.5, masses=1.0, velocities=np.stack(
+        [speeds, np.zeros_like(speeds)], axis=1))
+    scene = Scene.create(grains, period=10.0)
+    prof = measure.profile(scene, np.arange(0.0, 5.01, 1.0))
+    np.testing.assert_allclose(prof.packing, np.pi / 4, rtol=1e-12)
+    np.testing.assert_allclose(prof.velocity, 0.1 * (np.arange(5) + 0.5), rtol=1e-12)
+    assert measure.flow_rate(scene) == pytest.approx(np.pi * 0.25 * speeds.sum() / 10.0, rel=1e-13)
+    assert measure.kinetic_energy(scene) == pytest.approx(0.5 * np.sum(speeds**2), rel=1e-13)
+    assert measure.layer_height(prof) == pytest.approx(5.0)
+
+
+def test_bagnold_exponent_of_an_exact_profile():
+    h, bottom = 20.0, 1.0
+    edges = np.linspace(0.0, bottom + h, 85)
+    z = 0.5 * (edges[1:] + edges[:-1])
+    depth = np.clip(bottom + h - z, 0, h)
+    u = h**1.5 - depth**1.5
+    prof = measure.Profile(edges, np.ones_like(z), u)
+    exponent, surface = measure.bagnold_exponent(prof, bottom, bottom + h)
+    # u_s is the top slab's velocity, not h^1.5 exactly: the fit sees a small offset
+    assert exponent == pytest.approx(1.5, abs=0.02)
+    parabolic = measure.Profile(edges, np.ones_like(z), h**2 - depth**2)
+    assert measure.bagnold_exponent(parabolic, bottom, bottom + h)[0] == pytest.approx(2.0, abs=0.03)
+
+
+def test_contact_states_and_gamma_histogram():
+    gamma = np.array([0.0, 0.0, -0.5, -1.0, -0.2, 0.0])
+    floor = np.array([-1.0, -1.0, -1.0, -1.0, -np.inf, -1.0])
+    active = np.array([True, True, True, True, True, False])
+    np.testing.assert_array_equal(measure.contact_states(gamma, floor, active), [2, 2, 1])
+    hist = measure.gamma_histogram(gamma, floor, bins=4)
+    np.testing.assert_array_equal(hist, [0, 0, 1, 1])     # 0.5 and 1.0 (the -inf floor is skipped)
+
+
+def test_classify_flow():
+    t = np.linspace(0, 10, 50)
+    steady = measure.classify_flow(t, np.ones(50), 1.0 + 0.001 * np.sin(t))
+    assert steady.label == "steady"
+    stopping = measure.classify_flow(t, np.exp(-3 * t), np.exp(-3 * t))
+    assert stopping.label == "no_flow" and stopping.energy_ratio < 1e-6
+    assert measure.classify_flow(t, (1 + t)**2, 1 + t).label == "accelerating"
+
+
+# -- checkpoint and resume ------------------------------------------------------------------------
+def small_config(**changes):
+    values = dict(scene="inclined_flow", n_grains=24, width=12.0, model="dry", angle=25.0,
+                  steps=40, dt_fraction=0.05, settle_steps=0, solver="clarabel", tol=1e-8,
+                  checkpoint_every=20, sample_every=3)
+    values.update(changes)
+    return experiment.RunConfig(**values)
+
+
+def final_state(run):
+    grains = run.sim.scene.grains
+    return (grains.positions.copy(), grains.velocities.copy(), grains.spins.copy(),
+            run.sim.state.keys.copy(), run.sim.state.gamma.copy(), run.sim.scene.time)
+
+
+def test_resume_from_checkpoint_reaches_the_uninterrupted_state(tmp_path):
+    config = small_config()
+    scene = experiment.initial_scene(config)
+    straight = experiment.FlowRun(config, scene)
+    straight.advance(config.steps)
+    assert straight.last_report.contacts.count > 5          # grains touched the bed and each other
+
+    first = experiment.FlowRun(config, scene, tmp_path)
+    first.advance(20)                                       # checkpoint written at step 20
+    first.advance(7)                                        # ... then "interrupted" at step 27
+    resumed = experiment.FlowRun.resume(tmp_path / "checkpoint.npz")
+    assert resumed.steps_done == 20
+    resumed.advance(config.steps)
+    for got, want in zip(final_state(resumed), final_state(straight)):
+        np.testing.assert_allclose(got, want, rtol=0, atol=1e-12)
+    assert resumed.series["step"] == straight.series["step"]
+    np.testing.assert_allclose(resumed.series["flow_rate"], straight.series["flow_rate"], atol=1e-12)
+
+
+def test_run_command_writes_files_and_resumes(tmp_path):
+    out = tmp_path / "run"
+
+    def argv(steps):
+        return ["inclined_flow", "--n", "24", "--width", "12", "--model", "dry", "--steps", str(steps),
+                "--dt", "0.05", "--settle-steps", "0", "--solver", "clarabel",
+                "--checkpoint-every", "3", "--sample-every", "3", "--out", str(out), "--no-progress"]
+
+    assert experiment.run_main(argv(6)) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["steps"] == 6
+    for name in ("checkpoint.npz", "measurements.npz", "snapshot.png", "profile.png", "bed.npz"):
+        assert (out / name).stat().st_size > 0
+    assert experiment.run_main(argv(9) + ["--resume"]) == 0
+    assert json.loads((out / "summary.json").read_text())["steps"] == 9
+    assert not list(out.glob("*.tmp"))
+
+
+def test_config_rejects_bad_values():
+    with pytest.raises(ValueError, match="model"):
+        small_config(model="wet")
+    with pytest.raises(ValueError, match="sample_every"):
+        small_config(sample_every=0)
+    with pytest.raises(ValueError, match="angles"):
+        experiment.parse_angles("15:28")
+    np.testing.assert_allclose(experiment.parse_angles("15:28:1"), np.arange(15, 29))
