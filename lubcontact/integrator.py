@@ -13,6 +13,7 @@ import scipy.sparse as sp
 from . import checks
 from .cones import Cones
 from .contacts import Contacts, find_contacts, normal_jacobian, tangential_jacobian
+from .fixed_point import solve_coulomb
 from .laws import Law, PairState
 from .problem import StepProblem
 from .scene import Scene
@@ -41,6 +42,7 @@ class Trajectory:
     status: list = field(default_factory=list)
     residual: list = field(default_factory=list)
     iterations: list = field(default_factory=list)
+    outer_iterations: list = field(default_factory=list)
     min_gap: list = field(default_factory=list)
 
     def record_state(self, scene: Scene) -> None:
@@ -63,6 +65,34 @@ class StepReport:
     result: SolveResult
     gamma: np.ndarray
     gaps_after: np.ndarray
+
+
+@dataclass
+class _PreviousStep:
+    """What the next step's warm start needs, by pair key (keys sorted)."""
+
+    keys: np.ndarray
+    normal: np.ndarray
+    tangential_contacts: np.ndarray
+    tangential: np.ndarray
+    shift: np.ndarray
+
+
+def _lookup(stored_keys: np.ndarray, values: np.ndarray, wanted: np.ndarray,
+            width: int | None = None) -> np.ndarray:
+    """Values of the wanted keys in ``stored_keys`` (sorted), 0 for keys not stored.
+
+    ``values`` has one entry (``width`` is None) or one row of ``width``
+    entries per stored key.
+    """
+    shape = (wanted.size,) if width is None else (wanted.size, width)
+    out = np.zeros(shape)
+    if stored_keys.size == 0 or wanted.size == 0:
+        return out
+    pos = np.clip(np.searchsorted(stored_keys, wanted), 0, stored_keys.size - 1)
+    found = stored_keys[pos] == wanted
+    out[found] = values[pos[found]]
+    return out
 
 
 class Simulation:
@@ -90,12 +120,23 @@ class Simulation:
         so the scene still holds the last good state; ``warn`` applies the
         best iterate and warns.
     warm_start : bool
-        Start each solve from the previous step's forces, matched by pair.
+        Start each solve from the previous step's forces (normal and
+        tangential) and shift, matched by pair.
+    fixed_point : bool
+        With a frictional law, solve exact Coulomb friction by the fixed point
+        on s (:func:`~lubcontact.fixed_point.solve_coulomb`); False solves the
+        convex relaxation once (sliding contacts then separate by
+        ``mu dt |u_T|`` per step).
+    tol_fp : float
+        Tolerance of the fixed point on s (relative change, normalised units).
+    max_outer : int
+        Cap on the fixed point's outer iterations per step.
     """
 
     def __init__(self, scene: Scene, law: Law, dt: float, *, solver: str = "clarabel",
                  d_max: float | None = None, tol: float = 1e-9, solver_options: dict | None = None,
-                 on_failure: str = "raise", warm_start: bool = True):
+                 on_failure: str = "raise", warm_start: bool = True, fixed_point: bool = True,
+                 tol_fp: float = 1e-8, max_outer: int = 50):
         self.scene = scene.copy()
         self.law = law
         self.dt = checks.positive_scalar("dt", dt)
@@ -107,10 +148,13 @@ class Simulation:
         checks.require(on_failure in ON_FAILURE, "on_failure", f"must be one of {ON_FAILURE}", None)
         self.on_failure = on_failure
         self.warm_start = warm_start
+        self.fixed_point = fixed_point
+        self.tol_fp = checks.positive_scalar("tol_fp", tol_fp)
+        self.max_outer = int(checks.positive("max_outer", max_outer, shape=()))
         self.state = PairState()
         self.start_time = self.scene.time
         self.steps_done = 0
-        self._previous: tuple[np.ndarray, np.ndarray] | None = None
+        self._previous: _PreviousStep | None = None
         self.trajectory = Trajectory()
         self.trajectory.record_state(self.scene)
 
@@ -139,16 +183,21 @@ class Simulation:
         return StepProblem(mass=mass, free_velocity=free_velocity, jacobian=jacobian,
                            gaps=contacts.gaps, cones=cones, dt=self.dt, keys=contacts.keys)
 
-    def _warm_start(self, problem: StepProblem) -> np.ndarray | None:
-        """Previous normal forces matched by pair key (tangential rows start at 0)."""
+    def _warm_start(self, problem: StepProblem) -> tuple[np.ndarray | None, np.ndarray | None]:
+        """Previous forces (normal and tangential) and shift matched by pair key.
+
+        Returns ``(forces (n_rows,), shift (nc,))``, or ``(None, None)`` without
+        a previous step; pairs new to this step start at 0.
+        """
         if not self.warm_start or self._previous is None or problem.n_contacts == 0:
-            return None
-        keys, normal = self._previous
-        guess = np.zeros(problem.n_rows)
-        if keys.size:
-            pos = np.clip(np.searchsorted(keys, problem.keys), 0, keys.size - 1)
-            guess[: problem.n_contacts] = np.where(keys[pos] == problem.keys, normal[pos], 0.0)
-        return guess
+            return None, None
+        previous = self._previous
+        cones = problem.cones
+        normal = _lookup(previous.keys, previous.normal, problem.keys)
+        shift = _lookup(previous.keys, previous.shift, problem.keys)
+        tangential = _lookup(previous.keys[previous.tangential_contacts], previous.tangential,
+                             problem.keys[cones.tangential], width=cones.tangent_dim)
+        return cones.join(normal, tangential), shift
 
     # -- stepping --------------------------------------------------------------------------------
     def step(self) -> StepReport:
@@ -158,14 +207,22 @@ class Simulation:
         gamma = self.state.lookup(contacts.keys)
         cones = self.law.cones(contacts, gamma)
         problem = self.build_problem(contacts, cones)
-        result = solve(problem, self.solver, tol=self.tol, warm_start=self._warm_start(problem),
-                       **self.solver_options)
+        guess, shift = self._warm_start(problem)
+        if cones.has_friction and self.fixed_point:
+            result = solve_coulomb(problem, self.solver, tol=self.tol, tol_fp=self.tol_fp,
+                                   max_outer=self.max_outer, warm_start=guess, shift=shift,
+                                   **self.solver_options)
+        else:
+            result = solve(problem, self.solver, tol=self.tol, warm_start=guess, **self.solver_options)
         check_status(result, self.on_failure)
         self._apply(problem, result)
-        normal = result.forces[: problem.n_contacts]
+        normal, tangential = cones.split(result.forces)
         new_gamma = self.law.update_gamma(contacts, gamma, normal, self.dt, result.force_scale)
         self.state = PairState.from_contacts(contacts.keys, new_gamma)
-        self._previous = (contacts.keys, normal.copy())
+        used_shift = result.info.get("shift", np.zeros(problem.n_contacts))
+        self._previous = _PreviousStep(keys=contacts.keys, normal=normal.copy(),
+                                       tangential_contacts=cones.tangential.copy(),
+                                       tangential=tangential.copy(), shift=np.asarray(used_shift))
         report = StepReport(contacts=contacts, problem=problem, result=result, gamma=new_gamma,
                             gaps_after=problem.gaps_after(result.velocities))
         self._record(report)
@@ -197,6 +254,7 @@ class Simulation:
         record.status.append(report.result.status)
         record.residual.append(report.result.residual)
         record.iterations.append(report.result.iterations)
+        record.outer_iterations.append(int(report.result.info.get("outer_iterations", 1)))
         record.min_gap.append(float(report.gaps_after.min()) if report.gaps_after.size else np.inf)
 
     def run(self, n_steps: int, callback: Callable[["Simulation", StepReport], None] | None = None

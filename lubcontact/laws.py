@@ -1,5 +1,10 @@
 """Contact laws: which force set each contact gets, and how the gluey state evolves.
 
+Laws: :class:`Inelastic` (dry, frictionless), :class:`Coulomb` (dry with
+Coulomb friction), :class:`GlueyLubrication` (the gluey limit of lubrication,
+frictionless) and :class:`GlueyCoulomb` (lubrication + friction: friction acts
+only through asperities, at ``gamma = gamma_min``; MODEL.md section 4).
+
 A law turns the candidate contacts (and the per-pair state gamma) into
 :class:`~lubcontact.cones.Cones`, and updates gamma from the normal forces
 after a step (MODEL.md sections 1 and 3):
@@ -15,6 +20,7 @@ a pair that leaves the candidate list forgets its gamma.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Callable, Union
 
 import numpy as np
 
@@ -45,6 +51,9 @@ class PairState:
         return cls(keys=keys[glued][order].astype(np.int64), gamma=gamma[glued][order])
 
 
+FrictionLike = Union[float, Callable[[Contacts], np.ndarray]]
+
+
 class Law:
     """Base class: a frictionless, stateless inelastic law.
 
@@ -52,9 +61,13 @@ class Law:
     ----------
     needs_rotation : bool
         Whether spins are unknowns of the step problem (only with friction).
+    has_friction : bool
+        Whether some contact may get a friction cone (then the integrator runs
+        the fixed point on s unless told otherwise).
     """
 
     needs_rotation = False
+    has_friction = False
 
     def cones(self, contacts: Contacts, gamma: np.ndarray) -> Cones:
         """Force sets for the contacts given their current gamma."""
@@ -78,6 +91,65 @@ class Law:
 
 class Inelastic(Law):
     """Dry, frictionless, perfectly inelastic unilateral contact (``lambda_n >= 0``)."""
+
+
+class FrictionCoefficient:
+    """A friction coefficient: one number, or a function of the contacts.
+
+    Parameters
+    ----------
+    mu : float or callable
+        ``mu >= 0`` for every contact, or ``mu(contacts) -> ndarray (nc,)``
+        (per contact, e.g. looked up per material pair from ``body_a``,
+        ``body_b``); values must be finite and >= 0.
+    """
+
+    def __init__(self, mu: FrictionLike):
+        if callable(mu):
+            self._function, self._value = mu, None
+        else:
+            self._function, self._value = None, float(checks.nonnegative("mu", mu, shape=()))
+
+    @property
+    def may_be_positive(self) -> bool:
+        return self._function is not None or self._value > 0
+
+    def __call__(self, contacts: Contacts) -> np.ndarray:
+        if self._function is None:
+            return np.full(contacts.count, self._value)
+        return checks.nonnegative("mu", self._function(contacts), shape=(contacts.count,))
+
+
+def _friction_cones(kinds: np.ndarray, mu: np.ndarray, dim: int) -> Cones:
+    """Cones with tangential rows for the COULOMB and UNION contacts, in contact order."""
+    kinds = np.asarray(kinds, dtype=np.int8)
+    with_rows = np.flatnonzero((kinds == ConeKind.COULOMB) | (kinds == ConeKind.UNION))
+    return Cones(kinds=kinds, mu=np.asarray(mu, dtype=float), tangential=with_rows,
+                 tangent_dim=dim - 1)
+
+
+class Coulomb(Law):
+    """Dry unilateral contact with Coulomb friction ``|lambda_T| <= mu lambda_n``.
+
+    Contacts with ``mu = 0`` get no tangential rows (plain ``lambda_n >= 0``);
+    with ``mu = 0`` everywhere the law is :class:`Inelastic` and no rotational
+    unknowns are modelled.
+
+    Parameters
+    ----------
+    mu : float or callable
+        Friction coefficient (dimensionless, >= 0), or ``mu(contacts) ->
+        ndarray (nc,)`` for per-contact or per-material-pair values.
+    """
+
+    def __init__(self, mu: FrictionLike):
+        self.mu = FrictionCoefficient(mu)
+        self.needs_rotation = self.has_friction = self.mu.may_be_positive
+
+    def cones(self, contacts: Contacts, gamma: np.ndarray) -> Cones:
+        mu = self.mu(contacts)
+        kinds = np.where(mu > 0, ConeKind.COULOMB, ConeKind.NONNEG)
+        return _friction_cones(kinds, mu, contacts.dim)
 
 
 class GlueyLubrication(Law):
@@ -137,6 +209,43 @@ class GlueyLubrication(Law):
         at_floor = np.isfinite(lower) & (np.abs(new - lower) <= tol)
         new[at_floor] = lower[at_floor]
         return new
+
+
+class GlueyCoulomb(GlueyLubrication):
+    """Lubrication + friction (the poster's last model).
+
+    Per contact, by gluey state:
+
+    - unglued (``gamma = 0``): unilateral, frictionless (``NONNEG``);
+    - glued, ``gamma_min < gamma < 0``: bilateral, frictionless (``FREE``);
+    - at ``gamma = gamma_min`` (asperities touch): the non-convex ``UNION`` of
+      the Coulomb cone (pushed) and the pulled half-line (frictionless).
+
+    Parameters
+    ----------
+    mu : float or callable
+        Friction coefficient at the asperities (see :class:`Coulomb`).
+    gamma_min, viscosity, roughness, state_rtol
+        As for :class:`GlueyLubrication`. Without a finite ``gamma_min`` no
+        contact ever reaches the asperities and the law is frictionless.
+    """
+
+    def __init__(self, mu: FrictionLike, gamma_min: float | None = None, *,
+                 viscosity: float | None = None, roughness: float | None = None,
+                 state_rtol: float = 1e-6):
+        super().__init__(gamma_min, viscosity=viscosity, roughness=roughness, state_rtol=state_rtol)
+        self.mu = FrictionCoefficient(mu)
+        capped = gamma_min is not None or viscosity is not None
+        self.needs_rotation = self.has_friction = capped and self.mu.may_be_positive
+
+    def cones(self, contacts: Contacts, gamma: np.ndarray) -> Cones:
+        lower = self.gamma_min(contacts)
+        at_floor = np.isfinite(lower) & (gamma <= lower) & (gamma < 0)
+        mu = self.mu(contacts) if self.has_friction else np.zeros(contacts.count)
+        kinds = np.where(gamma < 0, ConeKind.FREE, ConeKind.NONNEG)
+        # at the floor with mu = 0 the union {pushed} U {pulled} is all of R: FREE
+        kinds = np.where(at_floor & (mu > 0), ConeKind.UNION, kinds)
+        return _friction_cones(kinds, mu, contacts.dim)
 
 
 def gamma_min_from_roughness(viscosity: float, roughness: float, r_eff: np.ndarray) -> np.ndarray:
