@@ -22,6 +22,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from enum import IntEnum
+from functools import cached_property
 
 import numpy as np
 
@@ -49,14 +50,30 @@ def project_friction_cone(normal: np.ndarray, tangential: np.ndarray, mu: np.nda
     (ndarray (m,), ndarray (m, k))
     """
     norm_t = np.linalg.norm(tangential, axis=1)
-    inside = norm_t <= mu * normal
+    inside = (norm_t <= mu * normal) & (normal >= 0.0)
     polar = mu * norm_t <= -normal
     scale = (normal + mu * norm_t) / (1.0 + mu * mu)
     new_n = np.where(inside, normal, np.where(polar, 0.0, scale))
-    with np.errstate(invalid="ignore", divide="ignore"):
-        direction = np.where(norm_t[:, None] > 0, tangential / norm_t[:, None], 0.0)
+    ratio = np.divide(mu * scale, norm_t, out=np.zeros_like(norm_t), where=norm_t > 0)
     new_t = np.where(inside[:, None], tangential,
-                     np.where(polar[:, None], 0.0, (mu * scale)[:, None] * direction))
+                     np.where(polar[:, None], 0.0, ratio[:, None] * tangential))
+    return new_n, new_t
+
+
+def project_dual_friction_cone(normal: np.ndarray, tangential: np.ndarray, mu: np.ndarray):
+    """Euclidean projection onto the dual cone ``{mu |t| <= n}``, vectorised.
+
+    Same arguments as :func:`project_friction_cone`; ``mu = 0`` gives the
+    half-space ``n >= 0``. (The polar cone of ``{|t| <= mu n}`` is minus this one.)
+    """
+    norm_t = np.linalg.norm(tangential, axis=1)
+    inside = mu * norm_t <= normal
+    polar = norm_t <= -mu * normal
+    scale = (mu * normal + norm_t) / (1.0 + mu * mu)
+    new_n = np.where(inside, normal, np.where(polar, 0.0, mu * scale))
+    ratio = np.divide(scale, norm_t, out=np.zeros_like(norm_t), where=norm_t > 0)
+    new_t = np.where(inside[:, None], tangential,
+                     np.where(polar[:, None], 0.0, ratio[:, None] * tangential))
     return new_n, new_t
 
 
@@ -128,35 +145,34 @@ class Cones:
         kinds[union & ~pulled] = ConeKind.COULOMB
         return Cones(kinds=kinds, mu=self.mu, tangential=self.tangential, tangent_dim=self.tangent_dim)
 
+    @cached_property
+    def projector(self) -> "ConeProjector":
+        """The projection with its index arrays prepared once (for iterative solvers)."""
+        return ConeProjector(self)
+
     def project(self, forces: np.ndarray) -> np.ndarray:
         """Euclidean projection of ``forces`` onto the product of the force sets.
 
         For UNION contacts this is the nearer of the projections onto the two
-        pieces (a projection onto a non-convex set, unique almost everywhere).
+        pieces (a projection onto a non-convex set, unique almost everywhere;
+        ties go to the friction cone).
         """
-        normal, tangential = self.split(forces)
-        kinds = self.kinds
-        new_n = normal.copy()
-        new_n[kinds == ConeKind.NONNEG] = np.maximum(normal[kinds == ConeKind.NONNEG], 0.0)
-        new_n[kinds == ConeKind.NONPOS] = np.minimum(normal[kinds == ConeKind.NONPOS], 0.0)
-        new_t = np.zeros_like(tangential)
-        if self.has_friction:
-            idx = self.tangential
-            t_kind = kinds[idx]
-            cone_n, cone_t = project_friction_cone(normal[idx], tangential, self.mu[idx])
-            coulomb = t_kind == ConeKind.COULOMB
-            new_n[idx[coulomb]] = cone_n[coulomb]
-            new_t[coulomb] = cone_t[coulomb]
-            union = t_kind == ConeKind.UNION
-            if np.any(union):
-                pull_n = np.minimum(normal[idx[union]], 0.0)
-                d_cone = (cone_n[union] - normal[idx[union]]) ** 2 + \
-                    np.sum((cone_t[union] - tangential[union]) ** 2, axis=1)
-                d_pull = (pull_n - normal[idx[union]]) ** 2 + np.sum(tangential[union] ** 2, axis=1)
-                take_cone = d_cone <= d_pull
-                new_n[idx[union]] = np.where(take_cone, cone_n[union], pull_n)
-                new_t[union] = np.where(take_cone[:, None], cone_t[union], 0.0)
-        return self.join(new_n, new_t)
+        return self.projector(forces)
+
+    def project_polar(self, forces: np.ndarray) -> np.ndarray:
+        """Euclidean projection onto the polar cone ``K° = {y : y.x <= 0 for x in K}``.
+
+        Computed from the polar sets themselves (R- for R+, {0} for R, R+ for
+        R-, minus the dual cone ``{mu |t| <= n}`` for a friction cone), so that
+        the Moreau decomposition ``x = P_K(x) + P_K°(x)`` is a real check.
+
+        Raises
+        ------
+        ValueError
+            If some contact is of the non-convex UNION kind.
+        """
+        self._require_convex()
+        return self.projector.polar(forces)
 
     def natural_residual(self, forces: np.ndarray, gradient: np.ndarray) -> float:
         """``|lam - P_K(lam - grad)|``, the natural-map residual (Euclidean norm)."""
@@ -294,3 +310,62 @@ def _cone_constraints(cp, bound, tangential, t_rows, tangent_dim, polyhedral, sc
                              f"tangent_dim={tangent_dim}")
         return [bound - t_expr >= 0, bound + t_expr >= 0]
     return [cp.SOC(bound, cp.reshape(t_expr, (tangent_dim, -1), order="F"), axis=0)]
+
+
+class ConeProjector:
+    """Projection onto a product of force sets, index arrays prepared once.
+
+    Frictionless rows are a box (``np.clip`` with per-row bounds: ``[0, inf)``,
+    ``R``, ``(-inf, 0]``; tangential rows of frictionless contacts ``{0}``);
+    friction contacts go through :func:`project_friction_cone`. No Python loop
+    over contacts.
+    """
+
+    def __init__(self, cones: Cones):
+        nc, dim_t = cones.count, cones.tangent_dim
+        kinds = cones.kinds
+        self.lower = np.full(cones.n_rows, -np.inf)
+        self.upper = np.full(cones.n_rows, np.inf)
+        self.lower[:nc][kinds == ConeKind.NONNEG] = 0.0
+        self.upper[:nc][kinds == ConeKind.NONPOS] = 0.0
+        self.lower[nc:] = 0.0
+        self.upper[nc:] = 0.0
+        self.pieces = []
+        for kind in (ConeKind.COULOMB, ConeKind.UNION):
+            positions = np.flatnonzero(kinds[cones.tangential] == kind) if cones.has_friction \
+                else np.zeros(0, dtype=int)
+            normal_rows = cones.tangential[positions]
+            tangent_rows = nc + positions[:, None] * dim_t + np.arange(dim_t)
+            self.pieces.append((normal_rows, tangent_rows, cones.mu[normal_rows]))
+
+    def __call__(self, forces: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+        """``P_K(forces)``; ``out`` may be given to avoid an allocation (not ``forces``)."""
+        out = np.clip(forces, self.lower, self.upper, out=out)
+        (cone_n, cone_t, cone_mu), (union_n, union_t, union_mu) = self.pieces
+        if cone_n.size:
+            new_n, new_t = project_friction_cone(forces[cone_n], forces[cone_t], cone_mu)
+            out[cone_n] = new_n
+            out[cone_t] = new_t
+        if union_n.size:
+            normal, tangential = forces[union_n], forces[union_t]
+            new_n, new_t = project_friction_cone(normal, tangential, union_mu)
+            pull_n = np.minimum(normal, 0.0)
+            d_cone = (new_n - normal) ** 2 + np.sum((new_t - tangential) ** 2, axis=1)
+            d_pull = (pull_n - normal) ** 2 + np.sum(tangential**2, axis=1)
+            take_cone = d_cone <= d_pull
+            out[union_n] = np.where(take_cone, new_n, pull_n)
+            out[union_t] = np.where(take_cone[:, None], new_t, 0.0)
+        return out
+
+    def polar(self, forces: np.ndarray) -> np.ndarray:
+        """``P_K°(forces)`` for convex cones (see :meth:`Cones.project_polar`)."""
+        # per row: polar of [0, inf) is (-inf, 0], of R is {0}, of (-inf, 0] is [0, inf), of {0} is R
+        lower = np.where(self.lower == -np.inf, 0.0, -np.inf)
+        upper = np.where(self.upper == np.inf, 0.0, np.inf)
+        out = np.clip(forces, lower, upper)
+        cone_n, cone_t, cone_mu = self.pieces[0]
+        if cone_n.size:
+            new_n, new_t = project_dual_friction_cone(-forces[cone_n], -forces[cone_t], cone_mu)
+            out[cone_n] = -new_n
+            out[cone_t] = -new_t
+        return out

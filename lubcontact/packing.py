@@ -1,0 +1,178 @@
+"""2D granular piles at rest, built geometrically (no time stepping).
+
+:func:`deposit_pile` drops polydisperse disks one at a time between two walls
+and lets each one roll down over the disks already placed until it rests on
+two supports (floor, wall or disks), the classical sequential "drop and roll"
+deposition. Every disk ends exactly tangent to its supports, so the pile is
+*at rest*: zero velocities, closed contacts (gaps at rounding level), and
+each disk is stable on its own supports. The assembly as a whole is not a
+static equilibrium for frictionless disks: loads from above push many grains
+out of their pockets, so the first step of such a pile opens a large part of
+its contacts (a genuine complementarity problem, not a trivial one).
+
+The construction loops over grains in Python (it runs once, outside any
+solver); each placement only uses vectorised operations over the disks in a
+vertical strip.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .scene import Grains, Scene
+
+_MAX_MOVES = 1000
+
+
+def _check_pile(n_grains, radius, polydispersity):
+    if int(n_grains) < 1:
+        raise ValueError(f"n_grains: must be >= 1, got {n_grains}")
+    if not 0.0 <= polydispersity < 1.0:
+        raise ValueError(f"polydispersity: must be in [0, 1), got {polydispersity}")
+    if not radius > 0:
+        raise ValueError(f"radius: must be > 0, got {radius}")
+    return int(n_grains), float(radius)
+
+
+def deposit_pile(n_grains: int, radius: float = 0.5, polydispersity: float = 0.2,
+                 width: float | None = None, g: float = 1.0, seed: int = 0) -> Scene:
+    """A 2D pile of ``n_grains`` disks at rest on a floor between two walls.
+
+    Parameters
+    ----------
+    n_grains : int
+        Number of disks (>= 1).
+    radius : float
+        Mean radius (length); radii are uniform in ``radius (1 +/- polydispersity)``.
+    polydispersity : float
+        In ``[0, 1)``.
+    width : float, optional
+        Distance between the walls; default ``2 radius sqrt(n_grains)``
+        (a pile about as tall as wide).
+    g : float
+        Gravity (length / time^2), pointing to ``-y``.
+    seed : int
+        Seed of the radii and drop abscissae (the pile is deterministic).
+
+    Returns
+    -------
+    Scene
+        Floor ``y = 0``, walls ``x = 0`` and ``x = width``, unit density,
+        zero velocities.
+    """
+    n_grains, radius = _check_pile(n_grains, radius, polydispersity)
+    width = 2.0 * radius * np.sqrt(n_grains) if width is None else float(width)
+    if not width > 2.0 * radius * (1.0 + polydispersity):
+        raise ValueError(f"width: must exceed the largest diameter, got {width}")
+    rng = np.random.default_rng(seed)
+    radii = radius * (1.0 + polydispersity * rng.uniform(-1.0, 1.0, n_grains))
+    drops = rng.uniform(0.0, 1.0, n_grains)
+    centres = np.zeros((n_grains, 2))
+    for i in range(n_grains):
+        r = radii[i]
+        x0 = r + drops[i] * (width - 2.0 * r)
+        centres[i] = _place(centres[:i], radii[:i], r, x0, width)
+    grains = Grains.create(centres, radii, densities=1.0)
+    return Scene.create(grains, plane_points=[[0.0, 0.0], [0.0, 0.0], [width, 0.0]],
+                        plane_normals=[[0.0, 1.0], [1.0, 0.0], [-1.0, 0.0]], gravity=[0.0, -g],
+                        metadata={"name": "deposit_pile", "seed": seed, "width": width})
+
+
+def _place(centres: np.ndarray, radii: np.ndarray, r: float, x0: float, width: float) -> np.ndarray:
+    """Final centre of a disk of radius ``r`` dropped at abscissa ``x0``."""
+    position = np.array([x0, np.inf])
+    support = _fall(centres, radii, r, position, exclude=-1)
+    direction = 0.0
+    for _ in range(_MAX_MOVES):
+        if support < 0:                               # on the floor
+            return position
+        if direction == 0.0:
+            direction = 1.0 if position[0] >= centres[support, 0] else -1.0
+        hit, position = _roll(centres, radii, r, position, support, direction, width)
+        if hit == "fall":
+            support = _fall(centres, radii, r, position, exclude=support)
+            direction = 0.0
+        elif hit in ("floor", "wall"):
+            return position
+        else:
+            other = int(hit)
+            low, high = sorted((centres[support, 0], centres[other, 0]))
+            if low <= position[0] <= high:
+                return position
+            support = other                          # keep rolling, same direction
+    raise RuntimeError(f"deposit_pile: a disk found no rest after {_MAX_MOVES} moves")
+
+
+def _fall(centres, radii, r, position, exclude: int) -> int:
+    """Drop vertically from ``position`` (in place); return the support (-1: floor)."""
+    x = position[0]
+    reach = r + radii
+    near = np.abs(centres[:, 0] - x) < reach
+    if 0 <= exclude:
+        near[exclude] = False
+    best, height = -1, r
+    if np.any(near):
+        index = np.flatnonzero(near)
+        y = centres[index, 1] + np.sqrt(reach[index] ** 2 - (centres[index, 0] - x) ** 2)
+        y[y > position[1] + 1e-12] = -np.inf            # only what lies below
+        k = int(np.argmax(y))
+        if y[k] > height:
+            best, height = int(index[k]), float(y[k])
+    position[1] = height
+    return best
+
+
+def _roll(centres, radii, r, position, support, direction, width):
+    """Roll on ``support`` towards ``direction`` until the first obstacle or the equator.
+
+    Returns ``(hit, position)`` with hit ``"floor"``, ``"wall"``, ``"fall"``
+    (reached the equator of the support with nothing in the way) or the index
+    of the disk hit.
+    """
+    c = centres[support]
+    big = r + radii[support]
+    start = np.arctan2(position[1] - c[1], position[0] - c[0])
+    end = 0.0 if direction > 0 else np.pi
+    # progress along the path: 0 at start, grows while rolling down
+    def progress(theta):
+        return direction * (start - theta)
+    limit = progress(end)
+    best_s, best_hit = limit, "fall"
+    # floor: c_y + big sin(theta) = r
+    s_floor = (r - c[1]) / big
+    if -1.0 <= s_floor <= 1.0:
+        theta = np.arcsin(s_floor) if direction > 0 else np.pi - np.arcsin(s_floor)
+        s = progress(theta)
+        if 0.0 <= s < best_s:
+            best_s, best_hit = s, "floor"
+    # wall the disk rolls towards
+    wall_x = width - r if direction > 0 else r
+    cos_wall = (wall_x - c[0]) / big
+    if -1.0 <= cos_wall <= 1.0:
+        s = progress(np.arccos(cos_wall))
+        if 0.0 <= s < best_s:
+            best_s, best_hit = s, "wall"
+    # other disks: intersections of circle(c, big) with circle(c_k, r + r_k)
+    reach = r + radii
+    distance = np.hypot(centres[:, 0] - c[0], centres[:, 1] - c[1])
+    near = (distance < big + reach) & (distance > np.abs(big - reach))
+    near[support] = False
+    if np.any(near):
+        k = np.flatnonzero(near)
+        base = np.arctan2(centres[k, 1] - c[1], centres[k, 0] - c[0])
+        half = np.arccos(np.clip((big**2 + distance[k] ** 2 - reach[k] ** 2) / (2 * big * distance[k]),
+                                 -1.0, 1.0))
+        thetas = np.concatenate([base - half, base + half])
+        s = np.mod(direction * (start - thetas), 2.0 * np.pi)
+        s[s > 2.0 * np.pi - 1e-9] = 0.0                  # touching now counts as progress 0
+        owners = np.concatenate([k, k])
+        ahead = (s > 1e-12) & (s < best_s)
+        if np.any(ahead):
+            j = int(np.argmin(np.where(ahead, s, np.inf)))
+            best_s, best_hit = float(s[j]), str(int(owners[j]))
+    theta = start - direction * best_s
+    new = c + big * np.array([np.cos(theta), np.sin(theta)])
+    if best_hit == "wall":
+        new[0] = wall_x
+    elif best_hit == "floor":
+        new[1] = r
+    return best_hit, new

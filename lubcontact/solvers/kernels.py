@@ -1,0 +1,119 @@
+"""Compiled (numba) kernels of the gradient methods, imported lazily.
+
+Only the box case (frictionless problems: every row in ``[lower, upper]``)
+is compiled: one APGD loop with the product ``W z`` fused with the
+projection, the residual, the restart test, the active-set bookkeeping and the
+extrapolation. Measured on the 10^4-grain pile it is several times faster than
+the numpy loop (docs/benchmarks.md), which remains the general path.
+"""
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+
+@numba.njit(cache=True)
+def matvec(indptr, indices, values, x, out):
+    """``out = W x`` for W in CSR arrays."""
+    for i in range(out.size):
+        total = 0.0
+        for k in range(indptr[i], indptr[i + 1]):
+            total += values[k] * x[indices[k]]
+        out[i] = total
+
+
+@numba.njit(cache=True)
+def apgd_box(indptr, indices, values, b, lower, upper, ratio, sign, z0, tol, max_iter,
+             lipschitz, stable, divergence):
+    """APGD (restart, backtracking) on ``min 1/2 z.Wz + b.z, lower <= z <= upper``.
+
+    Mirrors :func:`lubcontact.solvers.gradient.run_apgd`. ``ratio`` maps the
+    iteration variables to the Jacobi-scaled ones of the stopping measure;
+    ``sign`` marks one-sided rows (+1 lower bound 0, -1 upper bound 0) for the
+    active-set count; with ``stable > 0`` the loop stops with status 3 once the
+    active set has not changed for ``stable`` iterations.
+
+    Returns
+    -------
+    best, best_residual, history, status (0 converged, 1 max_iter,
+    2 diverged, 3 active set settled), iterations, products, last iterate,
+    Lipschitz estimate.
+    """
+    n = b.size
+    rms = 1.0 / np.sqrt(max(n, 1))
+    x_old = z0.copy()
+    wx_old = np.empty(n)
+    matvec(indptr, indices, values, x_old, wx_old)
+    y = x_old.copy()
+    wy = wx_old.copy()
+    x = np.empty(n)
+    wx = np.empty(n)
+    best = z0.copy()
+    best_residual = np.inf
+    first = -1.0
+    history = np.empty(max_iter)
+    previous = np.zeros(n, dtype=np.bool_)
+    unchanged = -1
+    products = 1
+    theta = 1.0
+    status = 1
+    iterations = max_iter
+    for k in range(max_iter):
+        while True:
+            for i in range(n):
+                x[i] = min(max(y[i] - (wy[i] + b[i]) / lipschitz, lower[i]), upper[i])
+            matvec(indptr, indices, values, x, wx)
+            products += 1
+            num = 0.0
+            den = 0.0
+            for i in range(n):
+                d = x[i] - y[i]
+                num += d * (wx[i] - wy[i])
+                den += d * d
+            if num <= lipschitz * den * (1.0 + 1e-12):
+                break
+            lipschitz *= 2.0
+        squares = 0.0
+        uphill = 0.0
+        changes = 0
+        for i in range(n):
+            g = wx[i] + b[i]
+            scaled = x[i] * ratio[i]
+            projected = min(max(scaled - g / ratio[i], lower[i]), upper[i])
+            squares += (scaled - projected) ** 2
+            uphill += (wy[i] + b[i]) * (x[i] - x_old[i])
+            active = sign[i] == 0.0 or sign[i] * (x[i] - g) > 0.0
+            if active != previous[i]:
+                changes += 1
+                previous[i] = active
+        residual = np.sqrt(squares) * rms
+        history[k] = residual
+        if first < 0.0:
+            first = residual
+        if residual < best_residual:
+            best_residual = residual
+            best[:] = x
+        if residual <= tol:
+            status, iterations = 0, k + 1
+            break
+        if not np.isfinite(residual) or residual > divergence * max(first, 1.0):
+            status, iterations = 2, k + 1
+            break
+        unchanged = unchanged + 1 if changes == 0 else 0
+        if stable > 0 and unchanged >= stable:
+            status, iterations = 3, k + 1
+            break
+        theta_new = 0.5 * (-theta * theta + theta * np.sqrt(theta * theta + 4.0))
+        beta = theta * (1.0 - theta) / (theta * theta + theta_new)
+        if uphill > 0.0:
+            theta_new = 1.0
+            beta = 0.0
+        for i in range(n):
+            y[i] = x[i] + beta * (x[i] - x_old[i])
+            wy[i] = wx[i] + beta * (wx[i] - wx_old[i])
+            x_old[i] = x[i]
+            wx_old[i] = wx[i]
+        theta = theta_new
+        lipschitz *= 0.9
+    return best, best_residual, history[:iterations], status, iterations, products, x, lipschitz
+
