@@ -16,6 +16,20 @@ Which contacts get a shift: every COULOMB contact; a UNION contact (gluey +
 friction at gamma_min) only on its pushed piece (``lam_n >= 0``): on the
 pulled piece it is frictionless and bilateral, and a shift would move it.
 
+UNION contacts and the shift. The shift enters the linear term of the
+problem, ``lam_n s``, on both pieces of a union, while the exact law wants it
+on the pushed piece only (``s max(lam_n, 0)``). Projecting onto the union
+with a shift therefore has spurious minimisers (a contact pulled *into* its
+neighbour by ``s``). The fixed point thus fixes each UNION contact on one
+piece during an inner solve (a convex problem, for every solver), shift on
+the pushed piece only, and updates the pieces with the shift, by the branch
+rule of docs/friction.md: a pushed contact whose normal force vanishes while
+its unshifted normal gap rate is opening (``D + dt u_n > 0``) is flipped to
+pulled; a pulled contact whose force vanishes while closing is flipped to
+pushed. Initial pieces: the sign of the warm start's normal force (pushed
+without one). The fixed point has converged when the shift has and no
+contact flipped in the last round.
+
 Stopping rule, with ``L`` the length unit of the normalised problem
 (``problem.normalized().scaling.length``, i.e. ``dt V``) and the max norm
 over contacts::
@@ -57,8 +71,9 @@ def coulomb_shift(problem, forces: np.ndarray) -> np.ndarray:
     _, g_tangential = cones.split(problem.gradient(forces))
     idx = cones.tangential
     slip = cones.mu[idx] * np.linalg.norm(g_tangential, axis=1)
-    pulled = (cones.kinds[idx] == ConeKind.UNION) & (forces[idx] < 0)
-    shift[idx] = np.where(pulled, 0.0, slip)
+    kinds = cones.kinds[idx]
+    frictional = (kinds == ConeKind.COULOMB) | ((kinds == ConeKind.UNION) & (forces[idx] >= 0))
+    shift[idx] = np.where(frictional, slip, 0.0)
     return shift
 
 
@@ -89,7 +104,7 @@ def coulomb_error(problem, forces: np.ndarray) -> float:
 def solve_coulomb(problem, method: str = "clarabel", *, tol: float = 1e-9, tol_fp: float = 1e-8,
                   max_outer: int = 50, warm_start: np.ndarray | None = None,
                   shift: np.ndarray | None = None, max_iter: int | None = None,
-                  **options) -> SolveResult:
+                  anderson: int = 5, forcing: float = 0.0, **options) -> SolveResult:
     """Solve a frictional problem exactly by the fixed point on ``s``.
 
     Parameters
@@ -111,6 +126,13 @@ def solve_coulomb(problem, method: str = "clarabel", *, tol: float = 1e-9, tol_f
         (the first inner solve is then the convex relaxation).
     max_iter : int, optional
         Iteration cap of each inner solve.
+    anderson : int
+        Memory of the Anderson acceleration of the map ``s -> mu |g_T(s)|``
+        (0: plain fixed point). Accelerated shifts are clipped at 0; the
+        stopping test is always on the plain map's change.
+    forcing : float
+        Inexact inner solves: the inner tolerance is
+        ``max(tol, forcing x previous change)`` (0: always ``tol``).
     **options
         Passed to the inner solver.
 
@@ -131,16 +153,24 @@ def solve_coulomb(problem, method: str = "clarabel", *, tol: float = 1e-9, tol_f
     nc = problem.cones.count
     current = np.zeros(nc) if shift is None else checks.as_array("shift", shift, shape=(nc,)).copy()
     if not problem.cones.has_friction:
-        return solve(problem.with_shift(current), method, tol=tol, max_iter=max_iter,
-                     warm_start=warm_start, **options)
+        result = solve(problem.with_shift(current), method, tol=tol, max_iter=max_iter,
+                       warm_start=warm_start, **options)
+        info = dict(result.info, outer_iterations=1, shift_change=0.0, force_change=np.inf,
+                    inner_status=result.status, fp_converged=True, shift=current,
+                    shift_history=np.zeros(0))
+        return replace(result, info=info)
     scaling = problem.normalized().scaling
     length, force_unit = scaling.length, scaling.force
+    accelerator = _Anderson(anderson)
+    branches = _Branches(problem, warm_start, threshold=max(1e3 * tol, 1e-7))
     forces, inner, history = warm_start, 0, []
     shift_change = force_change = np.inf
     converged = False
     for outer in range(1, max_outer + 1):
-        used = current
-        result = solve(problem.with_shift(used), method, tol=tol, max_iter=max_iter,
+        convex = branches.problem()
+        used = branches.restrict(current)
+        inner_tol = tol if forcing == 0 else max(tol, forcing * min(shift_change, 1.0))
+        result = solve(convex.with_shift(used), method, tol=inner_tol, max_iter=max_iter,
                        warm_start=forces, **options)
         inner += result.iterations
         if forces is not None:
@@ -148,16 +178,21 @@ def solve_coulomb(problem, method: str = "clarabel", *, tol: float = 1e-9, tol_f
         forces = result.forces
         if not result.success:
             break
-        current = coulomb_shift(problem, forces)
-        shift_change = _relative_change(current / length, used / length)
+        mapped = coulomb_shift(convex, forces)
+        shift_change = _relative_change(mapped / length, used / length)
         history.append(shift_change)
-        if shift_change < tol_fp:
+        flipped = branches.update(convex.with_shift(used), forces, length, force_unit)
+        if shift_change < tol_fp and inner_tol <= tol and not flipped:
             converged = True
             break
+        current = length * accelerator.step(used / length, mapped / length)
+        if flipped:
+            accelerator.restart()
     status = CONVERGED if converged else (result.status if not result.success else MAX_ITER)
     info = dict(result.info, outer_iterations=outer, shift_change=shift_change,
                 force_change=force_change, inner_status=result.status, fp_converged=converged,
-                shift=used, shift_history=np.asarray(history))
+                shift=used, shift_history=np.asarray(history), pulled=branches.pulled_contacts,
+                branch_flips=branches.flips)
     return replace(result, status=status, iterations=inner, info=info)
 
 
@@ -166,3 +201,90 @@ def _relative_change(new: np.ndarray, old: np.ndarray) -> float:
     if new.size == 0:
         return 0.0
     return float(np.max(np.abs(new - old)) / (1.0 + np.max(np.abs(new))))
+
+
+class _Anderson:
+    """Anderson acceleration (type II) of a fixed point ``x = F(x)``, kept in ``x >= 0``.
+
+    With the last ``memory + 1`` pairs ``(x_i, F(x_i))`` and residuals
+    ``f_i = F(x_i) - x_i``, the next iterate is ``F(x_k) - dF gamma`` with
+    ``gamma`` the least-squares solution of ``df gamma = f_k`` (differences of
+    consecutive pairs). The history restarts when the residual grows past
+    ten times the smallest seen, a safeguard against a poor extrapolation.
+    """
+
+    def __init__(self, memory: int):
+        self.memory = int(checks.nonnegative("anderson", memory, shape=()))
+        self.points: list[np.ndarray] = []
+        self.images: list[np.ndarray] = []
+        self.best = np.inf
+
+    def restart(self) -> None:
+        self.points, self.images, self.best = [], [], np.inf
+
+    def step(self, point: np.ndarray, image: np.ndarray) -> np.ndarray:
+        if self.memory == 0:
+            return image
+        size = float(np.linalg.norm(image - point))
+        if size > 10.0 * self.best:
+            self.restart()
+        self.best = min(self.best, size)
+        self.points = (self.points + [point])[-(self.memory + 1):]
+        self.images = (self.images + [image])[-(self.memory + 1):]
+        if len(self.points) < 2:
+            return image
+        images = np.array(self.images).T
+        residuals = images - np.array(self.points).T
+        gamma = np.linalg.lstsq(np.diff(residuals, axis=1), residuals[:, -1], rcond=1e-12)[0]
+        return np.maximum(image - np.diff(images, axis=1) @ gamma, 0.0)
+
+
+class _Branches:
+    """The piece (pushed or pulled) on which each UNION contact is fixed (module docstring).
+
+    Parameters
+    ----------
+    problem : StepProblem or LocalProblem
+    warm_start : ndarray or None
+        Initial forces: a negative normal force starts a UNION contact pulled.
+    threshold : float
+        Normalised level below which a normal force counts as zero and above
+        which a gap rate counts as opening or closing.
+    """
+
+    def __init__(self, problem, warm_start: np.ndarray | None, threshold: float):
+        self.base = problem
+        self.union = problem.cones.kinds == ConeKind.UNION
+        self.pulled = np.zeros(problem.cones.count, dtype=bool)
+        if warm_start is not None:
+            self.pulled = self.union & (warm_start[: problem.cones.count] < 0)
+        self.threshold = threshold
+        self.flips: list[int] = []
+
+    @property
+    def pulled_contacts(self) -> np.ndarray:
+        return np.flatnonzero(self.pulled)
+
+    def problem(self):
+        """The convex problem with every UNION contact on its current piece."""
+        if not self.union.any():
+            return self.base
+        return self.base.with_cones(self.base.cones.with_branches(self.pulled))
+
+    def restrict(self, shift: np.ndarray) -> np.ndarray:
+        """No shift on pulled contacts."""
+        return np.where(self.pulled, 0.0, shift)
+
+    def update(self, convex, forces: np.ndarray, length: float, force_unit: float) -> bool:
+        """Flip the contacts inconsistent with the union; returns whether any flipped."""
+        if not self.union.any():
+            return False
+        nc = convex.cones.count
+        normal = forces[:nc] / force_unit
+        opening = (convex.gradient(forces)[:nc] - convex.shift) / length      # (D + dt u_n) / L
+        idle = np.abs(normal) <= self.threshold
+        flip = self.union & idle & np.where(self.pulled, opening < -self.threshold,
+                                            opening > self.threshold)
+        self.flips.append(int(np.count_nonzero(flip)))
+        self.pulled ^= flip
+        return bool(flip.any())

@@ -7,7 +7,8 @@ is ``[all normals, then all tangential blocks]`` (see :mod:`lubcontact.cones`),
 so :class:`LocalProblem` permutes once on construction and offers the same
 protocol as :class:`~lubcontact.problem.StepProblem` (``delassus``,
 ``offset``, ``cones``, ``gradient``, ``natural_residual``, ``normalized``,
-``velocity``, ``with_shift``), so that :func:`lubcontact.solvers.solve` and
+``velocity``, ``with_shift``; no ``delassus_factor``: no factor ``W = L^T L``
+is known), so that :func:`lubcontact.solvers.solve` and
 :func:`lubcontact.fixed_point.solve_coulomb` work on it unchanged.
 
 The problem is the Coulomb problem of FCLIB: ``r_c`` in the cone
@@ -75,9 +76,6 @@ class LocalProblem:
     shift: np.ndarray | None = None
     name: str = ""
     scaling: Scaling | None = field(default=None, repr=False)
-
-    #: no factor ``W = L^T L`` is known (the symbolic form uses ``W`` directly)
-    delassus_factor = None
 
     def __post_init__(self):
         n = self.cones.n_rows
