@@ -173,7 +173,7 @@ def osqp_method(problem, *, tol: float = 1e-10, max_iter: int = 100000, warm_sta
     if warm_start is not None:
         solver.warm_start(x=np.asarray(warm_start, dtype=float))
     built = time.perf_counter()
-    result = solver.solve()
+    result = solver.solve(raise_error=False)
     done = time.perf_counter()
     raw = str(result.info.status)
     status = CONVERGED if raw == "solved" else INACCURATE if "inaccurate" in raw else \

@@ -480,6 +480,17 @@ def _common(problem, warm_start, scaling: bool, operator: str):
     return data, z, time.perf_counter() - start, time.perf_counter()
 
 
+def _accept_warm_start(data: DualData, z: np.ndarray, tol: float, warm_start, setup: float,
+                       start: float) -> MethodOutput | None:
+    """Converged output with 0 iterations when the (projected) warm start already meets ``tol``."""
+    if warm_start is None:
+        return None
+    tracker = _Tracker(data, tol)
+    if tracker.record(z, data.product(z) + data.offset) != CONVERGED:
+        return None
+    return _output(data, tracker, CONVERGED, 0, setup, start)
+
+
 def _empty(problem) -> MethodOutput | None:
     if problem.n_rows == 0:
         return MethodOutput(np.zeros(0), CONVERGED, 0, 0.0, 0.0)
@@ -493,6 +504,8 @@ def pgd(problem, *, tol: float = 1e-8, max_iter: int = 20000, warm_start=None,
     if (out := _empty(problem)) is not None:
         return out
     data, z, setup, start = _common(problem, warm_start, scaling, operator)
+    if (out := _accept_warm_start(data, z, tol, warm_start, setup, start)) is not None:
+        return out
     tracker, status, iterations = run_pgd(data, z, tol, max_iter)
     return _output(data, tracker, status, iterations, setup, start)
 
@@ -504,6 +517,8 @@ def _apgd(problem, tol, max_iter, warm_start, scaling, operator, active_set) -> 
     finishing = active_set and not problem.cones.has_friction
     data, z, setup, start = _common(problem, warm_start, scaling,
                                     "matrix" if fused or finishing else operator)
+    if (out := _accept_warm_start(data, z, tol, warm_start, setup, start)) is not None:
+        return out
     finish = None
     if finishing:
         finish = ActiveSetFinish(data, problem.cones)
@@ -602,6 +617,8 @@ def bb(problem, *, tol: float = 1e-8, max_iter: int = 20000, warm_start=None,
     if (out := _empty(problem)) is not None:
         return out
     data, z, setup, start = _common(problem, warm_start, scaling, operator)
+    if (out := _accept_warm_start(data, z, tol, warm_start, setup, start)) is not None:
+        return out
     tracker, status, iterations = run_bb(data, z, tol, max_iter)
     return _output(data, tracker, status, iterations, setup, start)
 

@@ -1,0 +1,183 @@
+"""Fast methods against the Clarabel reference (tol 1e-10): velocities, gaps, statuses, trajectories."""
+import numpy as np
+import pytest
+
+from lubcontact import GlueyLubrication, Inelastic, Simulation, scenes
+from lubcontact.bench import matched_forces, next_step_problem, pile_cases, velocity_error
+from lubcontact.cones import ConeKind, Cones
+from lubcontact.contacts import find_contacts
+from lubcontact.laws import Law
+from lubcontact.packing import deposit_pile
+from lubcontact.solvers import methods, solve
+from lubcontact.solvers.direct import conic_form
+
+FAST = ["pgd", "apgd", "bb", "apgd-jacobi", "apgd-as"]
+DIRECT = ["clarabel-direct", "osqp", "scs"]
+ACCURACY = 1e-6          # relative velocity error |v - v_ref|_M / |U|_M
+
+
+@pytest.fixture(scope="module")
+def piles():
+    """Dry and glued step problems of a 150-grain deposited pile, with reference solves."""
+    cases = pile_cases(150, glued_fraction=0.3, dt=0.01, seed=3)
+    return [(case, solve(case.problem, "clarabel", tol=1e-10)) for case in cases]
+
+
+def test_registry_has_every_method():
+    assert set(FAST + DIRECT) <= set(methods())
+
+
+@pytest.mark.parametrize("method", FAST + DIRECT)
+def test_pile_velocities_match_clarabel(piles, method):
+    for case, reference in piles:
+        tol = 1e-10 if method in DIRECT else 1e-9
+        result = solve(case.problem, method, tol=tol, max_iter=100000 if method == "pgd" else None)
+        assert result.status == "converged", (case.label, result.status)
+        assert velocity_error(case.problem, result.velocities, reference.velocities) <= ACCURACY
+        radius = case.scene.grains.radii.min()
+        assert case.problem.gaps_after(result.velocities).min() >= -ACCURACY * radius
+
+
+def test_pile_problem_is_at_rest_and_not_trivial(piles):
+    """Zero velocities, closed contacts, and a solution in which some contacts open."""
+    case, reference = piles[0]
+    assert np.all(case.scene.grains.velocities == 0)
+    closed = np.abs(case.problem.gaps) <= 1e-9
+    assert closed.sum() >= 1.9 * case.n_grains
+    opened = reference.forces[: case.problem.n_contacts] <= 1e-9 * reference.force_scale
+    assert 0 < np.count_nonzero(opened & closed) < closed.sum()
+
+
+def test_glued_contacts_pull(piles):
+    case, reference = piles[1]
+    free = case.problem.cones.kinds == ConeKind.FREE
+    assert free.sum() > 0 and np.any(reference.forces[: case.problem.n_contacts][free] < 0)
+
+
+def next_step_with_guess(case, reference):
+    """The following step's problem and the previous forces matched to it by pair key."""
+    following = next_step_problem(case, reference.velocities)
+    return following, matched_forces(case.problem.keys, reference.forces[: case.problem.n_contacts],
+                                     following)
+
+
+def test_warm_start_finishes_the_next_step_in_one_active_set_solve(piles):
+    """The dry pile opens many contacts in its first step; the second step starts from them."""
+    case, reference = piles[0]
+    following, guess = next_step_with_guess(case, reference)
+    next_reference = solve(following, "clarabel", tol=1e-10)
+    warm = solve(following, "apgd-as", tol=1e-9, warm_start=guess)
+    assert warm.status == "converged" and warm.iterations == 1
+    assert velocity_error(following, warm.velocities, next_reference.velocities) <= 1e-12
+
+
+@pytest.mark.parametrize("method", ["apgd", "apgd-jacobi", "bb"])
+def test_warm_start_helps_gradient_methods(piles, method):
+    """Glued pile: forces change by about 0.2 % between steps; the warm start saves iterations."""
+    case, reference = piles[1]
+    following, guess = next_step_with_guess(case, reference)
+    cold = solve(following, method, tol=1e-9)
+    warm = solve(following, method, tol=1e-9, warm_start=guess)
+    assert cold.status == warm.status == "converged"
+    assert warm.iterations < 0.9 * cold.iterations
+
+
+def test_a_warm_start_that_already_meets_tol_costs_no_iteration(piles):
+    case, reference = piles[0]
+    result = solve(case.problem, "apgd-jacobi", tol=1e-9, warm_start=reference.forces)
+    assert result.status == "converged" and result.iterations == 0
+
+
+def test_best_iterate_and_max_iter_status(piles):
+    case, _ = piles[0]
+    result = solve(case.problem, "apgd", tol=1e-14, max_iter=30)
+    assert result.status == "max_iter" and result.iterations == 30
+    assert result.info["best_residual"] == pytest.approx(np.min(result.residual_history))
+
+
+@pytest.mark.parametrize("operator", ["matrix", "factor"])
+def test_matrix_and_matrix_free_operators_agree(piles, operator):
+    case, reference = piles[0]
+    result = solve(case.problem, "bb", tol=1e-9, operator=operator)
+    assert result.status == "converged"
+    assert velocity_error(case.problem, result.velocities, reference.velocities) <= ACCURACY
+
+
+# -- friction (numpy path: projections onto 2D friction cones) ------------------------------------
+class _DryFriction(Law):
+    """Every contact with a Coulomb cone of coefficient ``mu`` (test-only law)."""
+
+    needs_rotation = True
+
+    def __init__(self, mu):
+        self.mu = mu
+
+    def cones(self, contacts, gamma):
+        return Cones(kinds=np.full(contacts.count, ConeKind.COULOMB, dtype=np.int8),
+                     mu=np.full(contacts.count, self.mu), tangential=np.arange(contacts.count),
+                     tangent_dim=contacts.dim - 1)
+
+
+@pytest.fixture(scope="module")
+def frictional():
+    """A 60-grain pile on a slope-free floor with mu = 0.3, one step after release."""
+    scene = deposit_pile(60, seed=5)
+    simulation = Simulation(scene, _DryFriction(0.3), 0.01)
+    contacts = find_contacts(simulation.scene, simulation.d_max)
+    problem = simulation.build_problem(contacts, simulation.law.cones(contacts, np.zeros(contacts.count)))
+    return problem, solve(problem, "clarabel", tol=1e-10)
+
+
+@pytest.mark.parametrize("method", ["apgd", "apgd-jacobi", "apgd-as", "bb", "clarabel-direct", "scs"])
+def test_frictional_pile_velocities_match_clarabel(frictional, method):
+    problem, reference = frictional
+    result = solve(problem, method, tol=1e-10 if method in DIRECT else 1e-10)
+    assert result.status == "converged"
+    assert velocity_error(problem, result.velocities, reference.velocities) <= ACCURACY
+    assert problem.cones.velocity_violation(problem.gradient(result.forces)).max() <= 1e-6
+
+
+def test_second_order_and_polyhedral_forms_agree(frictional):
+    problem, _ = frictional
+    scaled = problem.normalized()
+    assert conic_form(scaled, polyhedral=False).soc_count == problem.n_contacts
+    assert conic_form(scaled, polyhedral=True).soc_count == 0
+    soc = solve(problem, "clarabel-direct", tol=1e-10, polyhedral=False)
+    qp = solve(problem, "clarabel-direct", tol=1e-10, polyhedral=True)
+    assert velocity_error(problem, soc.velocities, qp.velocities) <= ACCURACY
+
+
+def test_direct_methods_reject_union_cones(frictional):
+    problem, _ = frictional
+    union = problem.cones.with_branches(np.zeros(problem.n_contacts, dtype=bool))
+    union.kinds[:] = ConeKind.UNION
+    with pytest.raises(ValueError, match="UNION"):
+        solve(problem.with_cones(union), "clarabel-direct")
+
+
+# -- inside Simulation -------------------------------------------------------------------------------
+def trajectories(scene, law, dt, steps, solver, d_max=None, tol=1e-10):
+    sim = Simulation(scene, law, dt, solver=solver, tol=tol, d_max=d_max)
+    sim.run(steps)
+    record = sim.trajectory.arrays()
+    return record["positions"], record["velocities"], record["glued_count"], record["contact_count"]
+
+
+@pytest.mark.parametrize("scene, law, dt, steps, d_max", [
+    (scenes.push_pull(), GlueyLubrication(), 0.05, 100, 0.02),
+    (scenes.disk_on_incline(np.radians(30), t_inversion=1.5), GlueyLubrication(gamma_min=-0.5), 0.02,
+     150, 0.02),
+    (scenes.settling_pile(500, seed=1), Inelastic(), 0.1, 30, None),
+], ids=["push-pull", "gluey-incline", "pile-500"])
+@pytest.mark.parametrize("solver", ["apgd-as"])
+def test_simulation_reproduces_clarabel_trajectories(scene, law, dt, steps, d_max, solver):
+    ref_x, ref_v, ref_glued, ref_count = trajectories(scene, law, dt, steps, "clarabel", d_max)
+    x, v, glued, count = trajectories(scene, law, dt, steps, solver, d_max)
+    assert ref_count.max() >= (300 if scene.grains.count > 1 else 1)      # contacts did happen
+    if isinstance(law, GlueyLubrication):
+        assert ref_glued.max() == 1 and ref_glued[-1] == 0                 # glued, then unglued
+    np.testing.assert_array_equal(glued, ref_glued)
+    np.testing.assert_array_equal(count, ref_count)
+    speed = max(np.abs(ref_v).max(), 1e-12)
+    assert np.abs(v - ref_v).max() <= 1e-6 * speed
+    assert np.abs(x - ref_x).max() <= 1e-6 * scene.grains.radii.min()
