@@ -13,7 +13,8 @@ by the free-velocity scale ``V``, lengths by ``dt V``, forces by ``m_ref V / dt`
   to ``CONE_TOL`` (relative to the largest force, at least 1); per-contact
   complementarity ``|lam_c . g_c| <= PROPERTY_TOL`` (same relative measure);
   kinetic energy not above the free velocity's (``ENERGY_TOL`` relative)
-  when zero velocity is admissible (no external work by the contacts).
+  when zero velocity is admissible (to ``PROPERTY_TOL``): the contacts then
+  do no work, the step is a projection onto a convex set holding 0.
 
 Verdicts: ``ok`` (converged, error and properties within tolerance),
 ``flagged`` (a non-converged status: acceptable, the caller is told),
@@ -90,6 +91,8 @@ class Expected:
 
 def expected_for(case, problem: StepProblem) -> Expected:
     """The exact velocities when the case has them, else the Clarabel reference's."""
+    if case.reference_fails and case.exact is None:
+        raise ValueError(f"{case.name}: a case whose reference fails needs an exact answer")
     reference = solve(problem, REFERENCE_METHOD, tol=REFERENCE_TOL)
     if case.exact is not None:
         return Expected(np.asarray(case.exact(problem), dtype=float), "exact", reference)
@@ -151,13 +154,14 @@ def _per_contact_dot(cones, forces: np.ndarray, g: np.ndarray) -> np.ndarray:
 
 
 def _zero_admissible(scaled: StepProblem, forces: np.ndarray) -> bool:
-    """Whether ``v = 0`` satisfies every constraint (UNION contacts on the branch of their force)."""
+    """Whether ``v = 0`` satisfies every constraint to ``PROPERTY_TOL`` (scaled lengths), UNION
+    contacts on the branch of their force; rounding-level overlaps of touching grains pass."""
     cones = scaled.cones
     if cones.count == 0:
         return True
     if not cones.is_convex:
         cones = cones.with_branches(forces[: cones.count] < 0)
-    return bool(np.all(cones.velocity_violation(scaled.constant_rows) == 0.0))
+    return bool(np.all(cones.velocity_violation(scaled.constant_rows) <= PROPERTY_TOL))
 
 
 def judge(case, problem: StepProblem, expected: Expected, result: SolveResult, seconds: float) -> Cell:
@@ -176,6 +180,8 @@ def judge(case, problem: StepProblem, expected: Expected, result: SolveResult, s
     cell.failed = [name for name, value in cell.properties.items() if not value <= limits[name]]
     if cell.error > tolerance:
         cell.failed.insert(0, "error")
+    if case.must_flag:
+        cell.failed.insert(0, "must_flag")
     if result.status != CONVERGED:
         cell.verdict = FLAGGED
     elif cell.failed:
@@ -237,8 +243,9 @@ def matrix(cells: list[Cell], markdown: bool = False) -> str:
     cases = list(dict.fromkeys(c.case for c in cells))
     solvers = list(dict.fromkeys(c.solver for c in cells))
     by_key = {(c.case, c.solver): c for c in cells}
-    rows = [["case"] + solvers] + [[case] + [cell_text(by_key[case, s]) for s in solvers]
-                                   for case in cases]
+    marked = {name for name, case in load_cases().items() if case.reference_fails}
+    rows = [["case"] + solvers] + [[case + ("*" if case in marked else "")] +
+                                   [cell_text(by_key[case, s]) for s in solvers] for case in cases]
     if markdown:
         lines = ["| " + " | ".join(row) + " |" for row in rows]
         lines.insert(1, "|" + "---|" * len(rows[0]))
@@ -282,5 +289,5 @@ def main(argv: list[str] | None = None) -> int:
     print()
     print(summary(cells))
     print(f"({len(cells)} solves in {time.perf_counter() - start:.1f} s; cell = verdict or status, "
-          "scaled error / iterations)")
+          "scaled error / iterations; * = Clarabel known wrong, checked against the exact answer)")
     return int(any(c.verdict in (WRONG, CRASH) for c in cells))

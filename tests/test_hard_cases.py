@@ -52,6 +52,8 @@ FINDINGS = {
     ("tetrahedron_3d_friction", "scs"): "forces outside their cones by 1.2e-10 (relative)",
     ("glued_chain_free", "scs"): "rejects a problem without inequality rows (all contacts FREE)",
     ("glued_chain_anchored", "scs"): "rejects a problem without inequality rows (all contacts FREE)",
+    ("hex_box_glued", "scs"): "rejects a problem without inequality rows (all contacts FREE)",
+    ("glued_infeasible", "scs"): "rejects a problem without inequality rows (all contacts FREE)",
 }
 
 
@@ -73,6 +75,7 @@ def test_suite_size_and_descriptions():
     for name, case in CASES.items():
         assert case.hard and case.expected, name
         assert case.problem.n_dof > 0, name
+        assert case.exact is not None or not case.reference_fails, name
 
 
 @pytest.mark.parametrize("solver", methods())

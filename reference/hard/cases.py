@@ -40,8 +40,13 @@ class HardCase:
     exact : callable (StepProblem) -> ndarray (n_dof,), optional
         Exact velocities after the step, when known.
     reference_fails : bool
-        Clarabel itself is known to fail here: solvers are checked against
-        ``exact`` instead of the Clarabel solution.
+        Clarabel (``clarabel``, tol 1e-10) is known to be wrong here while
+        reporting convergence (docs/hard_cases.md, findings); such a case must
+        have ``exact``. Every case with ``exact`` is checked against it, never
+        against Clarabel.
+    must_flag : bool
+        The problem has no solution (primal infeasible, dual unbounded): every
+        method must return a non-converged status.
     """
 
     name: str
@@ -50,6 +55,7 @@ class HardCase:
     build: Callable[[], StepProblem]
     exact: Callable[[StepProblem], np.ndarray] | None = None
     reference_fails: bool = False
+    must_flag: bool = False
 
     @cached_property
     def problem(self) -> StepProblem:
@@ -131,6 +137,19 @@ def _wedge_grains(half_angle: float = 1e-3) -> StepProblem:
     scene = Scene.create(grains, fixed_positions=[[-x, 0.0], [x, 0.0]], fixed_radii=1.0,
                          gravity=[0.0, -1.0])
     return scene_problem(scene, Inelastic(), 0.01)
+
+
+def _hexagonal_box_glued() -> StepProblem:
+    centres, width, _ = hexagonal_box(6, 6)
+    scene = floor_scene(centres, 0.5, masses=1.0, walls=(0.0, width))
+    law, dt = GlueyLubrication(), 0.01 * NATURAL_TIME
+    count = scene_problem(scene, law, dt).n_contacts
+    return scene_problem(scene, law, dt, gamma=np.full(count, -0.5))
+
+
+def _glued_between_walls() -> StepProblem:
+    scene = floor_scene([[0.0, 0.51]], 0.5, masses=1.0, lid=1.02)
+    return scene_problem(scene, GlueyLubrication(), 0.01, d_max=0.05, gamma=[-0.5, -0.5])
 
 
 # -- glued chains -----------------------------------------------------------------------------------
@@ -294,7 +313,8 @@ CASES: dict[str, HardCase] = {case.name: case for case in [
              "a 10-disk pyramid with random velocities, friction written with mu = 0: "
              "degenerate cones {|t| <= 0 n} (tangential rows that must vanish)",
              "the frictionless answer, spins untouched", lambda: scene_problem(
-                 _pyramid_scene(), ExplicitFriction(0.0), 0.01), _frictionless_pyramid_answer),
+                 _pyramid_scene(), ExplicitFriction(0.0), 0.01), _frictionless_pyramid_answer,
+             reference_fails=True),
     HardCase("mu_ten", "the same pyramid with mu = 10: wide cones, nearly sticking everywhere",
              "forces inside the cones, no penetration",
              lambda: scene_problem(_pyramid_scene(), ExplicitFriction(10.0), 0.01)),
@@ -307,7 +327,16 @@ CASES: dict[str, HardCase] = {case.name: case for case in [
              "the hexagonal packing closed by a lid, mu = 0.3: every grain over-constrained, "
              "3 rows per contact",
              "everything stays at rest", lambda: _hexagonal_box(ExplicitFriction(0.3), lid=True),
-             _at_rest),
+             _at_rest, reference_fails=True),
+    HardCase("hex_box_glued",
+             "the hexagonal packing with every contact glued: 89 equality rows for 66 unknowns "
+             "(H rank-deficient) and gaps that are zero only to rounding (+/- 2e-16)",
+             "everything stays at rest", _hexagonal_box_glued, _at_rest),
+    HardCase("glued_infeasible",
+             "a disk glued to the floor and to a lid, 0.01 from each: both gaps cannot close "
+             "(primal infeasible, dual unbounded)",
+             "no method converges: every status is non-converged, forces finite",
+             _glued_between_walls, must_flag=True),
     HardCase("wedge_planes",
              "a disk wedged in a V of half-angle 1e-3 rad: near-antiparallel normals, "
              "W nearly singular, forces ~500 m g",
@@ -340,9 +369,9 @@ CASES: dict[str, HardCase] = {case.name: case for case in [
              "the apex of the cone, where the projection is not differentiable",
              "exact Coulomb (the problem carries the fixed point's shift s = mu dt |u_T|): "
              "the sliding disk keeps its velocity, the pushed one stops, nothing spins",
-             lambda: _cone_apex(2), _cone_apex_exact(2)),
+             lambda: _cone_apex(2), _cone_apex_exact(2), reference_fails=True),
     HardCase("cone_apex_3d", "the cone apex with spheres (second-order cones)",
-             "as in 2D", lambda: _cone_apex(3), _cone_apex_exact(3)),
+             "as in 2D", lambda: _cone_apex(3), _cone_apex_exact(3), reference_fails=True),
     HardCase("dt_tiny", "a 15-disk loose pile with random velocities at dt = 1e-6 sqrt(r/g): "
              "gaps ~1e5 times the step's travel", "almost every contact inactive",
              lambda: _loose_pile(1e-6, Inelastic())),
