@@ -9,7 +9,7 @@ by the free-velocity scale ``V``, lengths by ``dt V``, forces by ``m_ref V / dt`
   (gaps after the step and tangential displacements, max norm, in ``dt V``),
   against the exact answer when the case has one, else the Clarabel reference
   (``clarabel``, tol 1e-10);
-- **properties**: no gap below ``-PROPERTY_TOL``; forces inside their cones
+- **properties** (with the final shift s for a fixed-point solve): no gap below ``-PROPERTY_TOL``; forces inside their cones
   to ``CONE_TOL`` (relative to the largest force, at least 1); per-contact
   complementarity ``|lam_c . g_c| <= PROPERTY_TOL`` (same relative measure);
   kinetic energy not above the free velocity's (``ENERGY_TOL`` relative)
@@ -33,7 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .cones import ConeKind
+from .fixed_point import solve_coulomb
 from .problem import StepProblem
 from .solvers import CONVERGED, SolveResult, methods, solve
 
@@ -46,6 +46,7 @@ FRICTION_ERROR_TOL = 1e-5
 PROPERTY_TOL = 1e-6
 CONE_TOL = 1e-10
 ENERGY_TOL = 1e-6
+FIXED_POINT_TOL = 1e-10
 
 OK, FLAGGED, WRONG, REJECTED, CRASH = "ok", "flagged", "wrong", "rejected", "crash"
 VERDICTS = (OK, FLAGGED, WRONG, REJECTED, CRASH)
@@ -89,11 +90,22 @@ class Expected:
     reference: SolveResult | None
 
 
-def expected_for(case, problem: StepProblem) -> Expected:
+def solve_case(problem: StepProblem, method: str, tol: float, max_iter: int | None = None,
+               fixed_point: bool = False) -> SolveResult:
+    """One solve of a case: the convex problem as given, or (``fixed_point``, frictional
+    problems) exact Coulomb friction by the fixed point on s started from ``s = 0``, as the
+    time stepper does (``info["shift"]`` holds the final shift)."""
+    if fixed_point and problem.cones.has_friction:
+        return solve_coulomb(problem.with_shift(np.zeros(problem.n_contacts)), method, tol=tol,
+                             tol_fp=FIXED_POINT_TOL, max_iter=max_iter)
+    return solve(problem, method, tol=tol, max_iter=max_iter)
+
+
+def expected_for(case, problem: StepProblem, fixed_point: bool = False) -> Expected:
     """The exact velocities when the case has them, else the Clarabel reference's."""
     if case.reference_fails and case.exact is None:
         raise ValueError(f"{case.name}: a case whose reference fails needs an exact answer")
-    reference = solve(problem, REFERENCE_METHOD, tol=REFERENCE_TOL)
+    reference = solve_case(problem, REFERENCE_METHOD, REFERENCE_TOL, fixed_point=fixed_point)
     if case.exact is not None:
         return Expected(np.asarray(case.exact(problem), dtype=float), "exact", reference)
     if reference.status == CONVERGED:
@@ -123,6 +135,8 @@ def properties(problem: StepProblem, result: SolveResult) -> dict[str, float]:
         ``energy`` (relative kinetic-energy gain; 0 when zero velocity is not
         admissible, where contacts may do work).
     """
+    if "shift" in result.info:                      # a fixed-point solve: its own final shift
+        problem = problem.with_shift(result.info["shift"])
     scaled = problem.normalized()
     scaling = scaled.scaling
     forces = result.forces / scaling.force
@@ -196,15 +210,16 @@ def error_tolerance(problem: StepProblem, expected: Expected) -> float:
     return ERROR_TOL
 
 
-def run_case(case, solvers: list[str], tol: float, max_iter: int | None) -> list[Cell]:
-    """Every solver of ``solvers`` on one case."""
+def run_case(case, solvers: list[str], tol: float, max_iter: int | None,
+             fixed_point: bool = False) -> list[Cell]:
+    """Every solver of ``solvers`` on one case (see :func:`solve_case` for ``fixed_point``)."""
     problem = case.problem
-    expected = expected_for(case, problem)
+    expected = expected_for(case, problem, fixed_point)
     cells = []
     for name in solvers:
         start = time.perf_counter()
         try:
-            result = solve(problem, name, tol=tol, max_iter=max_iter)
+            result = solve_case(problem, name, tol, max_iter, fixed_point)
         except ValueError as exc:
             cells.append(Cell(case.name, name, REJECTED, message=str(exc).splitlines()[0]))
             continue
@@ -216,15 +231,21 @@ def run_case(case, solvers: list[str], tol: float, max_iter: int | None) -> list
 
 
 def run_suite(case_names: list[str] | None = None, solvers: list[str] | None = None,
-              tol: float = 1e-9, max_iter: int | None = None) -> list[Cell]:
-    """Run the suite; ``None`` means every case / every registered method."""
+              tol: float = 1e-9, max_iter: int | None = None,
+              fixed_point: bool = False) -> list[Cell]:
+    """Run the suite; ``None`` means every case / every registered method.
+
+    With ``fixed_point`` only the frictional cases run, through the fixed point on s."""
     cases = load_cases()
     names = list(cases) if case_names is None else case_names
     unknown = [n for n in names if n not in cases]
     if unknown:
         raise ValueError(f"cases: unknown {unknown}; known: {', '.join(cases)}")
     solvers = methods() if solvers is None else solvers
-    return [cell for name in names for cell in run_case(cases[name], solvers, tol, max_iter)]
+    if fixed_point:
+        names = [n for n in names if cases[n].problem.cones.has_friction]
+    return [cell for name in names
+            for cell in run_case(cases[name], solvers, tol, max_iter, fixed_point)]
 
 
 # -- reporting ---------------------------------------------------------------------------------------
@@ -275,6 +296,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--solvers", help="comma-separated method names (default: all registered)")
     parser.add_argument("--tol", type=float, default=1e-9, help="solver tolerance (default 1e-9)")
     parser.add_argument("--max-iter", type=int, default=None, help="iteration cap (method default)")
+    parser.add_argument("--fixed-point", action="store_true",
+                        help="frictional cases only, exact Coulomb by the fixed point on s from s = 0")
     parser.add_argument("--markdown", action="store_true", help="print the matrix as a markdown table")
     parser.add_argument("--list", action="store_true", help="list the cases and exit")
     args = parser.parse_args(argv)
@@ -284,7 +307,8 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     split = (lambda text: None if text is None else [s.strip() for s in text.split(",") if s.strip()])
     start = time.perf_counter()
-    cells = run_suite(split(args.cases), split(args.solvers), args.tol, args.max_iter)
+    cells = run_suite(split(args.cases), split(args.solvers), args.tol, args.max_iter,
+                      args.fixed_point)
     print(matrix(cells, markdown=args.markdown))
     print()
     print(summary(cells))

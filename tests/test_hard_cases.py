@@ -20,7 +20,7 @@ import pytest
 from lubcontact import (GlueyLubrication, Grains, Inelastic, Scene, Simulation, find_contacts, methods,
                         solve)
 from lubcontact.hard import (CRASH, FLAGGED, OK, REJECTED, WRONG, Cell, error_against, expected_for,
-                             judge, load_cases, main, matrix, run_case)
+                             judge, load_cases, main, matrix, run_case, solve_case)
 from lubcontact.solvers import CONVERGED, SolverError, SolverWarning
 from lubcontact.solvers.base import STATUSES
 from lubcontact.solvers.base import _METHODS, MethodOutput, register
@@ -66,8 +66,8 @@ def _outside_domain(problem, method: str) -> bool:
 
 
 @lru_cache(maxsize=None)
-def _expected(name: str):
-    return expected_for(CASES[name], CASES[name].problem)
+def _expected(name: str, fixed_point: bool = False):
+    return expected_for(CASES[name], CASES[name].problem, fixed_point)
 
 
 def test_suite_size_and_descriptions():
@@ -81,8 +81,24 @@ def test_suite_size_and_descriptions():
 @pytest.mark.parametrize("solver", methods())
 @pytest.mark.parametrize("name", list(CASES))
 def test_hard_case(name, solver):
-    case = CASES[name]
-    cell = _run(case, solver)
+    _check(CASES[name], solver, fixed_point=False)
+
+
+#: frictional cases with exact answers: exact Coulomb by the fixed point on s from s = 0 must reach
+#: them (``lubcontact check-hard --fixed-point`` runs every frictional case, mu_ten included)
+FIXED_POINT_CASES = [n for n, c in CASES.items() if c.exact is not None and c.problem.cones.has_friction]
+
+
+@pytest.mark.parametrize("solver", methods())
+@pytest.mark.parametrize("name", FIXED_POINT_CASES)
+def test_hard_case_fixed_point(name, solver):
+    _check(CASES[name], solver, fixed_point=True)
+
+
+def _check(case, solver: str, fixed_point: bool) -> None:
+    """The assertions on one cell (module docstring)."""
+    name = case.name
+    cell = _run(case, solver, fixed_point)
     assert cell.verdict != CRASH, cell.message
     if cell.verdict == REJECTED:
         if (name, solver) in FINDINGS:
@@ -100,16 +116,17 @@ def test_hard_case(name, solver):
                                 f"failed {cell.failed}, {cell.properties}")
 
 
-def _run(case, solver: str) -> Cell:
+def _run(case, solver: str, fixed_point: bool) -> Cell:
     """One solve judged against the cached expectation (the reference solve is shared)."""
     problem = case.problem
     start = time.perf_counter()
     try:
-        result = solve(problem, solver, tol=1e-9)
+        result = solve_case(problem, solver, 1e-9, fixed_point=fixed_point)
     except ValueError as exc:
         return Cell(case.name, solver, REJECTED, message=str(exc))
     assert np.all(np.isfinite(result.forces)) and np.all(np.isfinite(result.velocities))
-    return judge(case, problem, _expected(case.name), result, time.perf_counter() - start)
+    return judge(case, problem, _expected(case.name, fixed_point), result,
+                 time.perf_counter() - start)
 
 
 @pytest.mark.parametrize("name", [n for n, c in CASES.items() if c.exact is not None])
