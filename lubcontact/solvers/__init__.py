@@ -2,11 +2,11 @@
 
 Use :func:`solve` with a registered method name; :func:`methods` lists them.
 """
-from .base import (CONVERGED, DIVERGED, FAILED, INACCURATE, MAX_ITER, SolveResult, SolverError,
-                   SolverWarning, check_status, methods, register, solve)
+from .base import (CONVERGED, DIVERGED, FAILED, INACCURATE, MAX_ITER, STATUSES, SolveResult,
+                   SolverError, SolverWarning, check_status, methods, register, solve)
 from . import reference  # noqa: F401  (registers the reference methods)
 from . import direct  # noqa: F401  (clarabel-direct, osqp, scs)
 from . import gradient  # noqa: F401  (pgd, apgd, bb, apgd-jacobi, apgd-as)
 
 __all__ = ["solve", "methods", "register", "check_status", "SolveResult", "SolverError",
-           "SolverWarning", "CONVERGED", "DIVERGED", "FAILED", "INACCURATE", "MAX_ITER"]
+           "SolverWarning", "CONVERGED", "DIVERGED", "FAILED", "INACCURATE", "MAX_ITER", "STATUSES"]

@@ -42,9 +42,10 @@ Operator
 ``W x`` is applied either from the assembled sparse W (``operator="matrix"``)
 or matrix-free as ``L^T (L x)`` (``operator="factor"``). Measured on the
 10^4-grain pile (docs/benchmarks.md) both cost about the same per product
-(0.25 ms vs 0.22 ms with a CSR copy of ``L^T``); the default is ``"auto"``:
-the factor when the problem has one (no product ``L^T L`` to assemble),
-otherwise W.
+(0.25 ms vs 0.22 ms with a CSR copy of ``L^T``). With ``"auto"``:
+frictionless problems assemble ``S W S`` (11 ms at 10^4, from ``L S``) for
+the compiled kernel of :mod:`.kernels` and the active-set finish; problems
+with friction cones use the matrix-free product when the factor exists.
 """
 from __future__ import annotations
 
@@ -89,9 +90,11 @@ class DualData:
     project : callable
         Projection onto K (invariant under the per-contact scaling).
     matrix : scipy.sparse matrix or None
-        ``W_it`` when assembled.
-    factor : scipy.sparse matrix or None
-        ``L S_it`` when the operator is matrix-free.
+        ``W_it`` when assembled (None with the matrix-free operator).
+    products : int
+        Products ``W z`` done so far.
+    ratio : ndarray, shape (n,)
+        ``s_it / s``: maps ``z`` to the Jacobi-scaled variables of the stopping measure.
     """
 
     apply: Callable[[np.ndarray], np.ndarray]
@@ -100,12 +103,11 @@ class DualData:
     jacobi: np.ndarray
     project: Callable
     matrix: sp.spmatrix | None = None
-    factor: sp.spmatrix | None = None
     products: int = 0
-    _ratio: np.ndarray = field(default=None, repr=False)
+    ratio: np.ndarray = field(init=False, repr=False)
 
     def __post_init__(self):
-        self._ratio = self.scale / self.jacobi
+        self.ratio = self.scale / self.jacobi
         self._rms = 1.0 / np.sqrt(max(self.offset.size, 1))
 
     def product(self, z: np.ndarray) -> np.ndarray:
@@ -114,8 +116,8 @@ class DualData:
 
     def residual(self, z: np.ndarray, gradient: np.ndarray) -> float:
         """The stopping measure ``r`` (module docstring) at ``z`` with gradient ``W_it z + b_it``."""
-        y = z * self._ratio
-        return float(np.linalg.norm(y - self.project(y - gradient / self._ratio)) * self._rms)
+        y = z * self.ratio
+        return float(np.linalg.norm(y - self.project(y - gradient / self.ratio)) * self._rms)
 
     def objective(self, z: np.ndarray, product: np.ndarray) -> float:
         return float(0.5 * z @ product + self.offset @ z)
@@ -124,8 +126,9 @@ class DualData:
 def jacobi_scale(problem) -> np.ndarray:
     """Per-row scale ``s``, constant over each contact's rows (see module docstring)."""
     cones = problem.cones
-    diagonal = np.asarray(problem.delassus.diagonal()) if not hasattr(problem, "delassus_factor") \
-        else np.asarray(problem.delassus_factor.multiply(problem.delassus_factor).sum(axis=0)).ravel()
+    factor = getattr(problem, "delassus_factor", None)
+    diagonal = np.asarray(problem.delassus.diagonal()) if factor is None \
+        else np.asarray(factor.multiply(factor).sum(axis=0)).ravel()
     nc = cones.count
     total = diagonal[:nc].copy()
     count = np.ones(nc)
@@ -165,7 +168,7 @@ def prepare(problem, scaling: bool, operator: str = "auto") -> DualData:
         factor = sp.csr_matrix(problem.delassus_factor @ sp.diags(scale))
         transposed = sp.csr_matrix(factor.T)
         return DualData(apply=lambda z: transposed @ (factor @ z), offset=offset, scale=scale,
-                        jacobi=jacobi, project=problem.cones.projector, factor=factor)
+                        jacobi=jacobi, project=problem.cones.projector)
     if has_factor:
         factor = sp.csr_matrix(problem.delassus_factor @ sp.diags(scale))
         matrix = sp.csr_matrix(factor.T @ factor)
@@ -564,7 +567,7 @@ def _run_apgd_fused(data: DualData, z: np.ndarray, tol: float, max_iter: int,
     while True:
         best, best_residual, history, code, iterations, products, last, lipschitz = kernel(
             matrix.indptr, matrix.indices, matrix.data, data.offset, data.project.lower,
-            data.project.upper, data._ratio, sign, z, tol, min(chunk, max_iter - done), lipschitz,
+            data.project.upper, data.ratio, sign, z, tol, min(chunk, max_iter - done), lipschitz,
             stable, _DIVERGENCE_FACTOR)
         done += iterations
         data.products += products
