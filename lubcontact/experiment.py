@@ -73,7 +73,10 @@ class RunConfig:
     solver, tol : str, float
         Step solver and its tolerance.
     fixed_point : bool
-        Exact Coulomb friction by the fixed point on s (else convex relaxation).
+        Exact Coulomb friction by the fixed point on s; default False: the
+        convex relaxation, one solve per step (the fixed point cost 3x more
+        and often hit its outer-iteration cap on flowing piles, see
+        docs/validation.md).
     checkpoint_every, sample_every, frame_every : int
         Periods (in steps) of checkpoints, measurement samples and frames
         (0: no frames).
@@ -81,6 +84,8 @@ class RunConfig:
         Every that many steps, re-solve the step with Clarabel (0: never).
     settle_steps : int
         Sedimentation steps before tilting (``inclined_flow`` without a bed).
+    settle_model : str
+        Model of that sedimentation (``frictionless`` settles fastest).
     bed : str
         Path of a settled bed (a sedimentation checkpoint); empty: settle here.
     average_from : float
@@ -102,12 +107,13 @@ class RunConfig:
     dt_fraction: float = 0.01
     solver: str = field(default_factory=default_solver)
     tol: float = 1e-6
-    fixed_point: bool = True
+    fixed_point: bool = False
     checkpoint_every: int = 200
     sample_every: int = 10
     frame_every: int = 0
     cross_check_every: int = 0
     settle_steps: int = 600
+    settle_model: str = "frictionless"
     bed: str = ""
     average_from: float = 0.5
     width: float = 40.0
@@ -119,8 +125,9 @@ class RunConfig:
             raise ValueError(f"scene: must be one of {SCENES}, got {self.scene!r}")
         if self.preset not in flow.PRESETS:
             raise ValueError(f"preset: must be one of {tuple(flow.PRESETS)}, got {self.preset!r}")
-        if self.model not in flow.MODELS:
-            raise ValueError(f"model: must be one of {flow.MODELS}, got {self.model!r}")
+        for name in ("model", "settle_model"):
+            if getattr(self, name) not in flow.MODELS:
+                raise ValueError(f"{name}: must be one of {flow.MODELS}, got {getattr(self, name)!r}")
         for name in ("n_grains", "checkpoint_every", "sample_every", "bins_per_radius"):
             if int(getattr(self, name)) < 1:
                 raise ValueError(f"{name}: must be >= 1, got {getattr(self, name)}")
@@ -246,7 +253,7 @@ class FlowRun:
         self.out_dir = None if out_dir is None else pathlib.Path(out_dir)
         self.sim = Simulation(scene, self.params.law(config.model),
                               flow.time_step(self.params, config.dt_fraction), solver=config.solver,
-                              tol=config.tol, on_failure="warn", fixed_point=config.fixed_point)
+                              tol=config.tol, on_failure="ignore", fixed_point=config.fixed_point)
         r = self.params.radius
         top = float(scene.grains.positions[:, 1].max() + 2 * r)
         self.profiles = measure.ProfileAccumulator(
@@ -455,8 +462,8 @@ def initial_scene(config: RunConfig, out_dir: pathlib.Path | None = None,
 
 
 def settle(config: RunConfig, scene: Scene, progress: bool = False) -> Scene:
-    """Sediment ``scene`` for ``config.settle_steps`` steps with the dry model."""
-    settling = RunConfig(**{**asdict(config), "scene": "sedimentation", "model": "dry",
+    """Sediment ``scene`` for ``config.settle_steps`` steps with ``config.settle_model``."""
+    settling = RunConfig(**{**asdict(config), "scene": "sedimentation", "model": config.settle_model,
                             "steps": config.settle_steps, "cross_check_every": 0,
                             "frame_every": 0})
     run = FlowRun(settling, scene)
@@ -477,13 +484,14 @@ def _add_common(parser: argparse.ArgumentParser) -> None:
                         help="time step as a fraction of sqrt(d/g')")
     parser.add_argument("--solver", default=defaults.solver, help=f"one of {methods()}")
     parser.add_argument("--tol", type=float, default=defaults.tol)
-    parser.add_argument("--relaxation", dest="fixed_point", action="store_false",
-                        help="convex relaxation of friction (no fixed point on s)")
+    parser.add_argument("--fixed-point", action="store_true",
+                        help="exact Coulomb friction by the fixed point on s (default: relaxation)")
     parser.add_argument("--checkpoint-every", type=int, default=defaults.checkpoint_every)
     parser.add_argument("--sample-every", type=int, default=defaults.sample_every)
     parser.add_argument("--cross-check-every", type=int, default=defaults.cross_check_every,
                         help="re-solve a step with Clarabel every that many steps (0: never)")
     parser.add_argument("--settle-steps", type=int, default=defaults.settle_steps)
+    parser.add_argument("--settle-model", choices=flow.MODELS, default=defaults.settle_model)
     parser.add_argument("--bed", default="", help="settled bed (.npz) to tilt")
     parser.add_argument("--width", type=float, default=defaults.width, help="period in radii")
     parser.add_argument("--seed", type=int, default=defaults.seed)
@@ -614,9 +622,10 @@ def sweep_main(argv: list[str] | None = None) -> int:
 def demo(out_dir: pathlib.Path) -> dict:
     """A small gluey + friction inclined flow with Clarabel cross-checks; writes figures and a report.
 
-    About 250 grains on a 30-radius period, settled then tilted to 24 degrees,
-    stepped by the fast solver (Clarabel when none is registered) at
-    tolerance 1e-6, every 25th step re-solved by Clarabel. Writes
+    150 grains on a 20-radius period (a layer about 8 diameters thick),
+    settled without friction, then tilted to 24 degrees and stepped with
+    gluey lubrication + friction by the fast solver (Clarabel when none is
+    registered) at tolerance 1e-6; every 25th step is re-solved by Clarabel. Writes
     ``flow_snapshot.png``, ``flow_profile.png``, ``flow_report.md`` and the
     run's files under ``out_dir/flow``.
 
@@ -627,8 +636,8 @@ def demo(out_dir: pathlib.Path) -> dict:
     """
     out_dir = pathlib.Path(out_dir)
     run_dir = out_dir / "flow"
-    config = RunConfig(scene="inclined_flow", n_grains=250, width=30.0, model="gluey", angle=24.0,
-                       steps=400, dt_fraction=0.02, settle_steps=250, tol=1e-6,
+    config = RunConfig(scene="inclined_flow", n_grains=150, width=20.0, model="gluey", angle=24.0,
+                       steps=150, dt_fraction=0.025, settle_steps=400, tol=1e-6,
                        checkpoint_every=100, sample_every=5, cross_check_every=25,
                        average_from=0.5)
     run = FlowRun(config, initial_scene(config, run_dir), run_dir)

@@ -11,7 +11,8 @@ fixed grains resting on the plane ``y = 0``:
 Parameters come in two presets (:func:`poster_parameters` in SI units, and
 :func:`dimensionless_parameters`) and two models (:data:`MODELS`): ``dry``
 (Coulomb friction only) and ``gluey`` (gluey lubrication + Coulomb friction at
-``gamma = gamma_min``).
+``gamma = gamma_min``); ``frictionless`` (inelastic, no friction) settles beds
+quickly.
 """
 from __future__ import annotations
 
@@ -23,7 +24,7 @@ from . import checks, laws
 from .laws import Law
 from .scene import Grains, Scene
 
-MODELS = ("dry", "gluey")
+MODELS = ("dry", "gluey", "frictionless")
 
 
 @dataclass(frozen=True)
@@ -91,8 +92,10 @@ class FlowParameters:
         return float(np.sqrt(self.reduced_gravity * 2.0 * self.radius))
 
     def law(self, model: str) -> Law:
-        """The contact law of ``model`` (``"dry"`` or ``"gluey"``)."""
+        """The contact law of ``model`` (``"dry"``, ``"gluey"`` or ``"frictionless"``)."""
         checks.require(model in MODELS, "model", f"must be one of {MODELS}", None)
+        if model == "frictionless":
+            return laws.Inelastic()
         glue = ({"gamma_min": self.gamma_min} if self.gamma_min is not None else
                 {"viscosity": self.viscosity, "roughness": self.roughness})
         if model == "dry":

@@ -112,7 +112,7 @@ def test_classify_flow():
 def small_config(**changes):
     values = dict(scene="inclined_flow", n_grains=24, width=12.0, model="dry", angle=25.0,
                   steps=40, dt_fraction=0.05, settle_steps=0, solver="clarabel", tol=1e-8,
-                  checkpoint_every=20, sample_every=3)
+                  checkpoint_every=20, sample_every=3, fixed_point=True)
     values.update(changes)
     return experiment.RunConfig(**values)
 
@@ -123,12 +123,22 @@ def final_state(run):
             run.sim.state.keys.copy(), run.sim.state.gamma.copy(), run.sim.scene.time)
 
 
-def test_resume_from_checkpoint_reaches_the_uninterrupted_state(tmp_path):
-    config = small_config()
+RESUME_CASES = {"dry-clarabel-fixed-point": dict(model="dry"),
+                "gluey-apgd": dict(model="gluey", solver="apgd", fixed_point=False, tol=1e-6)}
+
+
+@pytest.mark.parametrize("case", RESUME_CASES)
+def test_resume_from_checkpoint_reaches_the_uninterrupted_state(tmp_path, case):
+    """Warm starts (forces, shift) and the gluey state must travel in the checkpoint."""
+    config = small_config(**RESUME_CASES[case])
+    if config.solver not in experiment.methods():
+        pytest.skip(f"solver {config.solver} not registered")
     scene = experiment.initial_scene(config)
     straight = experiment.FlowRun(config, scene)
     straight.advance(config.steps)
     assert straight.last_report.contacts.count > 5          # grains touched the bed and each other
+    if config.model == "gluey":
+        assert np.count_nonzero(straight.sim.state.gamma < 0) > 5
 
     first = experiment.FlowRun(config, scene, tmp_path)
     first.advance(20)                                       # checkpoint written at step 20
