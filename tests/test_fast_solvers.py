@@ -95,11 +95,14 @@ def test_best_iterate_and_max_iter_status(piles):
     assert result.info["best_residual"] == pytest.approx(np.min(result.residual_history))
 
 
+@pytest.mark.parametrize("method", ["bb", "apgd", "apgd-as"])
 @pytest.mark.parametrize("operator", ["matrix", "factor"])
-def test_matrix_and_matrix_free_operators_agree(piles, operator):
-    case, reference = piles[0]
-    result = solve(case.problem, "bb", tol=1e-9, operator=operator)
+def test_matrix_and_matrix_free_operators_agree(piles, method, operator):
+    """``factor`` also takes APGD off the compiled kernel (the numpy loop and its callback)."""
+    case, reference = piles[1]
+    result = solve(case.problem, method, tol=1e-9, operator=operator)
     assert result.status == "converged"
+    assert result.info.get("fused_kernel", False) == (method != "bb" and operator == "matrix")
     assert velocity_error(case.problem, result.velocities, reference.velocities) <= ACCURACY
 
 

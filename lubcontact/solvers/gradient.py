@@ -531,7 +531,7 @@ def _apgd(problem, tol, max_iter, warm_start, scaling, operator, active_set) -> 
         if candidate is not None:
             tracker = _Tracker(data, tol)
             if tracker.record(candidate, data.product(candidate) + data.offset) == CONVERGED:
-                info = {"fused_kernel": False, "active_set_attempts": finish.attempts,
+                info = {"fused_kernel": fused, "active_set_attempts": finish.attempts,
                         "active_set_solves": finish.solves}
                 return _output(data, tracker, CONVERGED, finish.solves, setup, start, info)
             z = candidate

@@ -3,7 +3,7 @@
 Only the box case (frictionless problems: every row in ``[lower, upper]``)
 is compiled: one APGD loop with the product ``W z`` fused with the
 projection, the residual, the restart test, the active-set bookkeeping and the
-extrapolation. Measured on the 10^4-grain pile it is several times faster than
+extrapolation. Measured on the 10^4-grain pile it is about twice as fast as
 the numpy loop (docs/benchmarks.md), which remains the general path.
 """
 from __future__ import annotations
