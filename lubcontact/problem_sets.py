@@ -67,6 +67,11 @@ class Instance:
         Shift ``s`` of the previous step matched by pair key (coulomb sequences).
     step : int or None
         Step index within its sequence.
+    exact : ndarray, shape (n_dof,), optional
+        Exact velocities after the step, when known (errors are then measured
+        against them instead of the Clarabel reference).
+    must_flag : bool
+        The problem has no solution: success means a non-converged status.
     """
 
     name: str
@@ -76,6 +81,8 @@ class Instance:
     warm_start: np.ndarray | None = None
     warm_shift: np.ndarray | None = None
     step: int | None = None
+    exact: np.ndarray | None = None
+    must_flag: bool = False
 
     @property
     def n_contacts(self) -> int:
@@ -276,14 +283,14 @@ def build_flows() -> list[Instance]:
 
 
 def build_hard() -> list[Instance]:
-    """The hard-case suite of ``reference/hard`` (``CASES`` and ``load(name)``)."""
+    """The hard-case suite of ``reference/hard``: single solves, exact answers where known."""
     hard = _import("reference.hard", "the hard-case suite")
     instances = []
-    for name in sorted(getattr(hard, "CASES", {})):
-        problem = hard.load(name)
-        problem = problem[0] if isinstance(problem, tuple) else problem
-        mode = COULOMB if problem.cones.has_friction else CONVEX
-        instances.append(Instance(name, problem, mode, group="hard"))
+    for name, case in hard.CASES.items():
+        problem = case.problem
+        exact = case.exact(problem) if case.exact is not None else None
+        instances.append(Instance(name, problem, CONVEX, group="hard", exact=exact,
+                                  must_flag=case.must_flag))
     return instances
 
 
@@ -321,7 +328,8 @@ SETS: dict[str, ProblemSet] = {s.name: s for s in [
                "cold against warm-started solves", build_sequences, seeds={"settling_pile": 3}),
     ProblemSet("flows", "inclined flows at 25 degrees, 60 disks: dry Coulomb and gluey + Coulomb, "
                "3 consecutive steps", build_flows, seeds={"sedimentation": 2}),
-    ProblemSet("hard", "the hard-case suite (reference/hard)", build_hard),
+    ProblemSet("hard", "the hard-case suite (reference/hard, docs/hard_cases.md): one solve "
+               "each, errors against the exact velocities where known", build_hard),
     ProblemSet("siconos-fc2d", "Siconos 2D granular flow on a wall (667, 2020, 7002 contacts)",
                build_siconos),
     ProblemSet("fclib", "FCLIB 3D local problems (48 to 286 contacts)", build_fclib),

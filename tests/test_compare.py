@@ -128,3 +128,21 @@ def test_missing_sources_and_bad_arguments(tmp_path, monkeypatch, capsys):
     assert "--set: unknown set 'nonsense'" in capsys.readouterr().err
     assert compare.main(["--set", "tiny", "--solvers", "nonsense"]) == 2
     assert compare.main(["--set", "tiny", "--tolerances", "-1"]) == 2
+
+
+def test_hard_cases_use_exact_answers_and_flag_infeasible_problems():
+    try:
+        instances = {i.name: i for i in problem_sets.SETS["hard"].instances()}
+    except problem_sets.SetUnavailable as exc:
+        pytest.skip(str(exc))
+    single, infeasible = instances["single_contact"], instances["glued_infeasible"]
+    assert single.exact is not None and infeasible.must_flag
+    variant = compare.Variant("clarabel")
+    reference, summary = compare.reference_solve(single, None)
+    assert summary["errors_against"] == "exact velocities"
+    row = compare.measure(single, variant, 1e-8, reference, 1, None, compare.SUCCESS_SLACK)
+    assert row["success"] and row["velocity_error"] < 1e-8
+    reference, _ = compare.reference_solve(infeasible, None)
+    row = compare.measure(infeasible, variant, 1e-8, reference, 1, None, compare.SUCCESS_SLACK)
+    assert row["status"] != "converged" and row["success"]
+    assert np.isnan(row["velocity_error"])
