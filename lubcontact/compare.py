@@ -127,6 +127,8 @@ def measure(instance: Instance, variant: Variant, tol: float, reference, repeats
         setups.append(result.setup_time if split else float("nan"))
         solves.append(result.solve_time if split else float("nan"))
         signatures.append((result.iterations, result.status, result.x.tobytes()))
+        if result.status != "converged":
+            break   # a failure is penalised, not timed: no repeats
     row = dict(instance=instance.name, group=instance.group, mode=instance.mode,
                n_contacts=instance.n_contacts, n_rows=instance.n_rows, solver=variant.label,
                method=variant.method, warm=variant.warm, tol=tol, repeats=len(walls))
@@ -145,6 +147,15 @@ def measure(instance: Instance, variant: Variant, tol: float, reference, repeats
     else:
         row["success"] = bool(first.status == "converged" and row["error"] <= slack * tol)
     return row
+
+
+def skipped(instance: Instance, variant: Variant, tol: float, failed_at: float) -> dict:
+    """The row of a solve not run because the same solver failed at a looser tolerance."""
+    return dict(instance=instance.name, group=instance.group, mode=instance.mode,
+                n_contacts=instance.n_contacts, n_rows=instance.n_rows, solver=variant.label,
+                method=variant.method, warm=variant.warm, tol=tol, repeats=0,
+                **_failed_metrics(), status="skipped",
+                message=f"not run: did not converge at the looser tol {failed_at:.0e}")
 
 
 def _failed_metrics() -> dict:
@@ -236,8 +247,14 @@ def run_set(instances: list[Instance], methods: list[str], tolerances: list[floa
         _log(log, f"{instance.name}: {instance.n_contacts} contacts, reference "
                   f"{summary['reference_status']} in {summary['reference_time_s']:.3g} s")
         for variant in variants(methods, instances):
+            failed_at = None
             for tol in tolerances:
-                rows.append(measure(instance, variant, tol, reference, repeats, max_iter, slack))
+                if failed_at is None:
+                    rows.append(measure(instance, variant, tol, reference, repeats, max_iter,
+                                        slack))
+                    failed_at = tol if rows[-1]["status"] not in ("converged",) else None
+                else:
+                    rows.append(skipped(instance, variant, tol, failed_at))
             last = rows[-1]
             _log(log, f"  {variant.label:<18} tol {last['tol']:.0e}: {last['status']:<10} "
                       f"{last['iterations']:>6} it  {last['time_s']:.3g} s  error {last['error']:.2e}")
@@ -525,6 +542,8 @@ def report_text(problem_set: ProblemSet, rows: list[dict], references: list[dict
              "  Where an instance has exact velocities (hard cases) they replace the reference.",
              f"- Success at tol: status `converged` and primary error <= {meta['slack']:g} x tol "
              "(for a problem without solution: a non-converged status with finite forces).",
+             "- A solve that does not converge is not repeated, and the solver is not run at "
+             "tighter tolerances on that instance (status `skipped`, counted as failures).",
              f"- Time: wall-clock per call (set-up + solve + fixed point). Shifted geometric mean "
              f"with shift {TIME_SHIFT * 1e3:g} ms, a failed solve counting "
              f"{FAILURE_PENALTY:g} x the slowest solve of its instance; relative to the best.",
@@ -606,7 +625,8 @@ def _warm_section(rows: list[dict], labels: list[str], tol: float) -> list[str]:
 
 
 def _problems_section(rows: list[dict]) -> list[str]:
-    messages = sorted({(r["solver"], r["message"]) for r in rows if r["message"]})
+    messages = sorted({(r["solver"], r["message"]) for r in rows
+                       if r["message"] and r["status"] != "skipped"})
     unstable = sorted({r["solver"] for r in rows if not r["reproducible"]})
     lines = []
     if messages:

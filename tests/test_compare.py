@@ -56,14 +56,14 @@ def test_reference_scores_zero_error_against_itself(tiny):
 def test_numbers_are_sane(tiny):
     _, data = tiny
     rows = data["results"]
-    assert {r["status"] for r in rows} <= set(STATUSES) | {"error"}
+    assert {r["status"] for r in rows} <= set(STATUSES) | {"error", "skipped"}
     labels = data["meta"]["solvers"]
     for tol in data["meta"]["tolerances"]:
         summary = compare.summary_rows(rows, labels, tol)
         assert all(0.0 <= s["success"] <= 1.0 for s in summary)
         assert min(s["time_sgm_rel"] for s in summary) == pytest.approx(1.0)
     for row in rows:
-        if row["status"] != "error":
+        if row["status"] == "converged":
             assert row["time_min_s"] <= row["time_s"] <= row["time_max_s"]
             assert row["repeats"] == 2 and row["reproducible"]
     # the stored reference velocities of the pile agree with the fresh reference solve
