@@ -144,6 +144,19 @@ def test_exact_answers_are_reached_by_some_solver(name):
     assert min(errors) < 1e-8, dict(zip(candidates, errors))
 
 
+@pytest.mark.parametrize("solver", methods())
+@pytest.mark.parametrize("guess", [1e3, -1e12])
+def test_far_warm_start_is_never_silently_wrong(solver, guess):
+    """Warm starts 1e3 times too large, or hugely negative (projected away): ``ok`` or flagged.
+    (A NaN warm start is not tested: apgd and apgd-jacobi loop forever on it, see docs.)"""
+    case = CASES["hex_box_jammed"]
+    problem = case.problem
+    warm = np.full(problem.n_rows, guess) * _expected(case.name).reference.force_scale
+    result = solve(problem, solver, tol=1e-9, warm_start=warm)
+    cell = judge(case, problem, _expected(case.name), result, 0.0)
+    assert cell.verdict in (OK, FLAGGED), (cell.error, cell.failed)
+
+
 def test_gamma_within_state_tolerance_snaps_at_the_update():
     """gamma 1e-9 from 0 or from gamma_min is snapped exactly at the next update (laws.py)."""
     law = GlueyLubrication(GAMMA_MIN)
