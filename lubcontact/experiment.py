@@ -306,7 +306,10 @@ class FlowRun:
         gamma_min = self.sim.law.gamma_min(contacts)
         normal = report.result.forces[: contacts.count]
         active = (report.gamma < 0) | (normal > self.config.tol * report.result.force_scale)
-        states = measure.contact_states(report.gamma, gamma_min, active)
+        if self.config.model == "dry":       # every active contact is a Coulomb contact
+            states = np.array([0, 0, np.count_nonzero(active)])
+        else:
+            states = measure.contact_states(report.gamma, gamma_min, active)
         values = (self.steps_done, scene.time, measure.kinetic_energy(scene), measure.flow_rate(scene),
                   int(np.count_nonzero(active)), *states, report.result.residual,
                   report.result.iterations, report.result.success)
@@ -619,7 +622,8 @@ def sweep_main(argv: list[str] | None = None) -> int:
 
 
 # -- demo ---------------------------------------------------------------------------------------
-def demo(out_dir: pathlib.Path) -> dict:
+def demo(out_dir: pathlib.Path, *, n_grains: int = 150, steps: int = 150, settle_steps: int = 400,
+         width: float = 20.0) -> dict:
     """A small gluey + friction inclined flow with Clarabel cross-checks; writes figures and a report.
 
     150 grains on a 20-radius period (a layer about 8 diameters thick),
@@ -629,6 +633,8 @@ def demo(out_dir: pathlib.Path) -> dict:
     ``flow_snapshot.png``, ``flow_profile.png``, ``flow_report.md`` and the
     run's files under ``out_dir/flow``.
 
+    The keyword arguments shrink it (tests); the defaults are the demo.
+
     Returns
     -------
     dict
@@ -636,8 +642,8 @@ def demo(out_dir: pathlib.Path) -> dict:
     """
     out_dir = pathlib.Path(out_dir)
     run_dir = out_dir / "flow"
-    config = RunConfig(scene="inclined_flow", n_grains=150, width=20.0, model="gluey", angle=24.0,
-                       steps=150, dt_fraction=0.025, settle_steps=400, tol=1e-6,
+    config = RunConfig(scene="inclined_flow", n_grains=n_grains, width=width, model="gluey",
+                       angle=24.0, steps=steps, dt_fraction=0.025, settle_steps=settle_steps, tol=1e-6,
                        checkpoint_every=100, sample_every=5, cross_check_every=25,
                        average_from=0.5)
     run = FlowRun(config, initial_scene(config, run_dir), run_dir)

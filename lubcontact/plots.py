@@ -144,7 +144,9 @@ def state_fractions(rows: list[dict], path: pathlib.Path) -> None:
     styles = {"dry": "--", "gluey": "-"}
     for model, group in _by_model(rows).items():
         angles = [float(r["angle"]) for r in group]
-        for state, colour in zip(measure.STATES, ("tab:blue", "tab:orange", "tab:red")):
+        states = ("frictional",) if model == "dry" else measure.STATES   # dry: all Coulomb
+        for state in states:
+            colour = {"unglued": "tab:blue", "glued": "tab:orange", "frictional": "tab:red"}[state]
             ax.plot(angles, [float(r[f"fraction_{state}"]) for r in group], styles.get(model, ":"),
                     color=colour, marker="o", label=f"{model}: {state}")
     ax.set_xlabel("incline angle theta (degrees)")

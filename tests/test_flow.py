@@ -178,3 +178,44 @@ def test_config_rejects_bad_values():
     with pytest.raises(ValueError, match="angles"):
         experiment.parse_angles("15:28")
     np.testing.assert_allclose(experiment.parse_angles("15:28:1"), np.arange(15, 29))
+
+
+def test_small_demo_writes_its_figures_and_report(tmp_path):
+    """The demo's pipeline on a tiny layer: files written, cross-checks recorded, state sane."""
+    summary = experiment.demo(tmp_path, n_grains=24, steps=25, settle_steps=40, width=12.0)
+    for name in ("flow_snapshot.png", "flow_profile.png", "flow_report.md"):
+        assert (tmp_path / name).stat().st_size > 0
+    assert summary["steps"] == 25 and summary["unconverged_steps"] == 0
+    assert summary["max_cross_check"] < 1e-3
+    fractions = [summary[f"fraction_{state}"] for state in measure.STATES]
+    assert sum(fractions) == pytest.approx(1.0)
+    assert "cross-check" in (tmp_path / "flow_report.md").read_text()
+
+
+# -- long validations (pytest -m slow; results recorded in docs/validation.md) ---------------------
+def thick_dry_run(angle, steps):
+    """400 grains on a 40-radius period: a dry layer about 20 diameters thick."""
+    config = experiment.RunConfig(scene="inclined_flow", n_grains=400, width=40.0, model="dry",
+                                  angle=angle, steps=steps, dt_fraction=0.025, settle_steps=800,
+                                  sample_every=10, tol=1e-6)
+    run = experiment.FlowRun(config, experiment.initial_scene(config))
+    run.advance(steps)
+    return run
+
+
+@pytest.mark.slow
+def test_dry_thick_layer_stops_at_12_degrees():
+    run = thick_dry_run(12.0, 2000)
+    energy = np.asarray(run.series["kinetic_energy"])
+    assert energy[-1] < 1e-6 * energy.max()
+
+
+@pytest.mark.slow
+def test_dry_thick_layer_flows_steadily_at_22_degrees_with_a_bagnold_profile():
+    run = thick_dry_run(22.0, 8000)
+    summary = run.summary()
+    assert summary["state"] == "steady"
+    prof = run.profiles.profile()
+    bed_top = 2.0 * run.sim.scene.fixed_radii.max()
+    exponent, _ = measure.bagnold_exponent(prof, bed_top, measure.layer_height(prof))
+    assert exponent == pytest.approx(1.5, abs=0.3)
