@@ -227,6 +227,10 @@ class Cones:
                 t_rows = self._tangent_rows(np.flatnonzero(coulomb))
                 constraints += _cone_constraints(cp, cp.multiply(self.mu[cone_contacts], normal[cone_contacts]),
                                                  tangential, t_rows, self.tangent_dim, polyhedral)
+                # with mu = 0 the cone only says lam_T = 0: lam_n >= 0 must be explicit
+                degenerate = cone_contacts[self.mu[cone_contacts] == 0]
+                if degenerate.size:
+                    constraints.append(normal[degenerate] >= 0)
             zero_rows = self._tangent_rows(np.flatnonzero(~coulomb))
             if zero_rows.size:
                 constraints.append(tangential[zero_rows.ravel()] == 0)

@@ -2,7 +2,7 @@
 
 Each case is a scene, a law and a number of steps: the problem of the step
 after those steps is the case. ``reference/data/<name>.npz`` stores the
-problem's arrays and its Clarabel solution (dual form, tol 1e-10, polished on
+problem's arrays and its Clarabel solution (primal form, tol 1e-10, polished on
 its active set), produced by ``python -m reference.regenerate``. Tests check
 that the code still builds the same problems and that every solver reproduces
 the stored velocities.

@@ -15,7 +15,7 @@ def test_the_code_still_builds_the_stored_problem(name):
                                    err_msg=f"{name}: {key} changed")
 
 
-@pytest.mark.parametrize("method", ["clarabel", "clarabel-primal"])
+@pytest.mark.parametrize("method", ["clarabel", "clarabel-dual"])
 @pytest.mark.parametrize("name", sorted(CASES))
 def test_reference_solvers_reproduce_the_stored_velocities(name, method):
     problem, solution = load(name)

@@ -24,6 +24,13 @@ FAILED = "failed"
 STATUSES = (CONVERGED, MAX_ITER, DIVERGED, INACCURATE, FAILED)
 
 
+SUSPICIOUS_RESIDUAL = 1e-3
+"""A ``converged`` claim whose natural residual (normalised units, per sqrt(row))
+exceeds this is downgraded to ``inaccurate``: solutions this far from optimal
+are wrong, whatever the method says (e.g. an interior point drifting along an
+unbounded optimal face of the dual)."""
+
+
 class SolverError(RuntimeError):
     """Raised when a solve fails and the policy says to stop."""
 
@@ -152,6 +159,8 @@ def solve(problem: StepProblem, method: str = "clarabel", *, tol: float = 1e-9,
         warm_start = np.asarray(warm_start, dtype=float) / scale.force
         if warm_start.shape != (problem.n_rows,):
             raise ValueError(f"warm_start: expected shape ({problem.n_rows},), got {warm_start.shape}")
+        if not np.all(np.isfinite(warm_start)):
+            raise ValueError("warm_start: non-finite value")
     kwargs = dict(tol=tol, warm_start=warm_start, **options)
     if max_iter is not None:
         kwargs["max_iter"] = int(max_iter)
@@ -161,6 +170,9 @@ def solve(problem: StepProblem, method: str = "clarabel", *, tol: float = 1e-9,
     if not np.all(np.isfinite(forces)):
         status, forces = DIVERGED, np.zeros_like(forces)
     residual = scaled.natural_residual(forces) if forces.size else 0.0
+    if status == CONVERGED and residual > SUSPICIOUS_RESIDUAL * np.sqrt(max(forces.size, 1)):
+        status = INACCURATE          # the method's claim does not survive an independent check
+        out.info["claimed_status"] = CONVERGED
     physical = forces * scale.force
     if out.velocities is not None and status != DIVERGED and np.all(np.isfinite(out.velocities)):
         velocities = out.velocities * scale.velocity

@@ -2,9 +2,13 @@
 
 Registered names:
 
-- ``clarabel``: the dual form (over forces) through cvxpy;
-- ``clarabel-primal``: the primal form (over velocities) through cvxpy, forces
-  read from the constraint multipliers.
+- ``clarabel``: the primal form (over velocities) through cvxpy, forces read
+  from the constraint multipliers: the reference. The primal is strongly
+  convex with a unique solution; the dual's optimal set is unbounded when
+  the packing has self-stress states (a null space of W inside the cones),
+  and there the interior point drifts to huge forces and wrong velocities
+  while reporting success (docs/hard_cases.md, finding 2).
+- ``clarabel-dual``: the dual form (over forces) through cvxpy.
 
 Non-convex (UNION) contacts, gluey + friction at gamma_min, are solved by the
 branch rule of :func:`solve_branches`: fix each UNION contact on one piece
@@ -139,7 +143,7 @@ def _solve(step: StepProblem, form: str, tol: float, max_iter: int, polyhedral: 
     return solve_branches(step, form, tol, max_iter, polyhedral, warm_start, max_branch_rounds)
 
 
-@register("clarabel")
+@register("clarabel-dual")
 def clarabel_dual(step: StepProblem, *, tol: float = 1e-10, max_iter: int = 200,
                   warm_start=None, polyhedral: bool = False,
                   max_branch_rounds: int = 8) -> MethodOutput:
@@ -150,9 +154,9 @@ def clarabel_dual(step: StepProblem, *, tol: float = 1e-10, max_iter: int = 200,
     return _solve(step, "dual", tol, max_iter, polyhedral, warm_start, max_branch_rounds)
 
 
-@register("clarabel-primal")
+@register("clarabel")
 def clarabel_primal(step: StepProblem, *, tol: float = 1e-10, max_iter: int = 200,
                     warm_start=None, polyhedral: bool = False,
                     max_branch_rounds: int = 8) -> MethodOutput:
-    """Clarabel on the symbolic primal form (``warm_start`` as for ``clarabel``)."""
+    """Clarabel on the symbolic primal form (``warm_start`` as for ``clarabel-dual``)."""
     return _solve(step, "primal", tol, max_iter, polyhedral, warm_start, max_branch_rounds)
