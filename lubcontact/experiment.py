@@ -626,7 +626,7 @@ def demo(out_dir: pathlib.Path, *, n_grains: int = 150, steps: int = 150, settle
          width: float = 20.0) -> dict:
     """A small gluey + friction inclined flow with Clarabel cross-checks; writes figures and a report.
 
-    150 grains on a 20-radius period (a layer about 8 diameters thick),
+    150 grains on a 20-radius period (a layer about 14 diameters thick),
     settled without friction, then tilted to 24 degrees and stepped with
     gluey lubrication + friction by the fast solver (Clarabel when none is
     registered) at tolerance 1e-6; every 25th step is re-solved by Clarabel. Writes
