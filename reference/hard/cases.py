@@ -313,8 +313,7 @@ CASES: dict[str, HardCase] = {case.name: case for case in [
              "a 10-disk pyramid with random velocities, friction written with mu = 0: "
              "degenerate cones (norm of lam_T <= 0 x lam_n) (tangential rows that must vanish)",
              "the frictionless answer, spins untouched", lambda: scene_problem(
-                 _pyramid_scene(), ExplicitFriction(0.0), 0.01), _frictionless_pyramid_answer,
-             reference_fails=True),
+                 _pyramid_scene(), ExplicitFriction(0.0), 0.01), _frictionless_pyramid_answer),
     HardCase("mu_ten", "the same pyramid with mu = 10: wide cones, nearly sticking everywhere",
              "forces inside the cones, no penetration",
              lambda: scene_problem(_pyramid_scene(), ExplicitFriction(10.0), 0.01)),
@@ -327,7 +326,7 @@ CASES: dict[str, HardCase] = {case.name: case for case in [
              "the hexagonal packing closed by a lid, mu = 0.3: every grain over-constrained, "
              "3 rows per contact",
              "everything stays at rest", lambda: _hexagonal_box(ExplicitFriction(0.3), lid=True),
-             _at_rest, reference_fails=True),
+             _at_rest),
     HardCase("hex_box_glued",
              "the hexagonal packing with every contact glued: 89 equality rows for 66 unknowns "
              "(H rank-deficient) and gaps that are zero only to rounding (+/- 2e-16)",
