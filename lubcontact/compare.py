@@ -8,9 +8,10 @@ instance is solved ``repeats`` times; the report goes to
 
 Definitions (also written in each report):
 
-- reference: Clarabel (``clarabel``, the cvxpy dual form, polished on its
-  active set when frictionless) at tolerance ``1e-10``, run exactly like the
-  solvers (fixed point on s with ``tol_fp = tol`` for Coulomb problems);
+- reference: Clarabel at tolerance ``1e-10`` (``clarabel``, the primal form,
+  or ``clarabel-dual`` for local problems that have no primal form), run
+  exactly like the solvers (fixed point on s with ``tol_fp = tol`` for
+  Coulomb problems); exact velocities replace it where known (hard cases);
 - velocity error: ``|v - v_ref| / |v_ref|`` (velocities of the step, or local
   velocities ``u = W r + q`` for FCLIB/Siconos problems);
 - FCLIB error: MODEL.md section 6, on the normalised problem (unit-free);
@@ -48,7 +49,8 @@ from . import problem_sets
 from .problem_sets import COULOMB, Instance, ProblemSet, SetUnavailable
 from .report import format_table, relative_error
 
-REFERENCE_METHOD = "clarabel"
+# the first of these that accepts the problem (the primal form needs a StepProblem)
+REFERENCE_METHODS = ("clarabel", "clarabel-dual")
 REFERENCE_TOL = 1e-10
 DEFAULT_TOLERANCES = (1e-2, 1e-4, 1e-6, 1e-8, 1e-10)
 HEADLINE_TOL = 1e-6
@@ -58,6 +60,8 @@ TIME_SHIFT = 1e-3          # s, shift of the geometric mean
 FAILURE_PENALTY = 10.0     # a failed solve counts as this many times the slowest solve
 ERROR_FLOOR = 1e-16        # zero errors are drawn at this value on log axes
 WARM = "+warm"
+# statuses after which tighter tolerances cannot do better (an "inaccurate" loose solve can)
+EXHAUSTED = ("max_iter", "diverged", "failed", "error")
 PACKAGES = ("numpy", "scipy", "cvxpy", "clarabel", "osqp", "scs", "numba", "h5py", "matplotlib")
 
 
@@ -196,11 +200,12 @@ def reference_solve(instance: Instance, max_iter: int | None) -> tuple[object, d
                "exact velocities" if instance.exact is not None else "reference")
     nan = float("nan")
     try:
-        result, wall = run_once(instance, REFERENCE_METHOD, REFERENCE_TOL, max_iter=max_iter)
+        method, result, wall = _first_accepted(instance, max_iter)
     except Exception as exc:  # noqa: BLE001
-        return None, {**row, "reference_status": f"error: {exc}", "reference_time_s": nan,
-                      "reference_iterations": -1, "reference_fclib_error": nan,
-                      "reference_exact_error": nan}
+        return None, {**row, "reference_method": "none", "reference_status": f"error: {exc}",
+                      "reference_time_s": nan, "reference_iterations": -1,
+                      "reference_fclib_error": nan, "reference_exact_error": nan}
+    row["reference_method"] = method
     exact_error = relative_error(result.velocities, instance.exact) \
         if instance.exact is not None and np.all(np.isfinite(result.velocities)) else nan
     return result, {**row, "reference_status": result.status, "reference_time_s": wall,
@@ -208,6 +213,19 @@ def reference_solve(instance: Instance, max_iter: int | None) -> tuple[object, d
                     "reference_fclib_error": fclib_error(instance.problem, result.x)
                     if np.all(np.isfinite(result.x)) else nan,
                     "reference_exact_error": exact_error}
+
+
+def _first_accepted(instance: Instance, max_iter: int | None):
+    """``(method, result, wall)`` of the first reference method that accepts the problem."""
+    from .solvers import methods as registered
+
+    candidates = [m for m in REFERENCE_METHODS if m in registered()]
+    for method in candidates[:-1]:
+        try:
+            return (method, *run_once(instance, method, REFERENCE_TOL, max_iter=max_iter))
+        except ValueError:
+            continue
+    return (candidates[-1], *run_once(instance, candidates[-1], REFERENCE_TOL, max_iter=max_iter))
 
 
 def variants(methods: list[str], instances: list[Instance]) -> list[Variant]:
@@ -252,7 +270,7 @@ def run_set(instances: list[Instance], methods: list[str], tolerances: list[floa
                 if failed_at is None:
                     rows.append(measure(instance, variant, tol, reference, repeats, max_iter,
                                         slack))
-                    failed_at = tol if rows[-1]["status"] not in ("converged",) else None
+                    failed_at = tol if rows[-1]["status"] in EXHAUSTED else None
                 else:
                     rows.append(skipped(instance, variant, tol, failed_at))
             last = rows[-1]
@@ -529,21 +547,25 @@ def report_text(problem_set: ProblemSet, rows: list[dict], references: list[dict
              "- packages: " + ", ".join(f"{k} {v}" for k, v in env["packages"].items()),
              "- threads: " + ", ".join(f"{k}={v}" for k, v in env["threads"].items()),
              f"- seeds: {problem_set.seeds or 'none (deterministic or read from files)'}",
+             f"- instances left out (--max-contacts): {', '.join(meta.get('left_out') or []) or 'none'}",
              f"- solvers: {', '.join(labels)}; tolerances: "
              f"{', '.join(f'{t:.0e}' for t in tolerances)}; {meta['repeats']} timed repeats per "
              "solve (median reported, min/max in the CSV), after one untimed warm-up solve per "
              "solver", "",
              "## Definitions", "",
-             f"- Reference: `{REFERENCE_METHOD}` at tol {REFERENCE_TOL:.0e} (polished on its active "
-             "set when frictionless); Coulomb problems: fixed point on s around every solver, "
+             f"- Reference: `{REFERENCE_METHODS[0]}` at tol {REFERENCE_TOL:.0e}, or "
+             f"`{REFERENCE_METHODS[1]}` where the first does not accept the problem (column "
+             "`reference_method`), run exactly like the solvers; Coulomb problems: fixed point "
+             "on s around every solver, "
              f"`tol_fp = tol`, at most {MAX_OUTER} outer iterations.",
              f"- Primary error: {error_label(rows)}. Velocity error: `|v - v_ref| / |v_ref|`. "
              "FCLIB error: MODEL.md section 6 on the normalised problem.",
              "  Where an instance has exact velocities (hard cases) they replace the reference.",
              f"- Success at tol: status `converged` and primary error <= {meta['slack']:g} x tol "
              "(for a problem without solution: a non-converged status with finite forces).",
-             "- A solve that does not converge is not repeated, and the solver is not run at "
-             "tighter tolerances on that instance (status `skipped`, counted as failures).",
+             "- A solve that does not converge is not repeated; after `max_iter`, `diverged`, "
+             "`failed` or an exception the solver is not run at tighter tolerances on that "
+             "instance (status `skipped`, counted as failures).",
              f"- Time: wall-clock per call (set-up + solve + fixed point). Shifted geometric mean "
              f"with shift {TIME_SHIFT * 1e3:g} ms, a failed solve counting "
              f"{FAILURE_PENALTY:g} x the slowest solve of its instance; relative to the best.",
@@ -584,7 +606,8 @@ def report_text(problem_set: ProblemSet, rows: list[dict], references: list[dict
 
 
 def _instance_section(references: list[dict]) -> list[str]:
-    columns = ["instance", "group", "mode", "n_contacts", "n_rows", "reference_status",
+    columns = ["instance", "group", "mode", "n_contacts", "n_rows", "reference_method",
+               "reference_status",
                "reference_iterations", "reference_time_s", "reference_fclib_error"]
     if any(r["errors_against"] != "reference" for r in references):
         columns[5:5] = ["errors_against"]
@@ -689,6 +712,8 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--max-iter", type=int, default=None, help="iteration cap (method defaults)")
     p.add_argument("--slack", type=float, default=SUCCESS_SLACK,
                    help="success needs error <= slack x tol (default 100)")
+    p.add_argument("--max-contacts", type=int, default=None, metavar="N",
+                   help="leave out instances with more than N contacts (said in the report)")
     p.add_argument("--out", type=Path, default=Path("out/compare"), help="output folder")
     p.add_argument("--list", action="store_true", help="list the sets and exit")
     p.add_argument("--replot", type=Path, metavar="DIR",
@@ -713,16 +738,20 @@ def _check_args(args, available: list[str]) -> None:
 
 def compare_set(problem_set: ProblemSet, methods: list[str], tolerances: list[float],
                 repeats: int, out_dir: Path, command: str, max_iter: int | None = None,
-                slack: float = SUCCESS_SLACK, log=None) -> Path:
+                slack: float = SUCCESS_SLACK, log=None, max_contacts: int | None = None) -> Path:
     """Build, measure and report one set; returns the report's path."""
     instances = problem_set.instances()
+    left_out = [i.name for i in instances if max_contacts is not None and i.n_contacts > max_contacts]
+    instances = [i for i in instances if i.name not in left_out]
+    if not instances:
+        raise SetUnavailable(f"every instance has more than {max_contacts} contacts")
     rows, references = run_set(instances, methods, tolerances, repeats, max_iter, slack, log)
     labels = [v.label for v in variants(methods, instances)]
     headline = HEADLINE_TOL if HEADLINE_TOL in tolerances else tolerances[len(tolerances) // 2]
     meta = dict(command=command, environment=environment(), repeats=repeats,
                 tolerances=tolerances, solvers=labels, slack=slack, headline_tol=headline,
-                reference=dict(method=REFERENCE_METHOD, tol=REFERENCE_TOL, max_outer=MAX_OUTER),
-                max_iter=max_iter)
+                reference=dict(methods=REFERENCE_METHODS, tol=REFERENCE_TOL, max_outer=MAX_OUTER),
+                max_iter=max_iter, left_out=left_out)
     path = write_outputs(out_dir / problem_set.name, problem_set, rows, references, labels,
                          tolerances, meta)
     print(f"set {problem_set.name}: report written to {path}\n"
@@ -759,7 +788,7 @@ def main(argv: list[str] | None = None) -> int:
     for name in args.sets:
         try:
             compare_set(problem_sets.SETS[name], args.solvers, tolerances, args.repeats,
-                        args.out, command, args.max_iter, args.slack, log)
+                        args.out, command, args.max_iter, args.slack, log, args.max_contacts)
         except SetUnavailable as exc:
             print(f"lubcontact compare: skipping set {name!r}: {exc}", file=sys.stderr)
             status = 1

@@ -124,6 +124,8 @@ def test_missing_sources_and_bad_arguments(tmp_path, monkeypatch, capsys):
         problem_sets.SETS["siconos-fc2d"].instances()
     assert compare.main(["--set", "siconos-fc2d", "--out", str(tmp_path), "--quiet"]) == 1
     assert "skipping set 'siconos-fc2d'" in capsys.readouterr().err
+    assert compare.main(["--set", "tiny", "--max-contacts", "0", "--out", str(tmp_path)]) == 1
+    assert "more than 0 contacts" in capsys.readouterr().err
     assert compare.main(["--set", "nonsense"]) == 2
     assert "--set: unknown set 'nonsense'" in capsys.readouterr().err
     assert compare.main(["--set", "tiny", "--solvers", "nonsense"]) == 2
