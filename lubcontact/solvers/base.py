@@ -168,7 +168,8 @@ def solve(problem: StepProblem, method: str = "clarabel", *, tol: float = 1e-9,
     status = out.status
     forces = out.forces
     if not np.all(np.isfinite(forces)):
-        status, forces = DIVERGED, np.zeros_like(forces)
+        status = FAILED if status == FAILED else DIVERGED
+        forces = np.zeros_like(forces)
     residual = scaled.natural_residual(forces) if forces.size else 0.0
     if status == CONVERGED and residual > SUSPICIOUS_RESIDUAL * np.sqrt(max(forces.size, 1)):
         status = INACCURATE          # the method's claim does not survive an independent check
