@@ -28,7 +28,6 @@ import csv
 import json
 import os
 import pathlib
-import tempfile
 import time
 from dataclasses import asdict, dataclass, field, fields
 
@@ -155,13 +154,13 @@ def save_npz(path: pathlib.Path, **arrays) -> None:
     """Write ``arrays`` to ``path`` through a temporary file and a rename (atomic)."""
     path = pathlib.Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    handle, temporary = tempfile.mkstemp(dir=path.parent, prefix=path.name, suffix=".tmp")
+    temporary = path.with_name(path.name + ".tmp")
     try:
-        with os.fdopen(handle, "wb") as stream:
+        with open(temporary, "wb") as stream:
             np.savez(stream, **arrays)
         os.replace(temporary, path)
     except BaseException:
-        pathlib.Path(temporary).unlink(missing_ok=True)
+        temporary.unlink(missing_ok=True)
         raise
 
 
@@ -350,7 +349,12 @@ class FlowRun:
     @classmethod
     def resume(cls, path: pathlib.Path, out_dir: pathlib.Path | None = None,
                steps: int | None = None) -> "FlowRun":
-        """Rebuild a run from its checkpoint; ``steps`` may extend the total."""
+        """Rebuild a run from its checkpoint; ``steps`` may extend the total.
+
+        When the extension moves the averaging window past the checkpoint, the
+        time averages (profiles, gamma histogram) restart, so that they cover
+        the new window only; series are kept whole.
+        """
         path = pathlib.Path(path)
         with np.load(path) as data:
             data = dict(data)
@@ -366,6 +370,9 @@ class FlowRun:
         run.gamma_counts = data["gamma_histogram"].astype(np.int64)
         run.cross_checks = [tuple(row) for row in data["cross_checks"]]
         run.wall_time = float(data["wall_time"])
+        if run.steps_done <= config.average_from * config.steps and run.profiles.samples:
+            run.profiles.reset()
+            run.gamma_counts[:] = 0
         return run
 
     def summary(self) -> dict:

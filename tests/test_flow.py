@@ -165,8 +165,12 @@ def test_run_command_writes_files_and_resumes(tmp_path):
     assert summary["steps"] == 6
     for name in ("checkpoint.npz", "measurements.npz", "snapshot.png", "profile.png", "bed.npz"):
         assert (out / name).stat().st_size > 0
-    assert experiment.run_main(argv(9) + ["--resume"]) == 0
-    assert json.loads((out / "summary.json").read_text())["steps"] == 9
+    assert experiment.run_main(argv(18) + ["--resume"]) == 0
+    assert json.loads((out / "summary.json").read_text())["steps"] == 18
+    with np.load(out / "measurements.npz") as data:
+        # the extension moved the averaging window to steps > 9: samples 12, 15, 18 only
+        assert int(data["profile.samples"]) == 3
+        np.testing.assert_array_equal(data["series.step"], [3, 6, 9, 12, 15, 18])
     assert not list(out.glob("*.tmp"))
 
 
