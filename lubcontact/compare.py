@@ -314,31 +314,32 @@ def summary_rows(rows: list[dict], labels: list[str], tol: float) -> list[dict]:
     out = []
     for label in labels:
         mine = [r for r in rows if r["tol"] == tol and r["solver"] == label]
-        errors = np.array([r["error"] for r in mine], dtype=float)
         iterations = np.array([r["iterations"] for r in mine if r["iterations"] >= 0])
         spread = [(r["time_max_s"] - r["time_min_s"]) / r["time_s"] for r in mine
                   if r["repeats"] > 1 and r["time_s"] > 0]
         out.append(dict(solver=label, success=np.mean([r["success"] for r in mine]),
                         time_sgm_rel=means[label] / best if best > 0 else float("nan"),
                         time_sgm_s=means[label],
-                        median_error=float(np.median(errors[np.isfinite(errors)]))
-                        if np.isfinite(errors).any() else float("nan"),
+                        median_error=_median([r["error"] for r in mine]),
                         median_iterations=float(np.median(iterations)) if iterations.size else -1,
                         timing_spread=float(np.median(spread)) if spread else float("nan"),
                         median_setup_s=_median([r["setup_s"] for r in mine]),
                         median_solve_s=_median([r["solve_s"] for r in mine]),
                         median_time_s=_median([r["time_s"] for r in mine]),
-                        worst_gap=float(np.nanmin(gaps)) if np.isfinite(
-                            gaps := np.array([r["min_gap"] for r in mine], dtype=float)).any()
-                        else float("nan")))
+                        worst_gap=_finite(np.min, [r["min_gap"] for r in mine])))
     return out
+
+
+def _finite(reduce, values: list[float]) -> float:
+    """``reduce`` of the finite values (NaN when there are none)."""
+    values = np.asarray(values, dtype=float)
+    values = values[np.isfinite(values)]
+    return float(reduce(values)) if values.size else float("nan")
 
 
 def _median(values: list[float]) -> float:
     """Median of the finite values (NaN when there are none)."""
-    values = np.asarray(values, dtype=float)
-    values = values[np.isfinite(values)]
-    return float(np.median(values)) if values.size else float("nan")
+    return _finite(np.median, values)
 
 
 def success_table(rows: list[dict], labels: list[str], tolerances: list[float],
