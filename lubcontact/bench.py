@@ -5,8 +5,11 @@ Sub-benchmarks are dispatched through :data:`BENCHMARKS` with lazy imports:
 - ``solvers``: every registered method on 2D piles at rest (:func:`solvers_main`);
 - ``friction``: the friction benchmarks (``lubcontact.bench_friction:main``).
 
-``bench solvers`` builds, for each size N, a polydisperse pile by deposition
-(:func:`lubcontact.packing.deposit_pile`: zero velocities, closed contacts),
+``bench solvers`` builds, for each size N, a polydisperse pile at rest: by
+default settled by the dynamics (:func:`lubcontact.packing.settle_pile`,
+cached under ``out/cache``), with ``--pile deposited`` as deposited
+(:func:`lubcontact.packing.deposit_pile`: zero velocities, closed contacts,
+not in equilibrium),
 its step problem with inelastic frictionless contacts (``dry``) and the same
 with a fraction of the closed contacts glued (``glued``: FREE cones), and
 solves each with every method. Errors are measured against the reference
@@ -74,14 +77,29 @@ class PileCase:
     glued_keys: np.ndarray
 
 
-def pile_cases(n_grains: int, glued_fraction: float, dt: float, seed: int) -> list[PileCase]:
-    """The dry and glued step problems of a deposited pile of ``n_grains`` disks."""
+PILES = ("settled", "deposited")
+
+
+def pile_cases(n_grains: int, glued_fraction: float, dt: float, seed: int,
+               pile: str = "settled") -> list[PileCase]:
+    """The dry and glued step problems of a pile of ``n_grains`` disks.
+
+    ``pile``: ``"settled"`` (:func:`lubcontact.packing.settle_pile`, cached
+    under ``out/cache``) or ``"deposited"`` (:func:`lubcontact.packing.deposit_pile`).
+    """
     from .contacts import find_contacts
     from .integrator import Simulation
     from .laws import Inelastic
-    from .packing import deposit_pile
+    from .packing import deposit_pile, settle_pile
 
-    scene = deposit_pile(n_grains, seed=seed)
+    if pile not in PILES:
+        raise ValueError(f"pile: must be one of {PILES}, got {pile!r}")
+    if pile == "settled":
+        scene, info = settle_pile(n_grains, seed=seed)
+        print(f"# settled pile N={n_grains}: {info['steps']} steps, last max speed "
+              f"{info['max_speed']:.1e}, at rest: {info['at_rest']}")
+    else:
+        scene = deposit_pile(n_grains, seed=seed)
     simulation = Simulation(scene, Inelastic(), dt)
     contacts = find_contacts(simulation.scene, simulation.d_max)
     closed = np.flatnonzero(np.abs(contacts.gaps) <= 1e-9 * contacts.smaller_radius)
@@ -164,6 +182,10 @@ def run_case(case: PileCase, methods, tol: float, reference_tol: float, max_iter
     reference, reference_wall = timed_solve(problem, "clarabel", reference_tol, None)
     out(_row(case, "clarabel (ref)", reference, reference_wall, 0.0,
              problem.gaps_after(reference.velocities).min(), radius))
+    closed = np.abs(problem.gaps) <= 1e-9 * radius
+    opening = closed & (problem.gaps_after(reference.velocities) > 1e-9 * radius)
+    out(f"# {case.label} N={case.n_grains}: {np.count_nonzero(opening)} of "
+        f"{np.count_nonzero(closed)} closed contacts open in the step")
     totals = {}
     results = {}
     for method in methods:
@@ -231,6 +253,8 @@ def solvers_main(argv: list[str] | None = None) -> int:
                         help="relative velocity error a fast method must reach in the summary")
     parser.add_argument("--dt", type=float, default=0.01, help="time step (units of sqrt(r/g))")
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--pile", choices=PILES, default="settled",
+                        help="settled by the dynamics (cached in out/cache) or deposited")
     parser.add_argument("--no-warm", action="store_true", help="skip the next-step re-solves")
     args = parser.parse_args(argv)
     sizes = [int(s) for s in args.sizes.split(",") if s]
@@ -243,7 +267,7 @@ def solvers_main(argv: list[str] | None = None) -> int:
     print(HEADER)
     summaries = []
     for n in sizes:
-        cases = pile_cases(n, args.glued_fraction, args.dt, args.seed)
+        cases = pile_cases(n, args.glued_fraction, args.dt, args.seed, args.pile)
         if n == sizes[0]:            # untimed: load the compiled kernels before any timing
             timed_solve(cases[0].problem, "apgd-jacobi", 1e-3, None)
         for case in cases:

@@ -7,7 +7,7 @@ from lubcontact.bench import matched_forces, next_step_problem, pile_cases, velo
 from lubcontact.cones import ConeKind, Cones
 from lubcontact.contacts import find_contacts
 from lubcontact.laws import Law
-from lubcontact.packing import deposit_pile
+from lubcontact.packing import deposit_pile, settle_pile
 from lubcontact.solvers import methods, solve
 from lubcontact.solvers.direct import conic_form
 
@@ -19,7 +19,7 @@ ACCURACY = 1e-6          # relative velocity error |v - v_ref|_M / |U|_M
 @pytest.fixture(scope="module")
 def piles():
     """Dry and glued step problems of a 150-grain deposited pile, with reference solves."""
-    cases = pile_cases(150, glued_fraction=0.3, dt=0.01, seed=3)
+    cases = pile_cases(150, glued_fraction=0.3, dt=0.01, seed=3, pile="deposited")
     return [(case, solve(case.problem, "clarabel", tol=1e-10)) for case in cases]
 
 
@@ -184,3 +184,21 @@ def test_simulation_reproduces_clarabel_trajectories(scene, law, dt, steps, d_ma
     speed = max(np.abs(ref_v).max(), 1e-12)
     assert np.abs(v - ref_v).max() <= 1e-6 * speed
     assert np.abs(x - ref_x).max() <= 1e-6 * scene.grains.radii.min()
+
+
+def test_settled_pile_is_at_rest_and_apgd_as_solves_it_in_one_factorisation():
+    """A 100-grain pile settled by the dynamics: its closed contacts carry load and stay closed."""
+    scene, info = settle_pile(100, seed=1, cache=None, progress=None)
+    assert info["at_rest"] and info["max_speed"] < 1e-8
+    simulation = Simulation(scene, Inelastic(), 0.01)
+    contacts = find_contacts(simulation.scene, simulation.d_max)
+    problem = simulation.build_problem(contacts, Cones.frictionless(
+        np.full(contacts.count, ConeKind.NONNEG), contacts.dim - 1))
+    reference = solve(problem, "clarabel", tol=1e-10)
+    radius = scene.grains.radii.min()
+    closed = np.abs(problem.gaps) <= 1e-9 * radius
+    opening = closed & (problem.gaps_after(reference.velocities) > 1e-9 * radius)
+    assert closed.sum() >= scene.grains.count and opening.sum() <= 0.02 * closed.sum()
+    result = solve(problem, "apgd-as", tol=1e-9)
+    assert result.status == "converged" and result.iterations <= 3
+    assert velocity_error(problem, result.velocities, reference.velocities) <= 1e-9
