@@ -10,6 +10,11 @@ static equilibrium for frictionless disks: loads from above push many grains
 out of their pockets, so the first step of such a pile opens a large part of
 its contacts (a genuine complementarity problem, not a trivial one).
 
+:func:`settle_pile` starts from such a pile and runs the dynamics
+(inelastic, frictionless) until the grains are at rest: a static
+equilibrium whose closed contacts carry load and stay closed in the next
+step. Settled piles are cached as compressed ``.npz`` files (``out/cache``).
+
 The construction loops over grains in Python (it runs once, outside any
 solver); each placement only uses vectorised operations over the disks in a
 vertical strip.
@@ -182,7 +187,7 @@ def _roll(centres, radii, r, position, support, direction, width):
     return best_hit, new
 
 
-def settle_pile(n_grains: int, seed: int = 0, *, dt: float = 0.01, speed_tol: float = 1e-6,
+def settle_pile(n_grains: int, seed: int = 0, *, dt: float = 0.04, speed_tol: float = 1e-6,
                 max_steps: int = 20000, solver: str = "apgd-as", cache: str | None = "out/cache",
                 progress: Callable[[str], None] | None = print) -> tuple[Scene, dict]:
     """A deposited pile (:func:`deposit_pile`) settled by the dynamics until at rest.
@@ -198,7 +203,12 @@ def settle_pile(n_grains: int, seed: int = 0, *, dt: float = 0.01, speed_tol: fl
     n_grains, seed : int
         As in :func:`deposit_pile` (default radius, polydispersity, width, ``g = 1``).
     dt : float
-        Time step of the settling run (units of ``sqrt(r / g)``).
+        Time step of the settling run (units of ``sqrt(r / g)``). A rest
+        state is an equilibrium whatever the step that reached it; a larger
+        step dissipates more per unit time (inelastic implicit steps): at
+        N = 100, 0.01, 0.02 and 0.04 reached rest in 1537, 676 and 204 steps. Contacts are detected
+        within ``0.25 x`` the smallest radius so that none is missed at this
+        step.
     speed_tol : float
         Rest threshold on the largest grain speed, in units of ``g dt``.
     max_steps : int
@@ -208,7 +218,8 @@ def settle_pile(n_grains: int, seed: int = 0, *, dt: float = 0.01, speed_tol: fl
     cache : str or None
         Folder of compressed ``pile_<N>_<seed>.npz`` files (created on demand;
         ``out/`` is not committed); None disables the cache. The file name also
-        encodes ``dt``, ``speed_tol`` and ``max_steps``.
+        encodes ``dt``, ``speed_tol`` and ``max_steps``. A step whose solve
+        does not converge is applied with its best iterate (with a warning).
     progress : callable or None
         Receives a progress line every 100 steps.
 
@@ -231,7 +242,8 @@ def settle_pile(n_grains: int, seed: int = 0, *, dt: float = 0.01, speed_tol: fl
                 scene.grains.positions[:] = stored["positions"]
                 return scene, {key: stored[key].item() for key in _SETTLE_INFO}
     g = float(np.linalg.norm(scene.gravity))
-    simulation = Simulation(scene, Inelastic(), dt, solver=solver, on_failure="warn")
+    simulation = Simulation(scene, Inelastic(), dt, solver=solver, on_failure="warn",
+                            d_max=0.25 * float(scene.grains.radii.min()))
     start, speed, steps = time.perf_counter(), np.inf, 0
     while steps < max_steps and speed >= speed_tol * g * dt:
         report = simulation.step()
