@@ -214,8 +214,8 @@ def simulation_state(sim: Simulation) -> dict[str, np.ndarray]:
     """
     out = {"sim.pair_keys": sim.state.keys, "sim.pair_gamma": sim.state.gamma,
            "sim.steps_done": np.int64(sim.steps_done), "sim.start_time": np.float64(sim.start_time)}
-    if sim._previous is not None:
-        out.update({f"sim.previous.{k}": np.asarray(v) for k, v in vars(sim._previous).items()})
+    if sim.previous is not None:
+        out.update({f"sim.previous.{k}": np.asarray(v) for k, v in vars(sim.previous).items()})
     return out
 
 
@@ -226,7 +226,7 @@ def restore_simulation_state(sim: Simulation, data) -> None:
     sim.start_time = float(data["sim.start_time"])
     previous = {k[len("sim.previous."):]: data[k] for k in data.keys()
                 if k.startswith("sim.previous.")}
-    sim._previous = integrator._PreviousStep(**previous) if previous else None
+    sim.previous = integrator.PreviousStep(**previous) if previous else None
 
 
 # -- one run ------------------------------------------------------------------------------------

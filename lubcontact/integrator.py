@@ -19,7 +19,7 @@ from .problem import StepProblem
 from .scene import Scene
 from .solvers import SolveResult, check_status, solve
 
-ON_FAILURE = ("raise", "warn", "ignore")
+ON_FAILURE = ("raise", "warn", "ignore", "fallback")
 
 
 @dataclass
@@ -68,7 +68,7 @@ class StepReport:
 
 
 @dataclass
-class _PreviousStep:
+class PreviousStep:
     """What the next step's warm start needs, by pair key (keys sorted)."""
 
     keys: np.ndarray
@@ -78,7 +78,7 @@ class _PreviousStep:
     shift: np.ndarray
 
 
-def _lookup(stored_keys: np.ndarray, values: np.ndarray, wanted: np.ndarray,
+def lookup_by_key(stored_keys: np.ndarray, values: np.ndarray, wanted: np.ndarray,
             width: int | None = None) -> np.ndarray:
     """Values of the wanted keys in ``stored_keys`` (sorted), 0 for keys not stored.
 
@@ -114,11 +114,16 @@ class Simulation:
         Solver tolerance.
     solver_options : dict, optional
         Extra keyword arguments for the solver.
-    on_failure : {"raise", "warn", "ignore"}
+    on_failure : {"raise", "warn", "ignore", "fallback"}
         Policy when a step's solve does not converge: ``raise`` stops with
         :class:`~lubcontact.solvers.SolverError` before the state is touched,
         so the scene still holds the last good state; ``warn`` applies the
-        best iterate and warns.
+        best iterate and warns; ``ignore`` applies it silently (the status is
+        still in the trajectory); ``fallback`` re-solves the step once with
+        ``fallback_solver`` (same warm start and shift, recorded in
+        ``result.info["fallback_from"]``) and raises if that fails too.
+    fallback_solver : str
+        The solver used by ``on_failure="fallback"`` (default ``clarabel``).
     warm_start : bool
         Start each solve from the previous step's forces (normal and
         tangential) and shift, matched by pair.
@@ -136,7 +141,7 @@ class Simulation:
     def __init__(self, scene: Scene, law: Law, dt: float, *, solver: str = "clarabel",
                  d_max: float | None = None, tol: float = 1e-9, solver_options: dict | None = None,
                  on_failure: str = "raise", warm_start: bool = True, fixed_point: bool = True,
-                 tol_fp: float = 1e-8, max_outer: int = 50):
+                 tol_fp: float = 1e-8, max_outer: int = 50, fallback_solver: str = "clarabel"):
         self.scene = scene.copy()
         self.law = law
         self.dt = checks.positive_scalar("dt", dt)
@@ -147,6 +152,7 @@ class Simulation:
         self.solver_options = dict(solver_options or {})
         checks.require(on_failure in ON_FAILURE, "on_failure", f"must be one of {ON_FAILURE}", None)
         self.on_failure = on_failure
+        self.fallback_solver = fallback_solver
         self.warm_start = warm_start
         self.fixed_point = fixed_point
         self.tol_fp = checks.positive_scalar("tol_fp", tol_fp)
@@ -154,7 +160,7 @@ class Simulation:
         self.state = PairState()
         self.start_time = self.scene.time
         self.steps_done = 0
-        self._previous: _PreviousStep | None = None
+        self.previous: PreviousStep | None = None
         self.trajectory = Trajectory()
         self.trajectory.record_state(self.scene)
 
@@ -189,13 +195,13 @@ class Simulation:
         Returns ``(forces (n_rows,), shift (nc,))``, or ``(None, None)`` without
         a previous step; pairs new to this step start at 0.
         """
-        if not self.warm_start or self._previous is None or problem.n_contacts == 0:
+        if not self.warm_start or self.previous is None or problem.n_contacts == 0:
             return None, None
-        previous = self._previous
+        previous = self.previous
         cones = problem.cones
-        normal = _lookup(previous.keys, previous.normal, problem.keys)
-        shift = _lookup(previous.keys, previous.shift, problem.keys)
-        tangential = _lookup(previous.keys[previous.tangential_contacts], previous.tangential,
+        normal = lookup_by_key(previous.keys, previous.normal, problem.keys)
+        shift = lookup_by_key(previous.keys, previous.shift, problem.keys)
+        tangential = lookup_by_key(previous.keys[previous.tangential_contacts], previous.tangential,
                              problem.keys[cones.tangential], width=cones.tangent_dim)
         return cones.join(normal, tangential), shift
 
@@ -208,25 +214,31 @@ class Simulation:
         cones = self.law.cones(contacts, gamma)
         problem = self.build_problem(contacts, cones)
         guess, shift = self._warm_start(problem)
-        if cones.has_friction and self.fixed_point:
-            result = solve_coulomb(problem, self.solver, tol=self.tol, tol_fp=self.tol_fp,
-                                   max_outer=self.max_outer, warm_start=guess, shift=shift,
-                                   **self.solver_options)
-        else:
-            result = solve(problem, self.solver, tol=self.tol, warm_start=guess, **self.solver_options)
-        check_status(result, self.on_failure)
+        result = self._solve(problem, self.solver, guess, shift, self.solver_options)
+        if not result.success and self.on_failure == "fallback" and self.fallback_solver != self.solver:
+            failed = result
+            result = self._solve(problem, self.fallback_solver, guess, shift, {})
+            result.info["fallback_from"] = (failed.method, failed.status, failed.residual)
+        check_status(result, "raise" if self.on_failure == "fallback" else self.on_failure)
         self._apply(problem, result)
         normal, tangential = cones.split(result.forces)
         new_gamma = self.law.update_gamma(contacts, gamma, normal, self.dt, result.force_scale)
         self.state = PairState.from_contacts(contacts.keys, new_gamma)
         used_shift = result.info.get("shift", np.zeros(problem.n_contacts))
-        self._previous = _PreviousStep(keys=contacts.keys, normal=normal.copy(),
+        self.previous = PreviousStep(keys=contacts.keys, normal=normal.copy(),
                                        tangential_contacts=cones.tangential.copy(),
                                        tangential=tangential.copy(), shift=np.asarray(used_shift))
         report = StepReport(contacts=contacts, problem=problem, result=result, gamma=new_gamma,
                             gaps_after=problem.gaps_after(result.velocities))
         self._record(report)
         return report
+
+    def _solve(self, problem: StepProblem, method: str, guess, shift, options: dict) -> SolveResult:
+        """One step's solve: the fixed point on s with friction, else a single convex solve."""
+        if problem.cones.has_friction and self.fixed_point:
+            return solve_coulomb(problem, method, tol=self.tol, tol_fp=self.tol_fp,
+                                 max_outer=self.max_outer, warm_start=guess, shift=shift, **options)
+        return solve(problem, method, tol=self.tol, warm_start=guess, **options)
 
     def _apply(self, problem: StepProblem, result: SolveResult) -> None:
         grains = self.scene.grains

@@ -182,15 +182,15 @@ def matched_warm_start(previous: StepProblem, forces: np.ndarray, shift: np.ndar
     forces : ndarray, shape (problem.n_rows,)
     shift : ndarray, shape (problem.n_contacts,)
     """
-    from .integrator import _lookup
+    from .integrator import lookup_by_key
 
     old, new = previous.cones, problem.cones
     normal, tangential = old.split(forces)
     keys = previous.keys
-    matched_normal = _lookup(keys, normal, problem.keys)
-    matched_tangential = _lookup(keys[old.tangential], tangential, problem.keys[new.tangential],
+    matched_normal = lookup_by_key(keys, normal, problem.keys)
+    matched_tangential = lookup_by_key(keys[old.tangential], tangential, problem.keys[new.tangential],
                                  width=new.tangent_dim)
-    return new.join(matched_normal, matched_tangential), _lookup(keys, shift, problem.keys)
+    return new.join(matched_normal, matched_tangential), lookup_by_key(keys, shift, problem.keys)
 
 
 def sequence(name: str, steps: list[tuple[StepProblem, np.ndarray, np.ndarray]], mode: str,
