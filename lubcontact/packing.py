@@ -218,7 +218,8 @@ def settle_pile(n_grains: int, seed: int = 0, *, dt: float = 0.04, speed_tol: fl
     cache : str or None
         Folder of compressed ``pile_<N>_<seed>.npz`` files (created on demand;
         ``out/`` is not committed); None disables the cache. The file name also
-        encodes ``dt``, ``speed_tol`` and ``max_steps``. A step whose solve
+        encodes ``dt``, ``speed_tol`` and ``max_steps``; every 100 steps the state is
+        written to ``<name>.partial.npz`` and an interrupted run resumes from it. A step whose solve
         does not converge is applied with its best iterate (with a warning).
     progress : callable or None
         Receives a progress line every 100 steps.
@@ -242,17 +243,21 @@ def settle_pile(n_grains: int, seed: int = 0, *, dt: float = 0.04, speed_tol: fl
                 scene.grains.positions[:] = stored["positions"]
                 return scene, {key: stored[key].item() for key in _SETTLE_INFO}
     g = float(np.linalg.norm(scene.gravity))
+    partial = None if path is None else path.with_suffix(".partial.npz")
+    steps, elapsed = _resume_settling(scene, partial)
     simulation = Simulation(scene, Inelastic(), dt, solver=solver, on_failure="warn",
                             d_max=0.25 * float(scene.grains.radii.min()))
-    start, speed, steps = time.perf_counter(), np.inf, 0
+    start, speed = time.perf_counter() - elapsed, np.inf
     while steps < max_steps and speed >= speed_tol * g * dt:
         report = simulation.step()
         steps += 1
         speed = float(np.max(np.linalg.norm(simulation.scene.grains.velocities, axis=1)))
         simulation.trajectory = Trajectory()            # keep no history
-        if progress is not None and steps % 100 == 0:
-            progress(f"settle_pile N={n_grains}: step {steps}, max speed {speed:.2e}, "
-                     f"{report.contacts.count} contacts, {time.perf_counter() - start:.0f} s")
+        if steps % 100 == 0:
+            _save_settling(partial, simulation.scene, steps, time.perf_counter() - start)
+            if progress is not None:
+                progress(f"settle_pile N={n_grains}: step {steps}, max speed {speed:.2e}, "
+                         f"{report.contacts.count} contacts, {time.perf_counter() - start:.0f} s")
     settled = simulation.scene
     settled.grains.velocities[:] = 0.0
     settled.time = 0.0
@@ -261,7 +266,29 @@ def settle_pile(n_grains: int, seed: int = 0, *, dt: float = 0.04, speed_tol: fl
     if path is not None:
         path.parent.mkdir(parents=True, exist_ok=True)
         np.savez_compressed(path, positions=settled.grains.positions, **info)
+        partial.unlink(missing_ok=True)
     return settled, info
+
+
+def _save_settling(partial: Path | None, scene: Scene, steps: int, seconds: float) -> None:
+    """Write the settling state so that an interrupted run resumes (atomic rename)."""
+    if partial is None:
+        return
+    partial.parent.mkdir(parents=True, exist_ok=True)
+    scratch = partial.with_name(partial.name + ".tmp.npz")
+    np.savez_compressed(scratch, positions=scene.grains.positions,
+                        velocities=scene.grains.velocities, steps=steps, seconds=seconds)
+    scratch.replace(partial)
+
+
+def _resume_settling(scene: Scene, partial: Path | None) -> tuple[int, float]:
+    """Load an interrupted settling run into ``scene``; returns (steps, seconds) done."""
+    if partial is None or not partial.exists():
+        return 0, 0.0
+    with np.load(partial) as stored:
+        scene.grains.positions[:] = stored["positions"]
+        scene.grains.velocities[:] = stored["velocities"]
+        return int(stored["steps"]), float(stored["seconds"])
 
 
 _SETTLE_INFO = ("steps", "max_speed", "at_rest", "seconds")
