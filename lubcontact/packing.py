@@ -188,7 +188,8 @@ def _roll(centres, radii, r, position, support, direction, width):
 
 
 def settle_pile(n_grains: int, seed: int = 0, *, dt: float = 0.04, speed_tol: float = 1e-6,
-                max_steps: int = 20000, solver: str = "apgd-as", cache: str | None = "out/cache",
+                max_steps: int = 20000, solver: str = "apgd-as", max_iter: int = 2000,
+                fallback_solver: str = "clarabel-direct", cache: str | None = "out/cache",
                 progress: Callable[[str], None] | None = print) -> tuple[Scene, dict]:
     """A deposited pile (:func:`deposit_pile`) settled by the dynamics until at rest.
 
@@ -213,14 +214,17 @@ def settle_pile(n_grains: int, seed: int = 0, *, dt: float = 0.04, speed_tol: fl
         Rest threshold on the largest grain speed, in units of ``g dt``.
     max_steps : int
         Step cap; ``info["at_rest"]`` tells whether the threshold was met.
-    solver : str
-        Method of the settling run.
+    solver, max_iter, fallback_solver : str, int, str
+        Method of the settling run and its iteration cap; a step it does not
+        solve within the cap is re-solved by ``fallback_solver`` (the first
+        steps of a collapsing pile are hard for a gradient method, the long
+        nearly-at-rest tail is cheap for it).
     cache : str or None
         Folder of compressed ``pile_<N>_<seed>.npz`` files (created on demand;
         ``out/`` is not committed); None disables the cache. The file name also
-        encodes ``dt``, ``speed_tol`` and ``max_steps``; every 100 steps the state is
-        written to ``<name>.partial.npz`` and an interrupted run resumes from it. A step whose solve
-        does not converge is applied with its best iterate (with a warning).
+        encodes ``dt``, ``speed_tol``, ``max_steps`` and the solvers; every 100 steps the state is
+        written to ``<name>.partial.npz`` and an interrupted run resumes from it. A step that
+        neither method solves raises.
     progress : callable or None
         Receives a progress line every 100 steps.
 
@@ -237,7 +241,7 @@ def settle_pile(n_grains: int, seed: int = 0, *, dt: float = 0.04, speed_tol: fl
     path = None
     if cache is not None:
         path = Path(cache) / (f"pile_{int(n_grains)}_{seed}_dt{dt:g}_v{speed_tol:g}_"
-                              f"cap{max_steps}.npz")
+                              f"cap{max_steps}_{solver}{max_iter}+{fallback_solver}.npz")
         if path.exists():
             with np.load(path) as stored:
                 scene.grains.positions[:] = stored["positions"]
@@ -245,7 +249,8 @@ def settle_pile(n_grains: int, seed: int = 0, *, dt: float = 0.04, speed_tol: fl
     g = float(np.linalg.norm(scene.gravity))
     partial = None if path is None else path.with_suffix(".partial.npz")
     steps, elapsed = _resume_settling(scene, partial)
-    simulation = Simulation(scene, Inelastic(), dt, solver=solver, on_failure="warn",
+    simulation = Simulation(scene, Inelastic(), dt, solver=solver, on_failure="fallback",
+                            fallback_solver=fallback_solver, solver_options={"max_iter": max_iter},
                             d_max=0.25 * float(scene.grains.radii.min()))
     start, speed = time.perf_counter() - elapsed, np.inf
     while steps < max_steps and speed >= speed_tol * g * dt:
