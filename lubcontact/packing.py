@@ -189,7 +189,7 @@ def _roll(centres, radii, r, position, support, direction, width):
 
 def settle_pile(n_grains: int, seed: int = 0, *, dt: float = 0.04, speed_tol: float = 1e-6,
                 max_steps: int = 20000, solver: str = "apgd-as", max_iter: int = 2000,
-                fallback_solver: str = "clarabel-direct", cache: str | None = "out/cache",
+                fallback_solver: str = "clarabel-direct", switch_speed: float = 1e-2, cache: str | None = "out/cache",
                 progress: Callable[[str], None] | None = print) -> tuple[Scene, dict]:
     """A deposited pile (:func:`deposit_pile`) settled by the dynamics until at rest.
 
@@ -215,10 +215,13 @@ def settle_pile(n_grains: int, seed: int = 0, *, dt: float = 0.04, speed_tol: fl
     max_steps : int
         Step cap; ``info["at_rest"]`` tells whether the threshold was met.
     solver, max_iter, fallback_solver : str, int, str
-        Method of the settling run and its iteration cap; a step it does not
-        solve within the cap is re-solved by ``fallback_solver`` (the first
-        steps of a collapsing pile are hard for a gradient method, the long
-        nearly-at-rest tail is cheap for it).
+        The collapse (largest speed of the last step at least ``switch_speed
+        x g dt``) is stepped with ``fallback_solver``: its steps are hard for
+        a gradient method. The nearly-at-rest tail is stepped with ``solver``
+        (cheap there) capped at ``max_iter`` iterations, a step it does not
+        solve being re-solved by ``fallback_solver``.
+    switch_speed : float
+        Speed (units of ``g dt``) below which ``solver`` takes over.
     cache : str or None
         Folder of compressed ``pile_<N>_<seed>.npz`` files (created on demand;
         ``out/`` is not committed); None disables the cache. The file name also
@@ -241,25 +244,26 @@ def settle_pile(n_grains: int, seed: int = 0, *, dt: float = 0.04, speed_tol: fl
     path = None
     if cache is not None:
         path = Path(cache) / (f"pile_{int(n_grains)}_{seed}_dt{dt:g}_v{speed_tol:g}_"
-                              f"cap{max_steps}_{solver}{max_iter}+{fallback_solver}.npz")
+                              f"cap{max_steps}_{fallback_solver}{switch_speed:g}{solver}{max_iter}.npz")
         if path.exists():
             with np.load(path) as stored:
                 scene.grains.positions[:] = stored["positions"]
                 return scene, {key: stored[key].item() for key in _SETTLE_INFO}
     g = float(np.linalg.norm(scene.gravity))
     partial = None if path is None else path.with_suffix(".partial.npz")
-    steps, elapsed = _resume_settling(scene, partial)
+    steps, elapsed, speed = _resume_settling(scene, partial)
     simulation = Simulation(scene, Inelastic(), dt, solver=solver, on_failure="fallback",
                             fallback_solver=fallback_solver, solver_options={"max_iter": max_iter},
                             d_max=0.25 * float(scene.grains.radii.min()))
-    start, speed = time.perf_counter() - elapsed, np.inf
+    start = time.perf_counter() - elapsed
     while steps < max_steps and speed >= speed_tol * g * dt:
+        simulation.solver = solver if speed < switch_speed * g * dt else fallback_solver
         report = simulation.step()
         steps += 1
         speed = float(np.max(np.linalg.norm(simulation.scene.grains.velocities, axis=1)))
         simulation.trajectory = Trajectory()            # keep no history
         if steps % 100 == 0:
-            _save_settling(partial, simulation.scene, steps, time.perf_counter() - start)
+            _save_settling(partial, simulation.scene, steps, time.perf_counter() - start, speed)
             if progress is not None:
                 progress(f"settle_pile N={n_grains}: step {steps}, max speed {speed:.2e}, "
                          f"{report.contacts.count} contacts, {time.perf_counter() - start:.0f} s")
@@ -275,25 +279,27 @@ def settle_pile(n_grains: int, seed: int = 0, *, dt: float = 0.04, speed_tol: fl
     return settled, info
 
 
-def _save_settling(partial: Path | None, scene: Scene, steps: int, seconds: float) -> None:
+def _save_settling(partial: Path | None, scene: Scene, steps: int, seconds: float,
+                   speed: float) -> None:
     """Write the settling state so that an interrupted run resumes (atomic rename)."""
     if partial is None:
         return
     partial.parent.mkdir(parents=True, exist_ok=True)
     scratch = partial.with_name(partial.name + ".tmp.npz")
     np.savez_compressed(scratch, positions=scene.grains.positions,
-                        velocities=scene.grains.velocities, steps=steps, seconds=seconds)
+                        velocities=scene.grains.velocities, steps=steps, seconds=seconds,
+                        max_speed=speed)
     scratch.replace(partial)
 
 
-def _resume_settling(scene: Scene, partial: Path | None) -> tuple[int, float]:
-    """Load an interrupted settling run into ``scene``; returns (steps, seconds) done."""
+def _resume_settling(scene: Scene, partial: Path | None) -> tuple[int, float, float]:
+    """Load an interrupted settling run into ``scene``; returns (steps, seconds, max speed)."""
     if partial is None or not partial.exists():
-        return 0, 0.0
+        return 0, 0.0, np.inf
     with np.load(partial) as stored:
         scene.grains.positions[:] = stored["positions"]
         scene.grains.velocities[:] = stored["velocities"]
-        return int(stored["steps"]), float(stored["seconds"])
+        return int(stored["steps"]), float(stored["seconds"]), float(stored["max_speed"])
 
 
 _SETTLE_INFO = ("steps", "max_speed", "at_rest", "seconds")
