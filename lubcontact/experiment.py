@@ -29,7 +29,7 @@ import json
 import os
 import pathlib
 import time
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import asdict, dataclass, field, fields, replace
 
 import numpy as np
 
@@ -76,6 +76,10 @@ class RunConfig:
         convex relaxation, one solve per step (the fixed point cost 3x more
         and often hit its outer-iteration cap on flowing piles, see
         docs/validation.md).
+    tol_fp, max_outer : float, int
+        Tolerance and outer-iteration cap of that fixed point.
+    friction : float or None
+        Coulomb coefficient overriding the preset's ``mu`` (None: the preset's).
     checkpoint_every, sample_every, frame_every : int
         Periods (in steps) of checkpoints, measurement samples and frames
         (0: no frames).
@@ -107,6 +111,9 @@ class RunConfig:
     solver: str = field(default_factory=default_solver)
     tol: float = 1e-6
     fixed_point: bool = False
+    tol_fp: float = 1e-8
+    max_outer: int = 50
+    friction: float | None = None
     checkpoint_every: int = 200
     sample_every: int = 10
     frame_every: int = 0
@@ -127,18 +134,23 @@ class RunConfig:
         for name in ("model", "settle_model"):
             if getattr(self, name) not in flow.MODELS:
                 raise ValueError(f"{name}: must be one of {flow.MODELS}, got {getattr(self, name)!r}")
-        for name in ("n_grains", "checkpoint_every", "sample_every", "bins_per_radius"):
+        for name in ("n_grains", "checkpoint_every", "sample_every", "bins_per_radius", "max_outer"):
             if int(getattr(self, name)) < 1:
                 raise ValueError(f"{name}: must be >= 1, got {getattr(self, name)}")
         for name in ("steps", "frame_every", "cross_check_every", "settle_steps"):
             if int(getattr(self, name)) < 0:
                 raise ValueError(f"{name}: must be >= 0, got {getattr(self, name)}")
+        if not self.tol_fp > 0:
+            raise ValueError(f"tol_fp: must be > 0, got {self.tol_fp}")
+        if self.friction is not None and not self.friction >= 0:
+            raise ValueError(f"friction: must be >= 0, got {self.friction}")
         if not 0 <= self.average_from < 1:
             raise ValueError(f"average_from: must be in [0, 1), got {self.average_from}")
 
     @property
     def params(self) -> flow.FlowParameters:
-        return flow.PRESETS[self.preset]()
+        params = flow.PRESETS[self.preset]()
+        return params if self.friction is None else replace(params, friction=self.friction)
 
     def to_json(self) -> str:
         return json.dumps(asdict(self), sort_keys=True)
@@ -252,7 +264,8 @@ class FlowRun:
         self.out_dir = None if out_dir is None else pathlib.Path(out_dir)
         self.sim = Simulation(scene, self.params.law(config.model),
                               flow.time_step(self.params, config.dt_fraction), solver=config.solver,
-                              tol=config.tol, on_failure="ignore", fixed_point=config.fixed_point)
+                              tol=config.tol, on_failure="ignore", fixed_point=config.fixed_point,
+                              tol_fp=config.tol_fp, max_outer=config.max_outer)
         r = self.params.radius
         top = float(scene.grains.positions[:, 1].max() + 2 * r)
         self.profiles = measure.ProfileAccumulator(
@@ -496,6 +509,12 @@ def _add_common(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--tol", type=float, default=defaults.tol)
     parser.add_argument("--fixed-point", action="store_true",
                         help="exact Coulomb friction by the fixed point on s (default: relaxation)")
+    parser.add_argument("--tol-fp", type=float, default=defaults.tol_fp,
+                        help="tolerance of the fixed point on s")
+    parser.add_argument("--max-outer", type=int, default=defaults.max_outer,
+                        help="outer-iteration cap of the fixed point on s")
+    parser.add_argument("--mu", dest="friction", type=float, default=None,
+                        help="Coulomb coefficient (default: the preset's)")
     parser.add_argument("--checkpoint-every", type=int, default=defaults.checkpoint_every)
     parser.add_argument("--sample-every", type=int, default=defaults.sample_every)
     parser.add_argument("--cross-check-every", type=int, default=defaults.cross_check_every,

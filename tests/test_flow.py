@@ -174,11 +174,24 @@ def test_run_command_writes_files_and_resumes(tmp_path):
     assert not list(out.glob("*.tmp"))
 
 
+def test_friction_override_reaches_the_law_and_the_checkpoint():
+    config = small_config(friction=0.5)
+    assert config.params.friction == 0.5 and small_config().params.friction == 0.3
+    assert experiment.RunConfig.from_json(config.to_json()).friction == 0.5
+    from lubcontact import find_contacts
+    scene = Scene.create(Grains.create([[0.0, 0.0], [2.0, 0.0]], 1.0, densities=1.0))
+    np.testing.assert_array_equal(config.params.law("dry").mu(find_contacts(scene, 0.1)), [0.5])
+
+
 def test_config_rejects_bad_values():
     with pytest.raises(ValueError, match="model"):
         small_config(model="wet")
     with pytest.raises(ValueError, match="sample_every"):
         small_config(sample_every=0)
+    with pytest.raises(ValueError, match="friction"):
+        small_config(friction=-0.1)
+    with pytest.raises(ValueError, match="tol_fp"):
+        small_config(tol_fp=0.0)
     with pytest.raises(ValueError, match="angles"):
         experiment.parse_angles("15:28")
     np.testing.assert_allclose(experiment.parse_angles("15:28:1"), np.arange(15, 29))
