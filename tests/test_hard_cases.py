@@ -32,24 +32,9 @@ CASES = load_cases()
 
 #: (case, solver) -> what is wrong, measured with ``lubcontact check-hard`` (tol 1e-9)
 FINDINGS = {
-    ("cone_apex_2d", "clarabel"): "interior point at the cone apex: velocity error 2e-5",
-    ("cone_apex_2d", "clarabel-dual"): "interior point at the cone apex: velocity error 2e-5",
-    ("cone_apex_2d", "clarabel-direct"): "interior point at the cone apex: velocity error 3e-5",
-    ("cone_apex_3d", "clarabel"): "interior point at the cone apex: velocity error 3e-5",
-    ("cone_apex_3d", "clarabel-dual"): "interior point at the cone apex: velocity error 3e-5",
-    ("cone_apex_3d", "clarabel-direct"): "interior point at the cone apex: velocity error 3e-5",
-    ("mass_ratio_1e6_collision", "clarabel-direct"): "unpolished interior point: error 5e-6",
-    ("radius_ratio_100", "clarabel-direct"): "unpolished interior point: error 3e-6",
     ("mass_ratio_1e6_sandwich", "apgd"): "stopping rule on a condition-1e6 W: converged, error 2e-6",
     ("mass_ratio_1e6_sandwich", "apgd-jacobi"): "stopping rule on a condition-1e6 W: error 2e-6",
     ("heavy_on_light_stack", "bb"): "stopping rule with forces 1 to 1e4: converged, error 1.1e-6",
-    ("gamma_states_lubricated", "scs"): "forces outside their cones by 1.1e-10 (relative)",
-    ("dt_large", "scs"): "forces outside their cones by 2.6e-10 (relative)",
-    ("tetrahedron_3d_friction", "scs"): "forces outside their cones by 1.2e-10 (relative)",
-    ("glued_chain_free", "scs"): "rejects a problem without inequality rows (all contacts FREE)",
-    ("glued_chain_anchored", "scs"): "rejects a problem without inequality rows (all contacts FREE)",
-    ("hex_box_glued", "scs"): "rejects a problem without inequality rows (all contacts FREE)",
-    ("glued_infeasible", "scs"): "rejects a problem without inequality rows (all contacts FREE)",
 }
 
 
@@ -183,10 +168,6 @@ def _gamma_scene():
 
 # -- through the time stepper ----------------------------------------------------------------------
 STEPPER_SOLVER = next(m for m in ("apgd-as", "apgd-jacobi", "apgd") if m in methods())
-STEPPER_FINDINGS = {
-    ("gamma_states_gluey_coulomb", "clarabel"):
-        "unpolished frictional reference through the fixed point: penetration 1.6e-6 dt V at step 5",
-}
 
 
 def _stepper_scene(name: str):
@@ -223,8 +204,6 @@ def test_stepper_keeps_a_finite_non_penetrating_state(name, solver):
         penetration = max(penetration, -float(report.gaps_after.min()) / length)
     assert np.all(np.isfinite(sim.scene.grains.positions))
     assert np.all(np.isfinite(sim.scene.grains.velocities))
-    if penetration > 1e-6 and (name, solver) in STEPPER_FINDINGS:
-        pytest.xfail(STEPPER_FINDINGS[name, solver])
     assert penetration <= 1e-6
 
 

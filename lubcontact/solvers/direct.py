@@ -30,6 +30,7 @@ import scipy.sparse as sp
 
 from ..cones import ConeKind
 from .base import CONVERGED, FAILED, INACCURATE, MAX_ITER, MethodOutput, register
+from .polish import polish as polish_active_set
 
 
 @dataclass
@@ -125,8 +126,13 @@ def _empty(problem) -> MethodOutput | None:
 
 @register("clarabel-direct")
 def clarabel_direct(problem, *, tol: float = 1e-10, max_iter: int = 200, warm_start=None,
-                    polyhedral: bool | None = None) -> MethodOutput:
-    """Clarabel on :func:`conic_form` (``warm_start`` is ignored: interior point)."""
+                    polyhedral: bool | None = None, polish: bool = True) -> MethodOutput:
+    """Clarabel on :func:`conic_form` (``warm_start`` is ignored: interior point).
+
+    The solution is polished on its active set (:mod:`lubcontact.solvers.polish`,
+    as the cvxpy ``clarabel`` does) unless ``polish=False``; the polishing time
+    is part of ``solve_time`` and also in ``info["polish_time"]``.
+    """
     import clarabel
 
     if (out := _empty(problem)) is not None:
@@ -152,8 +158,13 @@ def clarabel_direct(problem, *, tol: float = 1e-10, max_iter: int = 200, warm_st
     raw = str(solution.status)
     status = {"Solved": CONVERGED, "AlmostSolved": INACCURATE, "MaxIterations": MAX_ITER}.get(raw, FAILED)
     forces = np.asarray(solution.x, dtype=float) if status != FAILED else np.full(problem.n_rows, np.nan)
+    polished = False
+    if polish and status != FAILED:
+        forces, polished = polish_active_set(problem, forces)
+    polish_time = time.perf_counter() - done
     return MethodOutput(forces=forces, status=status, iterations=int(solution.iterations),
-                        setup_time=built - start, solve_time=done - built, info={"raw_status": raw})
+                        setup_time=built - start, solve_time=done - built + polish_time,
+                        info={"raw_status": raw, "polished": polished, "polish_time": polish_time})
 
 
 @register("osqp")
@@ -186,15 +197,24 @@ def osqp_method(problem, *, tol: float = 1e-10, max_iter: int = 100000, warm_sta
 @register("scs")
 def scs_method(problem, *, tol: float = 1e-10, max_iter: int = 100000, warm_start=None,
                polyhedral: bool | None = None) -> MethodOutput:
-    """SCS on :func:`conic_form` (``warm_start`` seeds the primal variable)."""
+    """SCS on :func:`conic_form` (``warm_start`` seeds the primal variable).
+
+    The returned forces are projected onto their cones (SCS's iterates satisfy
+    the cone constraints only to its tolerance). A problem whose conic form
+    has no row (every contact FREE: an equality-constrained QP with no
+    inequality) gets one empty equality row ``0 = 0``, which SCS requires.
+    """
     import scs
 
     if (out := _empty(problem)) is not None:
         return out
     start = time.perf_counter()
     form = conic_form(problem, polyhedral)
-    data = {"P": form.P, "A": form.A, "b": form.c, "c": form.q}
-    cone = {"z": form.zero, "l": form.nonneg, "q": [form.soc_size] * form.soc_count}
+    rows, zero = form.A, form.zero
+    if rows.shape[0] == 0:               # only FREE contacts: SCS needs a row, add 0 = 0
+        rows, zero = sp.csc_matrix((1, problem.n_rows)), 1
+    data = {"P": form.P, "A": rows, "b": np.zeros(rows.shape[0]), "c": form.q}
+    cone = {"z": zero, "l": form.nonneg, "q": [form.soc_size] * form.soc_count}
     solver = scs.SCS(data, cone, eps_abs=tol, eps_rel=tol, max_iters=max_iter, verbose=False)
     built = time.perf_counter()
     guess = {"x": np.asarray(warm_start, dtype=float)} if warm_start is not None else {}
@@ -204,6 +224,8 @@ def scs_method(problem, *, tol: float = 1e-10, max_iter: int = 100000, warm_star
     status = CONVERGED if raw == "solved" else INACCURATE if "inaccurate" in raw else FAILED
     if status == INACCURATE and result["info"]["iter"] >= max_iter:
         status = MAX_ITER
-    forces = np.asarray(result["x"], dtype=float) if status != FAILED else np.full(problem.n_rows, np.nan)
+    forces = np.full(problem.n_rows, np.nan)
+    if status != FAILED:                 # SCS leaves forces up to ~1e-10 outside their cones
+        forces = problem.cones.project(np.asarray(result["x"], dtype=float))
     return MethodOutput(forces=forces, status=status, iterations=int(result["info"]["iter"]),
                         setup_time=built - start, solve_time=done - built, info={"raw_status": raw})

@@ -20,9 +20,11 @@ at most ``max_branch_rounds`` rounds.
 Clarabel runs with ``direct_solve_method="qdldl"`` (the automatic choice picked a
 slower multithreaded factorisation, MODEL.md section 9) and equal absolute and
 relative gap/feasibility tolerances ``tol``. An interior-point gap ``tol`` only
-bounds velocities to about ``sqrt(tol)``, so frictionless solutions are then
-polished on their active set (:mod:`lubcontact.solvers.polish`) to reach
-velocities accurate to about 1e-12 (``polish=False`` turns this off).
+bounds velocities to about ``sqrt(tol)`` (worse at the friction-cone apex), so
+solutions are then polished on their active set
+(:mod:`lubcontact.solvers.polish`: frictionless, frictional and mixed
+problems; 3D problems with sliding contacts are left as they are) to reach
+velocities accurate to about 1e-12. ``info["polished"]`` says whether it was.
 """
 from __future__ import annotations
 
