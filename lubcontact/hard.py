@@ -314,5 +314,6 @@ def main(argv: list[str] | None = None) -> int:
     print()
     print(summary(cells))
     print(f"({len(cells)} solves in {time.perf_counter() - start:.1f} s; cell = verdict or status, "
-          "scaled error / iterations; * = Clarabel known wrong, checked against the exact answer)")
+          "scaled error / iterations; * = reference marked unreliable (reference_fails), "
+          "checked against the exact answer)")
     return int(any(c.verdict in (WRONG, CRASH) for c in cells))
