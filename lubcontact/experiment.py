@@ -361,12 +361,16 @@ class FlowRun:
 
     @classmethod
     def resume(cls, path: pathlib.Path, out_dir: pathlib.Path | None = None,
-               steps: int | None = None) -> "FlowRun":
+               steps: int | None = None, **changes) -> "FlowRun":
         """Rebuild a run from its checkpoint; ``steps`` may extend the total.
 
         When the extension moves the averaging window past the checkpoint, the
         time averages (profiles, gamma histogram) restart, so that they cover
         the new window only; series are kept whole.
+
+        ``changes`` (RunConfig fields, e.g. ``friction=0.5``) continue the run
+        with other settings from the checkpoint's state; they are stored in
+        the config of the checkpoints written afterwards.
         """
         path = pathlib.Path(path)
         with np.load(path) as data:
@@ -374,6 +378,7 @@ class FlowRun:
         config = RunConfig.from_json(str(data["config"]))
         if steps is not None:
             config.steps = int(steps)
+        config = RunConfig(**{**asdict(config), **changes})
         run = cls(config, scene_from_arrays(data), path.parent if out_dir is None else out_dir)
         restore_simulation_state(run.sim, data)
         run.series = {name: list(data[f"series.{name}"]) for name in SERIES}
@@ -542,12 +547,17 @@ def run_main(argv: list[str] | None = None) -> int:
     parser.add_argument("--angle", type=float, default=RunConfig.angle, help="degrees")
     parser.add_argument("--frame-every", type=int, default=0)
     parser.add_argument("--out", type=pathlib.Path, default=pathlib.Path("out/run"))
-    parser.add_argument("--resume", action="store_true", help="continue from OUT/checkpoint.npz")
+    parser.add_argument("--resume", action="store_true",
+                        help="continue from OUT/checkpoint.npz (with --mu or --fixed-point: "
+                             "continue with that friction)")
     _add_common(parser)
     args = parser.parse_args(argv)
     checkpoint = args.out / "checkpoint.npz"
     if args.resume and checkpoint.exists():
-        run = FlowRun.resume(checkpoint, args.out, steps=args.steps)
+        changes = {"friction": args.friction} if args.friction is not None else {}
+        if args.fixed_point:
+            changes.update(fixed_point=True, tol_fp=args.tol_fp, max_outer=args.max_outer)
+        run = FlowRun.resume(checkpoint, args.out, steps=args.steps, **changes)
         print(f"resuming {checkpoint} at step {run.steps_done}")
     else:
         config = _config(args)

@@ -172,6 +172,13 @@ def test_run_command_writes_files_and_resumes(tmp_path):
         assert int(data["profile.samples"]) == 3
         np.testing.assert_array_equal(data["series.step"], [3, 6, 9, 12, 15, 18])
     assert not list(out.glob("*.tmp"))
+    # continuing with another friction coefficient: stored, and the law uses it
+    assert experiment.run_main(argv(21) + ["--resume", "--mu", "0.5"]) == 0
+    resumed = experiment.FlowRun.resume(out / "checkpoint.npz")
+    assert resumed.steps_done == 21 and resumed.config.friction == 0.5
+    from lubcontact import find_contacts
+    contacts = find_contacts(resumed.sim.scene, resumed.sim.d_max)
+    assert contacts.count > 0 and np.all(resumed.sim.law.mu(contacts) == 0.5)
 
 
 def test_friction_override_reaches_the_law_and_the_checkpoint():
