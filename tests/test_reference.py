@@ -49,10 +49,11 @@ def hard_cases():
 
 
 @pytest.mark.parametrize("name", ["cone_apex_2d", "cone_apex_3d", "radius_ratio_100_friction",
-                                  "dt_large_friction", "gamma_states_gluey_coulomb"])
+                                  "dt_large_friction", "gamma_states_gluey_coulomb",
+                                  "tetrahedron_3d_friction"])
 @pytest.mark.parametrize("method", ["clarabel", "clarabel-dual", "clarabel-direct"])
 def test_frictional_and_mixed_solutions_are_polished_to_rounding(hard_cases, name, method):
-    """Friction contacts open, sticking and sliding (2D and the 3D apex), NONNEG/FREE/UNION mixed:
+    """Friction contacts open, sticking and sliding (2D, 3D by Newton), NONNEG/FREE/UNION mixed:
     the polished solution satisfies the optimality conditions to rounding (the interior point
     alone leaves 1e-7 to 1e-5)."""
     problem = hard_cases[name].problem

@@ -33,11 +33,12 @@ accepted only when no correction is left (every force in its cone, every
 ``g_c`` of an open contact in ``K_c*``) and the natural residual decreases.
 
 In 2D the sliding direction is a sign and the sliding state is exact. In 3D
-it is the direction of the interior-point force, and optimality also needs
-the slip to be exactly opposite to it; when it is not, polishing gives up
-(the input is returned). Realigning ``d`` with the slip and solving again
-diverged on ``tetrahedron_3d_friction`` (the residual grew 1.6x per round),
-so 3D problems with sliding contacts stay unpolished.
+the direction of a sliding contact is an unknown too: after the solve with
+the direction of the interior-point force, Newton's method on the exact
+conditions (:func:`_slide_newton`) aligns force and slip. (Realigning the
+direction with the slip and solving again diverged on
+``tetrahedron_3d_friction``: the residual grew 1.6x per round.) If a 3D
+sliding contact is still misaligned, polishing gives up (input returned).
 """
 from __future__ import annotations
 
@@ -45,6 +46,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
+import scipy.sparse.linalg as spla
 
 from ..cones import ConeKind
 from ..problem import StepProblem
@@ -112,6 +114,8 @@ def polish(problem: StepProblem, forces: np.ndarray, threshold: float = 1e-7,
     before = problem.natural_residual(forces)
     for _ in range(max_rounds):
         candidate = _solve_on(problem, layout, forces, state, direction)
+        if layout.t_rows.shape[1] > 1 and np.any(state == SLIDE):
+            candidate, direction = _slide_newton(problem, layout, candidate, state, direction)
         try:
             state, direction, changed = _corrected(problem, layout, candidate, state, direction)
         except _Misaligned:
@@ -227,6 +231,76 @@ def _corrected(problem, layout, candidate, state, direction):
     if not changed and np.any(sliding & across):
         raise _Misaligned
     return new_state, new_direction, changed
+
+
+def _slide_newton(problem, layout, forces, state, direction, iterations: int = 20):
+    """3D sliding contacts: Newton's method on the exact conditions of the active set.
+
+    Unknowns: the forces of the active rows (every row of a sticking or
+    sliding contact, the normal row of a held one) and one ``kappa >= 0`` per
+    sliding contact; equations: ``g = 0`` on held and sticking rows, and per
+    sliding contact ``g_T + kappa lam_T = 0``, ``g_n - mu^2 kappa lam_n = 0``
+    (slip opposite to the force, on the boundary of ``K_c*``) and
+    ``|lam_T| = mu lam_n``. Started from the fixed-direction solution
+    ``forces``; ``1e-12 max diag W`` on the force block keeps redundant
+    contacts factorisable. Returns the forces and the sliding directions
+    ``lam_T / |lam_T|`` (``kappa < 0`` is left for the state corrections), or
+    the input unchanged when Newton does not converge (e.g. a sliding contact
+    whose normal force vanishes: the corrections then open it).
+    """
+    slide = np.flatnonzero(state == SLIDE)
+    slide_t = layout.t_rows[slide]                                    # (s, dim)
+    mu = layout.mu[slide]
+    rows = np.zeros(problem.n_rows, dtype=bool)
+    rows[np.flatnonzero(state != OPEN)] = True
+    rows[layout.t_rows[(state == STICK) | (state == SLIDE)].ravel()] = True
+    active = np.flatnonzero(rows)
+    position = np.full(problem.n_rows, -1)
+    position[active] = np.arange(active.size)
+    delassus = problem.delassus[active][:, active]
+    delta = 1e-12 * max(float(delassus.diagonal().max()), 1e-300)
+    lam = forces.copy()
+    slip = -np.sum(direction[slide] * problem.gradient(lam)[slide_t], axis=1)
+    kappa = np.maximum(slip, 0.0) / np.maximum(np.linalg.norm(lam[slide_t], axis=1), 1e-300)
+
+    def conditions(lam, kappa):
+        g = problem.gradient(lam)
+        g[slide_t] += kappa[:, None] * lam[slide_t]
+        g[slide] -= mu**2 * kappa * lam[slide]
+        return np.concatenate([g[active], np.linalg.norm(lam[slide_t], axis=1) - mu * lam[slide]])
+
+    value = conditions(lam, kappa)
+    for _ in range(iterations):
+        jacobian = _newton_matrix(delassus, delta, position, slide, slide_t, mu, lam, kappa)
+        step = spla.spsolve(jacobian, -value)
+        trial_lam, trial_kappa = lam.copy(), kappa + step[active.size:]
+        trial_lam[active] += step[: active.size]
+        trial = conditions(trial_lam, trial_kappa)
+        if not np.linalg.norm(trial) < np.linalg.norm(value):
+            break
+        lam, kappa, value = trial_lam, trial_kappa, trial
+    if not np.linalg.norm(value) <= ROUNDING * (1 + np.linalg.norm(problem.offset)):
+        return forces, direction                     # not converged: the state corrections decide
+    new_direction = direction.copy()
+    new_direction[slide] = _unit(lam[slide_t], fallback=direction[slide])
+    return lam, new_direction
+
+
+def _newton_matrix(delassus, delta, position, slide, slide_t, mu, lam, kappa) -> sp.csc_matrix:
+    """Jacobian of :func:`_slide_newton`'s conditions (forces block, then kappa)."""
+    n_active, count, dim = delassus.shape[0], slide.size, slide_t.shape[1]
+    diagonal = np.full(n_active, delta)
+    diagonal[position[slide_t].ravel()] += np.repeat(kappa, dim)
+    diagonal[position[slide]] -= mu**2 * kappa
+    tangent = lam[slide_t]
+    unit = _unit(tangent, fallback=np.zeros_like(tangent))
+    columns = np.concatenate([np.repeat(np.arange(count), dim), np.arange(count)])
+    coupling_rows = np.concatenate([position[slide_t].ravel(), position[slide]])
+    coupling = sp.csc_matrix((np.concatenate([tangent.ravel(), -mu**2 * lam[slide]]),
+                              (coupling_rows, columns)), shape=(n_active, count))
+    cone = sp.csc_matrix((np.concatenate([unit.ravel(), -mu]), (columns, coupling_rows)),
+                         shape=(count, n_active))
+    return sp.csc_matrix(sp.bmat([[delassus + sp.diags(diagonal), coupling], [cone, None]]))
 
 
 class _Misaligned(Exception):
