@@ -13,10 +13,15 @@ every method of ``--methods`` (default: the fast ``apgd-jacobi`` and
 ``clarabel-direct``, Clarabel on the conic form: the cvxpy ``clarabel`` needs
 a step problem), with ``tol = tol_fp = --tol``. Iterative methods use inexact
 inner solves (``--forcing``) and ``--anderson``; interior-point methods
-(Clarabel, SCS, OSQP) solve each inner problem to ``--tol`` with Anderson 5.
+(Clarabel, SCS, OSQP) solve each inner problem to ``--tol`` with Anderson 5;
+``clarabel-direct`` is not polished on local problems (no factor of W).
 The error is the Siconos/FCLIB measure of MODEL.md section 6
-(:func:`lubcontact.fixed_point.coulomb_error`) in the file's units. A failed
-method still gets its row: its last forces, their error and its status.
+(:func:`lubcontact.fixed_point.coulomb_error`) in the file's units
+(``FCLIB error``) and on the normalised problem (``scaled err``: ``q`` of unit
+rms, ``W`` of unit mean diagonal; it matters where ``|q|`` is far from 1, e.g.
+``|q| ~ 4e-18`` in the 667-contact Siconos file). A failed method still gets
+its row: its last forces, their errors and its status (``-`` when the method
+raised).
 
 Pile step (``--pile N``): one step of a frictional (Coulomb, mu = 0.3) pile
 of N disks, timed for each method of ``--pile-methods`` with the fixed point
@@ -34,9 +39,11 @@ step's forces and shift (matched by pair key, as a simulation does):
   every contact closed, not in equilibrium (the harder problem). Cold only.
 
 Errors: relative velocity error ``|v - v_ref|_M / |U|_M`` against the fixed
-point around ``clarabel`` (cvxpy primal form, ``tol = 1e-10``,
-``tol_fp = 1e-9``), and the FCLIB error of the normalised problem
-(unit-free). Timings are single wall-clock runs (compiled kernels loaded
+point around ``clarabel`` (cvxpy primal form, ``tol = 1e-9``, ``tol_fp = 1e-8``,
+the defaults of a simulation; its own status is in its row: where it did not
+converge, the error is only a distance to it), and the FCLIB error of the
+normalised problem (``scaled err``, unit-free). At most ``--pile-max-outer``
+outer iterations. Timings are single wall-clock runs (compiled kernels loaded
 before timing).
 """
 from __future__ import annotations
@@ -57,11 +64,11 @@ INTERIOR_METHODS = ("clarabel", "clarabel-dual", "clarabel-direct", "osqp", "scs
 DEFAULT_METHODS = ("apgd-jacobi", "clarabel-direct")
 PILE_KINDS = ("settling", "deposited")
 SETTLING_SEED, DEPOSITED_SEED = 3, 1          # the seeds of the comparison sets
-REFERENCE = dict(method="clarabel", tol=1e-10, tol_fp=1e-9)
+REFERENCE = dict(method="clarabel", tol=1e-9, tol_fp=1e-8)
 EXTERNAL_COLUMNS = ("problem", "contacts", "dim", "method", "outer it", "inner it", "time s",
-                    "FCLIB error", "status", "note")
+                    "FCLIB error", "scaled err", "status", "note")
 PILE_COLUMNS = ("pile", "N", "contacts", "method", "start", "outer it", "inner it", "time s",
-                "rel v err", "FCLIB error", "status", "note")
+                "rel v err", "scaled err", "status", "note")
 
 
 @dataclass(frozen=True)
@@ -95,8 +102,14 @@ EXTERNAL = (
 
 
 # -- solving -----------------------------------------------------------------------------------
-def fixed_point_options(method: str, forcing: float, anderson: int) -> dict:
-    """Fixed-point options: inexact inner solves for iterative methods only."""
+def fixed_point_options(method: str, problem, forcing: float, anderson: int) -> dict:
+    """Fixed-point options: inexact inner solves for iterative methods only.
+
+    ``clarabel-direct`` is not polished on problems without a factor
+    ``W = L^T L`` (local problems): :mod:`lubcontact.solvers.polish` needs one.
+    """
+    if method == "clarabel-direct" and not hasattr(problem, "delassus_factor"):
+        return {"polish": False}
     if method in INTERIOR_METHODS:
         return {}
     return dict(forcing=forcing, anderson=anderson)
@@ -167,6 +180,7 @@ def select_problems(patterns: list[str] | None, quick: bool) -> list[ExternalPro
 def external_rows(problems: list[ExternalProblem], folder: Path, methods: list[str], tol: float,
                   max_outer: int, forcing: float, anderson: int, out=print) -> list[dict]:
     """Solve each available problem with each method; one row per (problem, method)."""
+    from .compare import fclib_error
     from .fixed_point import coulomb_error
     from .io import read_problem
 
@@ -181,13 +195,16 @@ def external_rows(problems: list[ExternalProblem], folder: Path, methods: list[s
             load_kernels(problem, methods)
             loaded = True
         for method in methods:
-            options = fixed_point_options(method, forcing, anderson)
+            options = fixed_point_options(method, problem, forcing, anderson)
             result, wall, message = timed_coulomb(problem, method, tol, tol, max_outer, **options)
-            error = coulomb_error(problem, result.forces) if result is not None else np.nan
             row = dict(problem=entry.name, contacts=problem.n_contacts, dim=problem.dim,
                        method=method, **outcome(result, wall, message))
-            row["FCLIB error"] = _error(error)
-            out(f"# {entry.name} {method}: {row['status']}, error {row['FCLIB error']}, "
+            if options.get("polish") is False:
+                row["note"] = "; ".join(filter(None, ["unpolished", row["note"]]))
+            if result is not None:
+                row["FCLIB error"] = _error(coulomb_error(problem, result.forces))
+                row["scaled err"] = _error(fclib_error(problem, result.forces))
+            out(f"# {entry.name} {method}: {row['status']}, error {row.get('FCLIB error', '-')}, "
                 f"{row['time s']} s")
             rows.append(row)
     return rows
@@ -275,19 +292,19 @@ def pile_rows(step: PileStep, methods: list[str], tol: float, max_outer: int, fo
     base = dict(pile=step.label, N=step.n_grains, contacts=problem.n_contacts)
     rows = [dict(base, method=f"{REFERENCE['method']} (ref)", start="cold",
                  **outcome(reference, wall, message))]
-    rows[0]["FCLIB error"] = _error(fclib_error(problem, reference.forces)
+    rows[0]["scaled err"] = _error(fclib_error(problem, reference.forces)
                                     if reference is not None else np.nan)
     starts = [("cold", None, None)]
     if step.warm_start is not None:
         starts.append(("warm", step.warm_start, step.shift))
     for method in methods:
-        options = fixed_point_options(method, forcing, anderson)
+        options = fixed_point_options(method, problem, forcing, anderson)
         for start, forces, shift in starts:
             result, wall, message = timed_coulomb(problem, method, tol, tol, max_outer,
                                                   warm_start=forces, shift=shift, **options)
             row = dict(base, method=method, start=start, **outcome(result, wall, message))
             if result is not None:
-                row["FCLIB error"] = _error(fclib_error(problem, result.forces))
+                row["scaled err"] = _error(fclib_error(problem, result.forces))
                 if reference is not None:
                     row["rel v err"] = _error(velocity_error(problem, result.velocities,
                                                              reference.velocities))
@@ -327,6 +344,8 @@ def parser() -> argparse.ArgumentParser:
                         help="methods timed on the pile step, comma separated")
     parser.add_argument("--pile-tol", type=float, default=1e-6,
                         help="inner and fixed-point tolerance of the pile step")
+    parser.add_argument("--pile-max-outer", type=int, default=100,
+                        help="cap on the outer iterations of the fixed point on the pile step")
     parser.add_argument("--pile-steps", type=int, default=PILE_STEPS,
                         help="steps of the settling pile before the timed one")
     return parser
@@ -350,8 +369,9 @@ def _check(cli: argparse.ArgumentParser, args) -> None:
     for option in ("tol", "pile_tol"):
         if not getattr(args, option) > 0:
             cli.error(f"--{option.replace('_', '-')}: must be > 0, got {getattr(args, option)}")
-    if args.max_outer < 1 or args.pile_steps < 1 or (args.pile is not None and args.pile < 1):
-        cli.error("--max-outer, --pile-steps and --pile must be positive")
+    if min(args.max_outer, args.pile_max_outer, args.pile_steps) < 1 or \
+            (args.pile is not None and args.pile < 1):
+        cli.error("--max-outer, --pile-max-outer, --pile-steps and --pile must be positive")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -372,12 +392,13 @@ def main(argv: list[str] | None = None) -> int:
         print(format_table(rows, EXTERNAL_COLUMNS))
     if args.pile is not None:
         print(f"\n# pile step: Coulomb mu = {FRICTION}, dt = {PILE_DT}, tol = tol_fp = "
-              f"{args.pile_tol:g}, reference {REFERENCE}")
+              f"{args.pile_tol:g}, max {args.pile_max_outer} outer iterations, iterative methods "
+              f"with forcing {args.forcing:g} and Anderson {args.anderson}; reference {REFERENCE}")
         rows = []
         for kind in _names(args.pile_kinds):
             step = (settling_step(args.pile, args.pile_steps) if kind == "settling"
                     else deposited_step(args.pile))
-            rows += pile_rows(step, _names(args.pile_methods), args.pile_tol, args.max_outer,
+            rows += pile_rows(step, _names(args.pile_methods), args.pile_tol, args.pile_max_outer,
                               args.forcing, args.anderson)
         print(format_table(rows, PILE_COLUMNS))
     return 0
