@@ -27,6 +27,7 @@ from typing import Callable
 
 import numpy as np
 
+from . import checks
 from .scene import Grains, Scene
 
 _MAX_MOVES = 1000
@@ -80,10 +81,44 @@ def deposit_pile(n_grains: int, radius: float = 0.5, polydispersity: float = 0.2
         r = radii[i]
         x0 = r + drops[i] * (width - 2.0 * r)
         centres[i] = _place(centres[:i], radii[:i], r, x0, width)
+    return _box_pile(centres, radii, width, g, {"name": "deposit_pile", "seed": seed})
+
+
+def _box_pile(centres: np.ndarray, radii: np.ndarray, width: float, g: float,
+              metadata: dict) -> Scene:
+    """Unit-density disks on the floor ``y = 0`` between walls ``x = 0`` and ``x = width``."""
     grains = Grains.create(centres, radii, densities=1.0)
     return Scene.create(grains, plane_points=[[0.0, 0.0], [0.0, 0.0], [width, 0.0]],
                         plane_normals=[[0.0, 1.0], [1.0, 0.0], [-1.0, 0.0]], gravity=[0.0, -g],
-                        metadata={"name": "deposit_pile", "seed": seed, "width": width})
+                        metadata=dict(metadata, width=width))
+
+
+def tile_pile(pile: Scene, copies: int) -> Scene:
+    """``copies`` copies of a box pile side by side in one box ``copies`` times wider.
+
+    Parameters
+    ----------
+    pile : Scene
+        A pile made by :func:`deposit_pile` or :func:`settle_pile` (its
+        ``metadata["width"]`` is the distance between its walls).
+    copies : int
+        Number of copies (>= 1). The inner walls are removed; disks that
+        touched them do not overlap their new neighbours (their centres
+        are a radius from the old wall).
+
+    Returns
+    -------
+    Scene
+        Zero velocities; ``metadata`` records ``tiles``.
+    """
+    copies = int(checks.positive("copies", copies, shape=()))
+    width = float(pile.metadata["width"])
+    shift = np.zeros((copies, 1, 2))
+    shift[:, 0, 0] = width * np.arange(copies)
+    centres = (pile.grains.positions[None, :, :] + shift).reshape(-1, 2)
+    radii = np.tile(pile.grains.radii, copies)
+    g = float(np.linalg.norm(pile.gravity))
+    return _box_pile(centres, radii, copies * width, g, dict(pile.metadata, tiles=copies))
 
 
 def _place(centres: np.ndarray, radii: np.ndarray, r: float, x0: float, width: float) -> np.ndarray:
@@ -187,9 +222,10 @@ def _roll(centres, radii, r, position, support, direction, width):
     return best_hit, new
 
 
-def settle_pile(n_grains: int, seed: int = 0, *, dt: float = 0.04, speed_tol: float = 1e-6,
-                max_steps: int = 20000, solver: str = "apgd-as", max_iter: int = 2000,
-                fallback_solver: str = "clarabel-direct", switch_speed: float = 1e-2, cache: str | None = "out/cache",
+def settle_pile(n_grains: int, seed: int = 0, *, tiles: int = 1, dt: float = 0.04,
+                speed_tol: float = 1e-6, max_steps: int = 20000, solver: str = "apgd-as",
+                max_iter: int = 2000, fallback_solver: str = "clarabel-direct",
+                switch_speed: float = 1e-2, cache: str | None = "out/cache",
                 progress: Callable[[str], None] | None = print) -> tuple[Scene, dict]:
     """A deposited pile (:func:`deposit_pile`) settled by the dynamics until at rest.
 
@@ -203,13 +239,19 @@ def settle_pile(n_grains: int, seed: int = 0, *, dt: float = 0.04, speed_tol: fl
     ----------
     n_grains, seed : int
         As in :func:`deposit_pile` (default radius, polydispersity, width, ``g = 1``).
+    tiles : int
+        With ``tiles > 1`` (``n_grains`` a multiple of it) the pile starts as
+        :func:`tile_pile` of the settled pile of ``n_grains / tiles`` grains
+        (same seed and options) instead of a deposit: a box ``tiles`` times
+        wider than tall where only the disks near the removed inner walls
+        move, much cheaper to settle for large N than a deposit's collapse.
     dt : float
         Time step of the settling run (units of ``sqrt(r / g)``). A rest
         state is an equilibrium whatever the step that reached it; a larger
         step dissipates more per unit time (inelastic implicit steps): at
-        N = 100, 0.01, 0.02 and 0.04 reached rest in 1537, 676 and 204 steps. Contacts are detected
-        within ``0.25 x`` the smallest radius so that none is missed at this
-        step.
+        N = 100, 0.01, 0.02 and 0.04 reached rest in 1537, 676 and 204
+        steps. Contacts are detected within ``0.25 x`` the smallest radius
+        so that none is missed at this step.
     speed_tol : float
         Rest threshold on the largest grain speed, in units of ``g dt``.
     max_steps : int
@@ -223,11 +265,11 @@ def settle_pile(n_grains: int, seed: int = 0, *, dt: float = 0.04, speed_tol: fl
     switch_speed : float
         Speed (units of ``g dt``) below which ``solver`` takes over.
     cache : str or None
-        Folder of compressed ``pile_<N>_<seed>.npz`` files (created on demand;
-        ``out/`` is not committed); None disables the cache. The file name also
-        encodes ``dt``, ``speed_tol``, ``max_steps`` and the solvers; every 100 steps the state is
-        written to ``<name>.partial.npz`` and an interrupted run resumes from it. A step that
-        neither method solves raises.
+        Folder of compressed ``pile_<N>_<seed>...npz`` files (created on
+        demand; ``out/`` is not committed); None disables the cache. The
+        file name encodes every option. Every 100 steps the state is written
+        to ``<name>.partial.npz`` and an interrupted run resumes from it. A
+        step that neither method solves raises.
     progress : callable or None
         Receives a progress line every 100 steps.
 
@@ -237,18 +279,37 @@ def settle_pile(n_grains: int, seed: int = 0, *, dt: float = 0.04, speed_tol: fl
         The settled pile and ``info``: ``steps``, ``max_speed`` (last step,
         length/time), ``at_rest``, ``seconds``.
     """
+    tiles = int(checks.positive("tiles", tiles, shape=()))
+    if n_grains % tiles:
+        raise ValueError(f"n_grains: must be a multiple of tiles={tiles}, got {n_grains}")
+    settling = dict(dt=dt, speed_tol=speed_tol, max_steps=max_steps, solver=solver,
+                    max_iter=max_iter, fallback_solver=fallback_solver,
+                    switch_speed=switch_speed)
+    if tiles == 1:
+        scene = deposit_pile(n_grains, seed=seed)
+    else:
+        base, _ = settle_pile(n_grains // tiles, seed, cache=cache, progress=progress, **settling)
+        scene = tile_pile(base, tiles)
+    path = None
+    if cache is not None:
+        tiling = "" if tiles == 1 else f"_tiles{tiles}"
+        path = Path(cache) / (f"pile_{int(n_grains)}_{seed}{tiling}_dt{dt:g}_v{speed_tol:g}_"
+                              f"cap{max_steps}_{fallback_solver}{switch_speed:g}{solver}"
+                              f"{max_iter}.npz")
+    return _settle(scene, path, f"settle_pile N={n_grains}", progress, **settling)
+
+
+def _settle(scene: Scene, path: Path | None, label: str, progress, *, dt: float,
+            speed_tol: float, max_steps: int, solver: str, max_iter: int,
+            fallback_solver: str, switch_speed: float) -> tuple[Scene, dict]:
+    """Step ``scene`` until at rest (see :func:`settle_pile`), cached at ``path``."""
     from .integrator import Simulation, Trajectory
     from .laws import Inelastic
 
-    scene = deposit_pile(n_grains, seed=seed)
-    path = None
-    if cache is not None:
-        path = Path(cache) / (f"pile_{int(n_grains)}_{seed}_dt{dt:g}_v{speed_tol:g}_"
-                              f"cap{max_steps}_{fallback_solver}{switch_speed:g}{solver}{max_iter}.npz")
-        if path.exists():
-            with np.load(path) as stored:
-                scene.grains.positions[:] = stored["positions"]
-                return scene, {key: stored[key].item() for key in _SETTLE_INFO}
+    if path is not None and path.exists():
+        with np.load(path) as stored:
+            scene.grains.positions[:] = stored["positions"]
+            return scene, {key: stored[key].item() for key in _SETTLE_INFO}
     g = float(np.linalg.norm(scene.gravity))
     partial = None if path is None else path.with_suffix(".partial.npz")
     steps, elapsed, speed = _resume_settling(scene, partial)
@@ -265,7 +326,7 @@ def settle_pile(n_grains: int, seed: int = 0, *, dt: float = 0.04, speed_tol: fl
         if steps % 100 == 0:
             _save_settling(partial, simulation.scene, steps, time.perf_counter() - start, speed)
             if progress is not None:
-                progress(f"settle_pile N={n_grains}: step {steps}, max speed {speed:.2e}, "
+                progress(f"{label}: step {steps}, max speed {speed:.2e}, "
                          f"{report.contacts.count} contacts, {time.perf_counter() - start:.0f} s")
     settled = simulation.scene
     settled.grains.velocities[:] = 0.0
