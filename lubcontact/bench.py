@@ -7,7 +7,8 @@ Sub-benchmarks are dispatched through :data:`BENCHMARKS` with lazy imports:
 
 ``bench solvers`` builds, for each size N, a polydisperse pile at rest: by
 default settled by the dynamics (:func:`lubcontact.packing.settle_pile`,
-cached under ``out/cache``), with ``--pile deposited`` as deposited
+cached under ``out/cache``; ``--tiles k`` starts it from k settled piles of
+N/k grains side by side, cheaper to settle for large N), with ``--pile deposited`` as deposited
 (:func:`lubcontact.packing.deposit_pile`: zero velocities, closed contacts,
 not in equilibrium),
 its step problem with inelastic frictionless contacts (``dry``) and the same
@@ -81,11 +82,12 @@ PILES = ("settled", "deposited")
 
 
 def pile_cases(n_grains: int, glued_fraction: float, dt: float, seed: int,
-               pile: str = "settled") -> list[PileCase]:
+               pile: str = "settled", tiles: int = 1) -> list[PileCase]:
     """The dry and glued step problems of a pile of ``n_grains`` disks.
 
-    ``pile``: ``"settled"`` (:func:`lubcontact.packing.settle_pile`, cached
-    under ``out/cache``) or ``"deposited"`` (:func:`lubcontact.packing.deposit_pile`).
+    ``pile``: ``"settled"`` (:func:`lubcontact.packing.settle_pile` with
+    ``tiles``, cached under ``out/cache``) or ``"deposited"``
+    (:func:`lubcontact.packing.deposit_pile`).
     """
     from .contacts import find_contacts
     from .integrator import Simulation
@@ -95,8 +97,8 @@ def pile_cases(n_grains: int, glued_fraction: float, dt: float, seed: int,
     if pile not in PILES:
         raise ValueError(f"pile: must be one of {PILES}, got {pile!r}")
     if pile == "settled":
-        scene, info = settle_pile(n_grains, seed=seed)
-        print(f"# settled pile N={n_grains}: {info['steps']} steps, last max speed "
+        scene, info = settle_pile(n_grains, seed=seed, tiles=tiles)
+        print(f"# settled pile N={n_grains} (tiles {tiles}): {info['steps']} steps, last max speed "
               f"{info['max_speed']:.1e}, at rest: {info['at_rest']}")
     else:
         scene = deposit_pile(n_grains, seed=seed)
@@ -255,6 +257,9 @@ def solvers_main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--pile", choices=PILES, default="settled",
                         help="settled by the dynamics (cached in out/cache) or deposited")
+    parser.add_argument("--tiles", type=int, default=1,
+                        help="settled piles built from this many settled copies side by side "
+                             "(packing.settle_pile(tiles=...)); every size must be a multiple")
     parser.add_argument("--no-warm", action="store_true", help="skip the next-step re-solves")
     args = parser.parse_args(argv)
     sizes = [int(s) for s in args.sizes.split(",") if s]
@@ -264,10 +269,12 @@ def solvers_main(argv: list[str] | None = None) -> int:
         parser.error(f"--methods: unknown {', '.join(unknown)}; registered: {', '.join(registered())}")
     if any(n < 1 for n in sizes):
         parser.error(f"--sizes: must be positive, got {args.sizes}")
+    if args.tiles < 1 or any(n % args.tiles for n in sizes):
+        parser.error(f"--tiles: must be >= 1 and divide every size, got {args.tiles}")
     print(HEADER)
     summaries = []
     for n in sizes:
-        cases = pile_cases(n, args.glued_fraction, args.dt, args.seed, args.pile)
+        cases = pile_cases(n, args.glued_fraction, args.dt, args.seed, args.pile, args.tiles)
         if n == sizes[0]:            # untimed: load the compiled kernels before any timing
             timed_solve(cases[0].problem, "apgd-jacobi", 1e-3, None)
         for case in cases:
