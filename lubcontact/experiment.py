@@ -275,6 +275,7 @@ class FlowRun:
         self.gamma_counts = np.zeros(20, dtype=np.int64)
         self.cross_checks: list[tuple[int, float]] = []
         self.wall_time = 0.0
+        self.cpu_time = 0.0
         self.last_report: StepReport | None = None
 
     @property
@@ -291,10 +292,11 @@ class FlowRun:
         end = min(self.config.steps, self.steps_done + n_steps)
         bar = _progress_bar(end - self.steps_done, self.steps_done, progress, self.config)
         while self.steps_done < end:
-            start = time.perf_counter()
+            start, start_cpu = time.perf_counter(), time.process_time()
             report = self.sim.step()
             self.sim.trajectory = integrator.Trajectory()      # keep memory flat on long runs
             self.wall_time += time.perf_counter() - start
+            self.cpu_time += time.process_time() - start_cpu
             self.last_report = report
             self._measure(report)
             if bar is not None:
@@ -344,6 +346,7 @@ class FlowRun:
                     "gamma_histogram": self.gamma_counts,
                     "cross_checks": np.asarray(self.cross_checks, dtype=float).reshape(-1, 2),
                     "wall_time": np.float64(self.wall_time),
+                    "cpu_time": np.float64(self.cpu_time),
                     "config": np.array(self.config.to_json())})
         return out
 
@@ -388,6 +391,7 @@ class FlowRun:
         run.gamma_counts = data["gamma_histogram"].astype(np.int64)
         run.cross_checks = [tuple(row) for row in data["cross_checks"]]
         run.wall_time = float(data["wall_time"])
+        run.cpu_time = float(data.get("cpu_time", 0.0))     # older checkpoints: not recorded
         if run.steps_done <= config.average_from * config.steps and run.profiles.samples:
             run.profiles.reset()
             run.gamma_counts[:] = 0
@@ -419,6 +423,8 @@ class FlowRun:
                 "max_cross_check": float(checks[:, 1].max()) if checks.size else float("nan"),
                 "wall_time": self.wall_time,
                 "steps_per_second": self.steps_done / self.wall_time if self.wall_time else 0.0,
+                "cpu_time": self.cpu_time,
+                "steps_per_cpu_second": self.steps_done / self.cpu_time if self.cpu_time else 0.0,
                 "solver": self.config.solver, "tol": self.config.tol}
 
 
@@ -591,7 +597,7 @@ def parse_angles(text: str) -> np.ndarray:
 SWEEP_COLUMNS = ("model", "angle", "flow_rate", "flow_rate_std", "state", "energy_ratio",
                  "relative_change", "fraction_unglued", "fraction_glued", "fraction_frictional",
                  "kinetic_energy", "steps", "time", "unconverged_steps", "max_cross_check",
-                 "wall_time", "steps_per_second", "solver", "tol")
+                 "wall_time", "steps_per_second", "cpu_time", "steps_per_cpu_second", "solver", "tol")
 
 
 def sweep(config: RunConfig, angles: np.ndarray, models: list[str], out_dir: pathlib.Path,

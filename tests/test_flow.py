@@ -163,6 +163,9 @@ def test_run_command_writes_files_and_resumes(tmp_path):
     assert experiment.run_main(argv(6)) == 0
     summary = json.loads((out / "summary.json").read_text())
     assert summary["steps"] == 6
+    # stepping cost: wall and processor time (the latter is what a shared machine cannot inflate)
+    assert 0 < summary["cpu_time"] and summary["steps_per_cpu_second"] == pytest.approx(
+        6 / summary["cpu_time"])
     for name in ("checkpoint.npz", "measurements.npz", "snapshot.png", "profile.png", "bed.npz"):
         assert (out / name).stat().st_size > 0
     assert experiment.run_main(argv(18) + ["--resume"]) == 0
