@@ -108,7 +108,8 @@ def coulomb_error(problem, forces: np.ndarray) -> float:
 def solve_coulomb(problem, method: str = "clarabel", *, tol: float = 1e-9, tol_fp: float = 1e-8,
                   max_outer: int = 50, warm_start: np.ndarray | None = None,
                   shift: np.ndarray | None = None, max_iter: int | None = None,
-                  anderson: int = 5, forcing: float = 0.0, **options) -> SolveResult:
+                  anderson: int = 5, forcing: float = 0.0, joint: int = 0,
+                  **options) -> SolveResult:
     """Solve a frictional problem exactly by the fixed point on ``s``.
 
     Parameters
@@ -137,6 +138,15 @@ def solve_coulomb(problem, method: str = "clarabel", *, tol: float = 1e-9, tol_f
     forcing : float
         Inexact inner solves: the inner tolerance is
         ``max(tol, forcing x previous change)`` (0: always ``tol``).
+    joint : int
+        If > 0 and the problem is 2D with friction cones: before the outer
+        loop, solve Coulomb's problem jointly inside one Jacobi-scaled APGD run
+        that updates the shift from its iterate every ``joint`` iterations
+        (:func:`lubcontact.solvers.kernels.apgd_cone2d`), to ``tol`` on the
+        modified natural map and at most ``max_iter`` iterations (default
+        20000); its forces and shift then start the outer loop, whose tests are
+        unchanged (the first inner solve checks the joint result with the
+        shift frozen). 0: no joint phase.
     **options
         Passed to the inner solver.
 
@@ -147,7 +157,9 @@ def solve_coulomb(problem, method: str = "clarabel", *, tol: float = 1e-9, tol_f
         ``info["shift"]``), with ``iterations`` the total inner iterations and
         ``status`` ``converged`` only if the fixed point and the last inner
         solve converged (``max_iter`` when the outer loop ran out, the inner
-        status when an inner solve failed). ``info`` adds ``outer_iterations``,
+        status when an inner solve failed). ``info`` adds ``joint_iterations``
+        (APGD iterations of the joint phase, included in ``iterations``),
+        ``outer_iterations``,
         ``shift_change`` (the last relative change of s), ``force_change``
         (last relative change of the forces, rms norm), ``inner_status``,
         ``fp_converged`` and ``shift_history``.
@@ -168,6 +180,12 @@ def solve_coulomb(problem, method: str = "clarabel", *, tol: float = 1e-9, tol_f
     accelerator = _Anderson(anderson)
     branches = _Branches(problem, warm_start, threshold=max(1e3 * tol, 1e-7))
     forces, inner, history = warm_start, 0, []
+    joint_iterations = 0
+    if joint > 0 and branches.problem().cones.tangent_dim == 1:
+        forces, current, joint_iterations = _joint_phase(
+            branches.problem(), branches.restrict(current), forces, tol,
+            20000 if max_iter is None else max_iter, joint)
+        inner += joint_iterations
     shift_change = force_change = np.inf
     converged = False
     for outer in range(1, max_outer + 1):
@@ -193,11 +211,33 @@ def solve_coulomb(problem, method: str = "clarabel", *, tol: float = 1e-9, tol_f
         if flipped:
             accelerator.restart()
     status = CONVERGED if converged else (result.status if not result.success else MAX_ITER)
-    info = dict(result.info, outer_iterations=outer, shift_change=shift_change,
+    info = dict(result.info, joint_iterations=joint_iterations, outer_iterations=outer,
+                shift_change=shift_change,
                 force_change=force_change, inner_status=result.status, fp_converged=converged,
                 shift=used, shift_history=np.asarray(history), pulled=branches.pulled_contacts,
                 branch_flips=branches.flips)
     return replace(result, status=status, iterations=inner, info=info)
+
+
+def _joint_phase(convex, shift: np.ndarray, warm_start: np.ndarray | None, tol: float,
+                 max_iter: int, every: int) -> tuple[np.ndarray, np.ndarray, int]:
+    """Coulomb's problem by APGD with the shift updated inside (``joint`` of :func:`solve_coulomb`).
+
+    Returns the forces and the shift ``mu |g_T|`` they map to (physical units)
+    and the iterations done; the outer loop checks them.
+    """
+    from .solvers.gradient import prepare, run_apgd_cones
+
+    scaled = convex.with_shift(shift).normalized()
+    data = prepare(scaled, scaling=True, operator="matrix")
+    start = np.zeros(scaled.n_rows) if warm_start is None else warm_start / scaled.scaling.force
+    z = data.project(start / data.scale)
+    base = scaled.offset.copy()
+    base[: scaled.n_contacts] -= scaled.shift
+    tracker, _, iterations, _ = run_apgd_cones(data, scaled.cones, z, tol, max_iter,
+                                               base=data.scale * base, every=every)
+    forces = tracker.best * data.scale * scaled.scaling.force
+    return forces, coulomb_shift(convex, forces), iterations
 
 
 def _relative_change(new: np.ndarray, old: np.ndarray) -> float:
@@ -293,3 +333,4 @@ class _Branches:
         self.flips.append(int(np.count_nonzero(flip)))
         self.pulled ^= flip
         return bool(flip.any())
+

@@ -144,6 +144,19 @@ def test_frictional_pile_velocities_match_clarabel(frictional, method):
     assert problem.cones.velocity_violation(problem.gradient(result.forces)).max() <= 1e-6
 
 
+@pytest.mark.parametrize("method", ["apgd", "apgd-jacobi"])
+def test_compiled_and_numpy_frictional_apgd_agree(frictional, method):
+    """2D friction cones run in the compiled kernel (``matrix``); ``factor`` keeps the numpy loop."""
+    problem, reference = frictional
+    compiled = solve(problem, method, tol=1e-10)
+    plain = solve(problem, method, tol=1e-10, operator="factor")
+    assert compiled.info["fused_kernel"] and not plain.info["fused_kernel"]
+    assert compiled.status == plain.status == "converged"
+    for result in (compiled, plain):
+        assert velocity_error(problem, result.velocities, reference.velocities) <= ACCURACY
+    assert abs(compiled.iterations - plain.iterations) <= 0.05 * plain.iterations
+
+
 def test_second_order_and_polyhedral_forms_agree(frictional):
     problem, _ = frictional
     scaled = problem.normalized()

@@ -208,3 +208,47 @@ def test_trio_with_glue_and_friction_clarabel_and_fast_agree():
     assert np.max(np.abs(reference["spins"])) > 0.05          # friction did act
     for field in ("positions", "velocities", "spins"):
         np.testing.assert_allclose(fast[field], reference[field], atol=1e-6, rtol=0)
+
+
+# -- joint fixed point (shift updated inside APGD) ------------------------------------------------
+@pytest.fixture(scope="module")
+def settling_step():
+    """The 31st step of a 60-grain frictional settling pile (mu = 0.3), with Clarabel's fixed point."""
+    sim = Simulation(scenes.settling_pile(60, seed=3), Coulomb(0.3), 0.05, solver="apgd-jacobi",
+                     tol=1e-8, tol_fp=1e-6, on_failure="ignore")
+    sim.run(30)
+    contacts = find_contacts(sim.scene, sim.d_max)
+    problem = sim.build_problem(contacts, sim.law.cones(contacts, sim.state.lookup(contacts.keys)))
+    reference = solve_coulomb(problem, "clarabel", tol=1e-10, tol_fp=1e-10, max_outer=500)
+    assert reference.success and problem.n_contacts >= 30
+    return problem, reference
+
+
+def velocity_error(problem, velocities, reference):
+    scale = np.sqrt(np.sum(problem.mass * problem.free_velocity**2))
+    return np.sqrt(np.sum(problem.mass * (velocities - reference) ** 2)) / scale
+
+
+@pytest.mark.parametrize("joint", [0, 20, 50])
+def test_joint_fixed_point_matches_clarabel(settling_step, joint):
+    """The joint phase solves Coulomb's problem inside APGD; the outer loop then checks it with
+    the shift frozen (one inner solve accepting its warm start, one at the final tolerance)."""
+    problem, reference = settling_step
+    result = solve_coulomb(problem, "apgd-jacobi", tol=1e-9, tol_fp=1e-9, forcing=1e-4, joint=joint)
+    assert result.success and result.info["fp_converged"]
+    assert velocity_error(problem, result.velocities, reference.velocities) <= 1e-6
+    assert coulomb_error(problem.normalized(), result.forces / result.force_scale) <= 1e-7
+    if joint:
+        assert result.info["joint_iterations"] > 0 and result.info["outer_iterations"] == 2
+        assert result.info["shift_change"] <= 1e-9
+    else:
+        assert result.info["joint_iterations"] == 0 and result.info["outer_iterations"] > 2
+
+
+def test_joint_phase_stops_honestly_when_capped(settling_step):
+    """A joint phase cut short leaves the outer loop to finish (or to report max_iter)."""
+    problem, _ = settling_step
+    capped = solve_coulomb(problem, "apgd-jacobi", tol=1e-9, tol_fp=1e-9, joint=20, max_iter=10,
+                           max_outer=3)
+    assert capped.status == solvers.MAX_ITER and not capped.info["fp_converged"]
+    assert coulomb_error(problem.normalized(), capped.forces / capped.force_scale) > 1e-7

@@ -78,6 +78,15 @@ def _box_kernel():
     return apgd_box
 
 
+def _cone_kernel():
+    """The compiled APGD loop with 2D friction cones, or None when numba is unavailable."""
+    try:
+        from .kernels import apgd_cone2d
+    except ImportError:
+        return None
+    return apgd_cone2d
+
+
 @dataclass
 class DualData:
     """The dual problem in the iteration variables ``z = x / s_it``.
@@ -581,7 +590,9 @@ def pgd(problem, *, tol: float = 1e-8, max_iter: int = 20000, warm_start=None,
 def _apgd(problem, tol, max_iter, warm_start, scaling, operator, active_set) -> MethodOutput:
     if (out := _empty(problem)) is not None:
         return out
-    fused = _is_box(problem.cones) and operator != "factor" and _box_kernel() is not None
+    box = _is_box(problem.cones) and _box_kernel() is not None
+    cones_2d = _is_cone_2d(problem.cones) and _cone_kernel() is not None
+    fused = (box or cones_2d) and operator != "factor"
     finishing = active_set and not problem.cones.has_friction
     data, z, setup, start = _common(problem, warm_start, scaling,
                                     "matrix" if fused or finishing else operator)
@@ -601,7 +612,9 @@ def _apgd(problem, tol, max_iter, warm_start, scaling, operator, active_set) -> 
                 return _finalise(problem, data, tracker, CONVERGED, finish.solves, setup, start,
                                  info, finish)
             z = candidate
-    if fused:
+    if fused and cones_2d:
+        tracker, status, iterations, _ = run_apgd_cones(data, problem.cones, z, tol, max_iter)
+    elif fused:
         tracker, status, iterations = _run_apgd_fused(data, z, tol, max_iter, finish)
     else:
         tracker, status, iterations, _ = run_apgd(data, z, tol, max_iter, callback=finish)
@@ -614,6 +627,39 @@ def _apgd(problem, tol, max_iter, warm_start, scaling, operator, active_set) -> 
 def _is_box(cones) -> bool:
     """True when K is a box (no friction cone): the fused kernel applies."""
     return all(piece[0].size == 0 for piece in cones.projector.pieces)
+
+
+def _is_cone_2d(cones) -> bool:
+    """True when K is a product of a box and 2D friction cones (no UNION contact)."""
+    coulomb, union = cones.projector.pieces
+    return coulomb[0].size > 0 and union[0].size == 0 and cones.tangent_dim == 1
+
+
+def run_apgd_cones(data: DualData, cones, z: np.ndarray, tol: float, max_iter: int,
+                   base: np.ndarray | None = None, every: int = 0):
+    """APGD in the compiled kernel :func:`.kernels.apgd_cone2d` (2D friction cones).
+
+    With ``every > 0`` and ``base`` (the iteration offset without shift) it
+    solves Coulomb's problem, updating the shift every ``every`` iterations
+    (see the kernel). Returns (tracker, status, iterations, offset): the offset
+    ``b_it`` of the last shift.
+    """
+    kernel = _cone_kernel()
+    matrix = data.assembled()
+    normal_rows, tangent_rows, mu = cones.projector.pieces[0]
+    probe = z + np.random.default_rng(0).uniform(-1.0, 1.0, z.size)
+    lipschitz = max(float(np.linalg.norm(data.product(probe) - data.product(z)) /
+                          np.linalg.norm(probe - z)), 1e-12)
+    best, best_residual, history, code, iterations, products, _, _, offset = kernel(
+        matrix.indptr, matrix.indices, matrix.data, data.offset,
+        data.offset if base is None else base, data.project.lower, data.project.upper,
+        normal_rows, tangent_rows[:, 0].copy(), mu, data.ratio, z, tol, max_iter, lipschitz,
+        _DIVERGENCE_FACTOR, every)
+    data.products += products
+    tracker = _Tracker(data, tol)
+    tracker.history.extend(history)
+    tracker.best, tracker.best_residual = best, best_residual
+    return tracker, _KERNEL_STATUS.get(code, MAX_ITER), iterations, offset
 
 
 def _run_apgd_fused(data: DualData, z: np.ndarray, tol: float, max_iter: int,

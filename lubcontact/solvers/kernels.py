@@ -117,3 +117,135 @@ def apgd_box(indptr, indices, values, b, lower, upper, ratio, sign, z0, tol, max
         lipschitz *= 0.9
     return best, best_residual, history[:iterations], status, iterations, products, x, lipschitz
 
+
+
+@numba.njit(cache=True)
+def project_cones(x, lower, upper, cone_n, cone_t, cone_mu, out):
+    """``out = P_K(x)``: rows clipped to ``[lower, upper]``, then each 2D friction cone
+    ``{|t| <= mu n}`` (normal row ``cone_n[c]``, tangential row ``cone_t[c]``) projected."""
+    for i in range(x.size):
+        out[i] = min(max(x[i], lower[i]), upper[i])
+    for c in range(cone_n.size):
+        normal = x[cone_n[c]]
+        tangent = x[cone_t[c]]
+        mu = cone_mu[c]
+        size = abs(tangent)
+        if size <= mu * normal and normal >= 0.0:
+            out[cone_n[c]] = normal
+            out[cone_t[c]] = tangent
+        elif mu * size <= -normal:
+            out[cone_n[c]] = 0.0
+            out[cone_t[c]] = 0.0
+        else:
+            scale = (normal + mu * size) / (1.0 + mu * mu)
+            out[cone_n[c]] = scale
+            out[cone_t[c]] = mu * scale * (1.0 if tangent > 0.0 else -1.0)
+
+
+@numba.njit(cache=True)
+def apgd_cone2d(indptr, indices, values, b, base, lower, upper, cone_n, cone_t, cone_mu, ratio,
+                z0, tol, max_iter, lipschitz, divergence, every):
+    """APGD (restart, backtracking) on ``min 1/2 z.Wz + b.z, z in K`` with 2D friction cones.
+
+    Mirrors :func:`lubcontact.solvers.gradient.run_apgd` (no active-set
+    bookkeeping). With ``every > 0`` the problem is Coulomb's, not its convex
+    relaxation: every ``every`` iterations the shift is updated from the
+    current iterate, ``b_n = base_n + mu |g_T|`` on the cone contacts (``base``:
+    the offset without shift, ``g = W z + b``), and the momentum restarts; the
+    stopping measure is then the natural residual with the shift consistent
+    with the iterate (``g_n`` replaced by ``base_n + (W z)_n + mu |g_T|``),
+    i.e. the modified (De Saxce) natural map of the Coulomb problem.
+
+    Returns
+    -------
+    best, best_residual, history, status (0 converged, 1 max_iter, 2 diverged),
+    iterations, products, last iterate, Lipschitz estimate, last offset ``b``.
+    """
+    n = b.size
+    b = b.copy()
+    rms = 1.0 / np.sqrt(max(n, 1))
+    x_old = z0.copy()
+    wx_old = np.empty(n)
+    matvec(indptr, indices, values, x_old, wx_old)
+    y = x_old.copy()
+    wy = wx_old.copy()
+    x = np.empty(n)
+    wx = np.empty(n)
+    trial = np.empty(n)
+    projected = np.empty(n)
+    gradient = np.empty(n)
+    best = z0.copy()
+    best_residual = np.inf
+    first = -1.0
+    history = np.empty(max_iter)
+    products = 1
+    theta = 1.0
+    status = 1
+    iterations = max_iter
+    for k in range(max_iter):
+        while True:
+            for i in range(n):
+                trial[i] = y[i] - (wy[i] + b[i]) / lipschitz
+            project_cones(trial, lower, upper, cone_n, cone_t, cone_mu, x)
+            matvec(indptr, indices, values, x, wx)
+            products += 1
+            num = 0.0
+            den = 0.0
+            for i in range(n):
+                d = x[i] - y[i]
+                num += d * (wx[i] - wy[i])
+                den += d * d
+            if num <= lipschitz * den * (1.0 + 1e-12):
+                break
+            lipschitz *= 2.0
+        for i in range(n):
+            gradient[i] = wx[i] + b[i]
+        if every > 0:
+            for c in range(cone_n.size):
+                gradient[cone_n[c]] = wx[cone_n[c]] + base[cone_n[c]] + cone_mu[c] * abs(
+                    gradient[cone_t[c]])
+        for i in range(n):
+            trial[i] = x[i] * ratio[i] - gradient[i] / ratio[i]
+        project_cones(trial, lower, upper, cone_n, cone_t, cone_mu, projected)
+        squares = 0.0
+        uphill = 0.0
+        for i in range(n):
+            squares += (x[i] * ratio[i] - projected[i]) ** 2
+            uphill += (wy[i] + b[i]) * (x[i] - x_old[i])
+        residual = np.sqrt(squares) * rms
+        history[k] = residual
+        if first < 0.0:
+            first = residual
+        if residual < best_residual:
+            best_residual = residual
+            best[:] = x
+        if residual <= tol:
+            status, iterations = 0, k + 1
+            break
+        if not np.isfinite(residual) or residual > divergence * max(first, 1.0):
+            status, iterations = 2, k + 1
+            break
+        if every > 0 and (k + 1) % every == 0:
+            for c in range(cone_n.size):
+                b[cone_n[c]] = gradient[cone_n[c]] - wx[cone_n[c]]
+            for i in range(n):
+                y[i] = x[i]
+                wy[i] = wx[i]
+                x_old[i] = x[i]
+                wx_old[i] = wx[i]
+            theta = 1.0
+            lipschitz *= 0.9
+            continue
+        theta_new = 0.5 * (-theta * theta + theta * np.sqrt(theta * theta + 4.0))
+        beta = theta * (1.0 - theta) / (theta * theta + theta_new)
+        if uphill > 0.0:
+            theta_new = 1.0
+            beta = 0.0
+        for i in range(n):
+            y[i] = x[i] + beta * (x[i] - x_old[i])
+            wy[i] = wx[i] + beta * (wx[i] - wx_old[i])
+            x_old[i] = x[i]
+            wx_old[i] = wx[i]
+        theta = theta_new
+        lipschitz *= 0.9
+    return best, best_residual, history[:iterations], status, iterations, products, x, lipschitz, b
