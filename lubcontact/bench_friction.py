@@ -102,8 +102,9 @@ EXTERNAL = (
 
 
 # -- solving -----------------------------------------------------------------------------------
-def fixed_point_options(method: str, problem, forcing: float, anderson: int) -> dict:
-    """Fixed-point options: inexact inner solves for iterative methods only.
+def fixed_point_options(method: str, problem, forcing: float, anderson: int,
+                        max_iter: int | None = None) -> dict:
+    """Fixed-point options: inexact inner solves and ``max_iter`` for iterative methods only.
 
     ``clarabel-direct`` is not polished on problems without a factor
     ``W = L^T L`` (local problems): :mod:`lubcontact.solvers.polish` needs one.
@@ -112,7 +113,7 @@ def fixed_point_options(method: str, problem, forcing: float, anderson: int) -> 
         return {"polish": False}
     if method in INTERIOR_METHODS:
         return {}
-    return dict(forcing=forcing, anderson=anderson)
+    return dict(forcing=forcing, anderson=anderson, max_iter=max_iter)
 
 
 def timed_coulomb(problem, method: str, tol: float, tol_fp: float, max_outer: int,
@@ -178,7 +179,8 @@ def select_problems(patterns: list[str] | None, quick: bool) -> list[ExternalPro
 
 
 def external_rows(problems: list[ExternalProblem], folder: Path, methods: list[str], tol: float,
-                  max_outer: int, forcing: float, anderson: int, out=print) -> list[dict]:
+                  max_outer: int, forcing: float, anderson: int, max_iter: int | None = None,
+                  out=print) -> list[dict]:
     """Solve each available problem with each method; one row per (problem, method)."""
     from .compare import fclib_error
     from .fixed_point import coulomb_error
@@ -195,7 +197,7 @@ def external_rows(problems: list[ExternalProblem], folder: Path, methods: list[s
             load_kernels(problem, methods)
             loaded = True
         for method in methods:
-            options = fixed_point_options(method, problem, forcing, anderson)
+            options = fixed_point_options(method, problem, forcing, anderson, max_iter)
             result, wall, message = timed_coulomb(problem, method, tol, tol, max_outer, **options)
             row = dict(problem=entry.name, contacts=problem.n_contacts, dim=problem.dim,
                        method=method, **outcome(result, wall, message))
@@ -279,7 +281,7 @@ def deposited_step(n_grains: int, dt: float = PILE_DT, seed: int = DEPOSITED_SEE
 
 
 def pile_rows(step: PileStep, methods: list[str], tol: float, max_outer: int, forcing: float,
-              anderson: int, out=print) -> list[dict]:
+              anderson: int, max_iter: int | None = None, out=print) -> list[dict]:
     """The reference row and one row per method and start (cold, warm)."""
     from .bench import velocity_error
     from .compare import fclib_error
@@ -298,7 +300,7 @@ def pile_rows(step: PileStep, methods: list[str], tol: float, max_outer: int, fo
     if step.warm_start is not None:
         starts.append(("warm", step.warm_start, step.shift))
     for method in methods:
-        options = fixed_point_options(method, problem, forcing, anderson)
+        options = fixed_point_options(method, problem, forcing, anderson, max_iter)
         for start, forces, shift in starts:
             result, wall, message = timed_coulomb(problem, method, tol, tol, max_outer,
                                                   warm_start=forces, shift=shift, **options)
@@ -330,6 +332,8 @@ def parser() -> argparse.ArgumentParser:
                         help="iterative methods: inner tol = max(tol, forcing x last change)")
     parser.add_argument("--anderson", type=int, default=5,
                         help="iterative methods: Anderson memory of the fixed point (0: none)")
+    parser.add_argument("--max-iter", type=int, default=None,
+                        help="iterative methods: iteration cap of each inner solve (method default)")
     parser.add_argument("--quick", action="store_true",
                         help="the small external problems only (667-contact Siconos, "
                              "Box_Stacks, LMGC, local_problem_test)")
@@ -369,9 +373,10 @@ def _check(cli: argparse.ArgumentParser, args) -> None:
     for option in ("tol", "pile_tol"):
         if not getattr(args, option) > 0:
             cli.error(f"--{option.replace('_', '-')}: must be > 0, got {getattr(args, option)}")
-    if min(args.max_outer, args.pile_max_outer, args.pile_steps) < 1 or \
-            (args.pile is not None and args.pile < 1):
-        cli.error("--max-outer, --pile-max-outer, --pile-steps and --pile must be positive")
+    optional = [value for value in (args.max_iter, args.pile) if value is not None]
+    if min([args.max_outer, args.pile_max_outer, args.pile_steps] + optional) < 1:
+        cli.error("--max-outer, --max-iter, --pile-max-outer, --pile-steps and --pile must be "
+                  "positive")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -386,9 +391,9 @@ def main(argv: list[str] | None = None) -> int:
             cli.error(f"--problems: nothing matches {args.problems!r}")
         print(f"# external problems from {args.folder}: tol = tol_fp = {args.tol:g}, "
               f"max {args.max_outer} outer iterations, iterative methods with forcing "
-              f"{args.forcing:g} and Anderson {args.anderson}")
+              f"{args.forcing:g}, Anderson {args.anderson}, inner cap {args.max_iter or 'default'}")
         rows = external_rows(problems, args.folder, _names(args.methods), args.tol,
-                             args.max_outer, args.forcing, args.anderson)
+                             args.max_outer, args.forcing, args.anderson, args.max_iter)
         print(format_table(rows, EXTERNAL_COLUMNS))
     if args.pile is not None:
         print(f"\n# pile step: Coulomb mu = {FRICTION}, dt = {PILE_DT}, tol = tol_fp = "
@@ -399,6 +404,6 @@ def main(argv: list[str] | None = None) -> int:
             step = (settling_step(args.pile, args.pile_steps) if kind == "settling"
                     else deposited_step(args.pile))
             rows += pile_rows(step, _names(args.pile_methods), args.pile_tol, args.pile_max_outer,
-                              args.forcing, args.anderson)
+                              args.forcing, args.anderson, args.max_iter)
         print(format_table(rows, PILE_COLUMNS))
     return 0
