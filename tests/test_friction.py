@@ -229,7 +229,7 @@ def velocity_error(problem, velocities, reference):
     return np.sqrt(np.sum(problem.mass * (velocities - reference) ** 2)) / scale
 
 
-@pytest.mark.parametrize("joint", [0, 20, 50])
+@pytest.mark.parametrize("joint", [0, 1, 5])
 def test_joint_fixed_point_matches_clarabel(settling_step, joint):
     """The joint phase solves Coulomb's problem inside APGD; the outer loop then checks it with
     the shift frozen (one inner solve accepting its warm start, one at the final tolerance)."""
@@ -248,7 +248,7 @@ def test_joint_fixed_point_matches_clarabel(settling_step, joint):
 def test_joint_phase_stops_honestly_when_capped(settling_step):
     """A joint phase cut short leaves the outer loop to finish (or to report max_iter)."""
     problem, _ = settling_step
-    capped = solve_coulomb(problem, "apgd-jacobi", tol=1e-9, tol_fp=1e-9, joint=20, max_iter=10,
+    capped = solve_coulomb(problem, "apgd-jacobi", tol=1e-9, tol_fp=1e-9, joint=1, max_iter=10,
                            max_outer=3)
     assert capped.status == solvers.MAX_ITER and not capped.info["fp_converged"]
     assert coulomb_error(problem.normalized(), capped.forces / capped.force_scale) > 1e-7
