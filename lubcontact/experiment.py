@@ -37,7 +37,7 @@ from . import flow, integrator, measure
 from .integrator import Simulation, StepReport
 from .laws import PairState
 from .scene import Grains, Scene
-from .solvers import methods, solve
+from .solvers import CONVERGED, methods, solve
 
 SCENES = ("sedimentation", "inclined_flow")
 FAST_SOLVERS = ("apgd",)
@@ -274,6 +274,7 @@ class FlowRun:
         self.series = {name: [] for name in SERIES}
         self.gamma_counts = np.zeros(20, dtype=np.int64)
         self.cross_checks: list[tuple[int, float]] = []
+        self.statuses: dict[str, int] | None = {}      # solver status -> steps (None: unknown)
         self.wall_time = 0.0
         self.cpu_time = 0.0
         self.last_report: StepReport | None = None
@@ -297,6 +298,9 @@ class FlowRun:
             self.sim.trajectory = integrator.Trajectory()      # keep memory flat on long runs
             self.wall_time += time.perf_counter() - start
             self.cpu_time += time.process_time() - start_cpu
+            if self.statuses is not None:
+                status = report.result.status
+                self.statuses[status] = self.statuses.get(status, 0) + 1
             self.last_report = report
             self._measure(report)
             if bar is not None:
@@ -347,6 +351,7 @@ class FlowRun:
                     "cross_checks": np.asarray(self.cross_checks, dtype=float).reshape(-1, 2),
                     "wall_time": np.float64(self.wall_time),
                     "cpu_time": np.float64(self.cpu_time),
+                    "statuses": np.array(json.dumps(self.statuses)),
                     "config": np.array(self.config.to_json())})
         return out
 
@@ -391,7 +396,8 @@ class FlowRun:
         run.gamma_counts = data["gamma_histogram"].astype(np.int64)
         run.cross_checks = [tuple(row) for row in data["cross_checks"]]
         run.wall_time = float(data["wall_time"])
-        run.cpu_time = float(data.get("cpu_time", 0.0))     # older checkpoints: not recorded
+        run.cpu_time = float(data.get("cpu_time", np.nan))  # older checkpoints: unknown
+        run.statuses = json.loads(str(data["statuses"])) if "statuses" in data else None
         if run.steps_done <= config.average_from * config.steps and run.profiles.samples:
             run.profiles.reset()
             run.gamma_counts[:] = 0
@@ -419,12 +425,16 @@ class FlowRun:
                 "energy_ratio": verdict.energy_ratio if verdict else float("nan"),
                 "relative_change": verdict.relative_change if verdict else float("nan"),
                 **{f"fraction_{k}": v for k, v in fractions.items()},
-                "unconverged_steps": int(np.count_nonzero(series["converged"] == 0)),
+                "unconverged_steps": (None if self.statuses is None else
+                                      sum(n for s, n in self.statuses.items() if s != CONVERGED)),
+                "step_statuses": self.statuses,
+                "unconverged_samples": int(np.count_nonzero(series["converged"] == 0)),
                 "max_cross_check": float(checks[:, 1].max()) if checks.size else float("nan"),
                 "wall_time": self.wall_time,
                 "steps_per_second": self.steps_done / self.wall_time if self.wall_time else 0.0,
                 "cpu_time": self.cpu_time,
-                "steps_per_cpu_second": self.steps_done / self.cpu_time if self.cpu_time else 0.0,
+                "steps_per_cpu_second": (self.steps_done / self.cpu_time if self.cpu_time
+                                         else 0.0),
                 "solver": self.config.solver, "tol": self.config.tol}
 
 
