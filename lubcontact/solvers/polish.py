@@ -42,6 +42,7 @@ sliding contact is still misaligned, polishing gives up (input returned).
 """
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -249,6 +250,8 @@ def _slide_newton(problem, layout, forces, state, direction, iterations: int = 2
     whose normal force vanishes: the corrections then open it).
     """
     slide = np.flatnonzero(state == SLIDE)
+    if np.any(forces[slide] <= ROUNDING * np.max(np.abs(forces))):
+        return forces, direction                     # (nearly) singular: the corrections open these
     slide_t = layout.t_rows[slide]                                    # (s, dim)
     mu = layout.mu[slide]
     rows = np.zeros(problem.n_rows, dtype=bool)
@@ -272,7 +275,11 @@ def _slide_newton(problem, layout, forces, state, direction, iterations: int = 2
     value = conditions(lam, kappa)
     for _ in range(iterations):
         jacobian = _newton_matrix(delassus, delta, position, slide, slide_t, mu, lam, kappa)
-        step = spla.spsolve(jacobian, -value)
+        with warnings.catch_warnings():              # a singular Jacobian gives NaN: stop there
+            warnings.simplefilter("ignore", spla.MatrixRankWarning)
+            step = spla.spsolve(jacobian, -value)
+        if not np.all(np.isfinite(step)):
+            break
         trial_lam, trial_kappa = lam.copy(), kappa + step[active.size:]
         trial_lam[active] += step[: active.size]
         trial = conditions(trial_lam, trial_kappa)
