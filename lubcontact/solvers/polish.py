@@ -99,7 +99,12 @@ def polish(problem: StepProblem, forces: np.ndarray, threshold: float = 1e-7,
     threshold : float
         Relative force level (of ``max |lam|``) below which a contact counts as open.
     max_rounds : int
-        Active-set solves allowed (module docstring).
+        Active-set solves allowed (module docstring). Polishing also gives up
+        as soon as a round changes the state of as many contacts as the round
+        before (the set is not settling: e.g. on a hyperstatic frictional
+        1000-grain pile, whose sticking forces are not unique, the changes
+        went 270, 249, 753: three solves, 0.09 s, instead of eight, 0.15 s,
+        for a polish that fails anyway).
 
     Returns
     -------
@@ -113,17 +118,22 @@ def polish(problem: StepProblem, forces: np.ndarray, threshold: float = 1e-7,
     layout = _Layout.of(cones)
     state, direction = _initial_states(problem, layout, forces, threshold)
     before = problem.natural_residual(forces)
+    previous_changes = state.size + 1
     for _ in range(max_rounds):
         candidate = _solve_on(problem, layout, forces, state, direction)
         if layout.t_rows.shape[1] > 1 and np.any(state == SLIDE):
             candidate, direction = _slide_newton(problem, layout, candidate, state, direction)
         try:
-            state, direction, changed = _corrected(problem, layout, candidate, state, direction)
+            new_state, direction, changed = _corrected(problem, layout, candidate, state, direction)
         except _Misaligned:
             return forces, False
         if not changed:
             accepted = problem.natural_residual(candidate) < before
             return (candidate, True) if accepted else (forces, False)
+        changes = int(np.count_nonzero(new_state != state))
+        if changes >= previous_changes:              # the active set is not settling: give up
+            return forces, False
+        state, previous_changes = new_state, changes
     return forces, False
 
 
