@@ -103,8 +103,10 @@ EXTERNAL = (
 
 # -- solving -----------------------------------------------------------------------------------
 def fixed_point_options(method: str, problem, forcing: float, anderson: int,
-                        max_iter: int | None = None) -> dict:
-    """Fixed-point options: inexact inner solves and ``max_iter`` for iterative methods only.
+                        max_iter: int | None = None, joint: int = 0) -> dict:
+    """Fixed-point options: inexact inner solves, ``max_iter`` and the joint phase
+    (``joint`` of :func:`~lubcontact.fixed_point.solve_coulomb`, passed when > 0) for
+    iterative methods only.
 
     ``clarabel-direct`` is not polished on problems without a factor
     ``W = L^T L`` (local problems): :mod:`lubcontact.solvers.polish` needs one.
@@ -113,7 +115,10 @@ def fixed_point_options(method: str, problem, forcing: float, anderson: int,
         return {"polish": False}
     if method in INTERIOR_METHODS:
         return {}
-    return dict(forcing=forcing, anderson=anderson, max_iter=max_iter)
+    options = dict(forcing=forcing, anderson=anderson, max_iter=max_iter)
+    if joint > 0:
+        options["joint"] = joint
+    return options
 
 
 def timed_coulomb(problem, method: str, tol: float, tol_fp: float, max_outer: int,
@@ -180,7 +185,7 @@ def select_problems(patterns: list[str] | None, quick: bool) -> list[ExternalPro
 
 def external_rows(problems: list[ExternalProblem], folder: Path, methods: list[str], tol: float,
                   max_outer: int, forcing: float, anderson: int, max_iter: int | None = None,
-                  out=print) -> list[dict]:
+                  joint: int = 0, out=print) -> list[dict]:
     """Solve each available problem with each method; one row per (problem, method)."""
     from .compare import fclib_error
     from .fixed_point import coulomb_error
@@ -197,7 +202,7 @@ def external_rows(problems: list[ExternalProblem], folder: Path, methods: list[s
             load_kernels(problem, methods)
             loaded = True
         for method in methods:
-            options = fixed_point_options(method, problem, forcing, anderson, max_iter)
+            options = fixed_point_options(method, problem, forcing, anderson, max_iter, joint)
             result, wall, message = timed_coulomb(problem, method, tol, tol, max_outer, **options)
             row = dict(problem=entry.name, contacts=problem.n_contacts, dim=problem.dim,
                        method=method, **outcome(result, wall, message))
@@ -281,7 +286,8 @@ def deposited_step(n_grains: int, dt: float = PILE_DT, seed: int = DEPOSITED_SEE
 
 
 def pile_rows(step: PileStep, methods: list[str], tol: float, max_outer: int, forcing: float,
-              anderson: int, max_iter: int | None = None, out=print) -> list[dict]:
+              anderson: int, max_iter: int | None = None, joint: int = 0,
+              out=print) -> list[dict]:
     """The reference row and one row per method and start (cold, warm)."""
     from .bench import velocity_error
     from .compare import fclib_error
@@ -300,7 +306,7 @@ def pile_rows(step: PileStep, methods: list[str], tol: float, max_outer: int, fo
     if step.warm_start is not None:
         starts.append(("warm", step.warm_start, step.shift))
     for method in methods:
-        options = fixed_point_options(method, problem, forcing, anderson, max_iter)
+        options = fixed_point_options(method, problem, forcing, anderson, max_iter, joint)
         for start, forces, shift in starts:
             result, wall, message = timed_coulomb(problem, method, tol, tol, max_outer,
                                                   warm_start=forces, shift=shift, **options)
@@ -334,6 +340,9 @@ def parser() -> argparse.ArgumentParser:
                         help="iterative methods: Anderson memory of the fixed point (0: none)")
     parser.add_argument("--max-iter", type=int, default=None,
                         help="iterative methods: iteration cap of each inner solve (method default)")
+    parser.add_argument("--joint", type=int, default=0,
+                        help="iterative methods: joint phase of the fixed point, shift updated "
+                             "every JOINT iterations inside the solver (0: none)")
     parser.add_argument("--quick", action="store_true",
                         help="the small external problems only (667-contact Siconos, "
                              "Box_Stacks, LMGC, local_problem_test)")
@@ -373,6 +382,8 @@ def _check(cli: argparse.ArgumentParser, args) -> None:
     for option in ("tol", "pile_tol"):
         if not getattr(args, option) > 0:
             cli.error(f"--{option.replace('_', '-')}: must be > 0, got {getattr(args, option)}")
+    if args.joint < 0:
+        cli.error(f"--joint: must be >= 0, got {args.joint}")
     optional = [value for value in (args.max_iter, args.pile) if value is not None]
     if min([args.max_outer, args.pile_max_outer, args.pile_steps] + optional) < 1:
         cli.error("--max-outer, --max-iter, --pile-max-outer, --pile-steps and --pile must be "
@@ -391,19 +402,22 @@ def main(argv: list[str] | None = None) -> int:
             cli.error(f"--problems: nothing matches {args.problems!r}")
         print(f"# external problems from {args.folder}: tol = tol_fp = {args.tol:g}, "
               f"max {args.max_outer} outer iterations, iterative methods with forcing "
-              f"{args.forcing:g}, Anderson {args.anderson}, inner cap {args.max_iter or 'default'}")
+              f"{args.forcing:g}, Anderson {args.anderson}, inner cap {args.max_iter or 'default'}, "
+              f"joint {args.joint}")
         rows = external_rows(problems, args.folder, _names(args.methods), args.tol,
-                             args.max_outer, args.forcing, args.anderson, args.max_iter)
+                             args.max_outer, args.forcing, args.anderson, args.max_iter,
+                             args.joint)
         print(format_table(rows, EXTERNAL_COLUMNS))
     if args.pile is not None:
         print(f"\n# pile step: Coulomb mu = {FRICTION}, dt = {PILE_DT}, tol = tol_fp = "
               f"{args.pile_tol:g}, max {args.pile_max_outer} outer iterations, iterative methods "
-              f"with forcing {args.forcing:g} and Anderson {args.anderson}; reference {REFERENCE}")
+              f"with forcing {args.forcing:g}, Anderson {args.anderson}, joint {args.joint}; "
+              f"reference {REFERENCE}")
         rows = []
         for kind in _names(args.pile_kinds):
             step = (settling_step(args.pile, args.pile_steps) if kind == "settling"
                     else deposited_step(args.pile))
             rows += pile_rows(step, _names(args.pile_methods), args.pile_tol, args.pile_max_outer,
-                              args.forcing, args.anderson, args.max_iter)
+                              args.forcing, args.anderson, args.max_iter, args.joint)
         print(format_table(rows, PILE_COLUMNS))
     return 0
