@@ -13,8 +13,7 @@ every method of ``--methods`` (default: the fast ``apgd-jacobi`` and
 ``clarabel-direct``, Clarabel on the conic form: the cvxpy ``clarabel`` needs
 a step problem), with ``tol = tol_fp = --tol``. Iterative methods use inexact
 inner solves (``--forcing``) and ``--anderson``; interior-point methods
-(Clarabel, SCS, OSQP) solve each inner problem to ``--tol`` with Anderson 5;
-``clarabel-direct`` is not polished on local problems (no factor of W).
+(Clarabel, SCS, OSQP) solve each inner problem to ``--tol`` with Anderson 5.
 The error is the Siconos/FCLIB measure of MODEL.md section 6
 (:func:`lubcontact.fixed_point.coulomb_error`) in the file's units
 (``FCLIB error``) and on the normalised problem (``scaled err``: ``q`` of unit
@@ -102,17 +101,12 @@ EXTERNAL = (
 
 
 # -- solving -----------------------------------------------------------------------------------
-def fixed_point_options(method: str, problem, forcing: float, anderson: int,
+def fixed_point_options(method: str, forcing: float, anderson: int,
                         max_iter: int | None = None, joint: int = 0) -> dict:
     """Fixed-point options: inexact inner solves, ``max_iter`` and the joint phase
     (``joint`` of :func:`~lubcontact.fixed_point.solve_coulomb`, passed when > 0) for
     iterative methods only.
-
-    ``clarabel-direct`` is not polished on problems without a factor
-    ``W = L^T L`` (local problems): :mod:`lubcontact.solvers.polish` needs one.
     """
-    if method == "clarabel-direct" and not hasattr(problem, "delassus_factor"):
-        return {"polish": False}
     if method in INTERIOR_METHODS:
         return {}
     options = dict(forcing=forcing, anderson=anderson, max_iter=max_iter)
@@ -202,12 +196,10 @@ def external_rows(problems: list[ExternalProblem], folder: Path, methods: list[s
             load_kernels(problem, methods)
             loaded = True
         for method in methods:
-            options = fixed_point_options(method, problem, forcing, anderson, max_iter, joint)
+            options = fixed_point_options(method, forcing, anderson, max_iter, joint)
             result, wall, message = timed_coulomb(problem, method, tol, tol, max_outer, **options)
             row = dict(problem=entry.name, contacts=problem.n_contacts, dim=problem.dim,
                        method=method, **outcome(result, wall, message))
-            if options.get("polish") is False:
-                row["note"] = "; ".join(filter(None, ["unpolished", row["note"]]))
             if result is not None:
                 row["FCLIB error"] = _error(coulomb_error(problem, result.forces))
                 row["scaled err"] = _error(fclib_error(problem, result.forces))
@@ -306,7 +298,7 @@ def pile_rows(step: PileStep, methods: list[str], tol: float, max_outer: int, fo
     if step.warm_start is not None:
         starts.append(("warm", step.warm_start, step.shift))
     for method in methods:
-        options = fixed_point_options(method, problem, forcing, anderson, max_iter, joint)
+        options = fixed_point_options(method, forcing, anderson, max_iter, joint)
         for start, forces, shift in starts:
             result, wall, message = timed_coulomb(problem, method, tol, tol, max_outer,
                                                   warm_start=forces, shift=shift, **options)

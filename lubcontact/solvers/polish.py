@@ -200,8 +200,7 @@ def _solve_on(problem, layout, forces, state, direction, refinements: int = 4) -
     basis, coordinates = _active_basis(problem, layout, forces, state, direction)
     if basis.shape[1] == 0:
         return np.zeros_like(forces)
-    factor = sp.csr_matrix(problem.delassus_factor @ basis)           # L P, n_dof x k
-    gram = sp.triu(factor.T @ factor, format="csc")
+    gram = sp.triu(_active_gram(problem, basis), format="csc")
     delta = 1e-12 * max(float(gram.diagonal().max()), 1e-300)
     solver = qdldl.Solver(sp.csc_matrix(gram + delta * sp.identity(gram.shape[0], format="csc")),
                           upper=True)
@@ -214,6 +213,16 @@ def _solve_on(problem, layout, forces, state, direction, refinements: int = 4) -
             break
         coordinates, residual = trial, trial_residual
     return basis @ coordinates
+
+
+def _active_gram(problem, basis: sp.spmatrix) -> sp.spmatrix:
+    """``P^T W P``: as ``(L P)^T (L P)`` where a factor ``W = L^T L`` exists, else from ``W``
+    (local problems: :class:`~lubcontact.local.LocalProblem` has no factor)."""
+    factor = getattr(problem, "delassus_factor", None)
+    if factor is None:
+        return sp.csr_matrix(basis.T @ problem.delassus @ basis)
+    scaled = sp.csr_matrix(factor @ basis)                              # L P, n_dof x k
+    return scaled.T @ scaled
 
 
 def _corrected(problem, layout, candidate, state, direction):
