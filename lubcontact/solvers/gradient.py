@@ -48,9 +48,10 @@ Operator
 or matrix-free as ``L^T (L x)`` (``operator="factor"``). Measured on the
 10^4-grain pile (docs/benchmarks.md) both cost about the same per product
 (0.25 ms vs 0.22 ms with a CSR copy of ``L^T``). With ``"auto"``:
-frictionless problems assemble ``S W S`` (11 ms at 10^4, from ``L S``) for
-the compiled kernel of :mod:`.kernels` and the active-set finish; problems
-with friction cones use the matrix-free product when the factor exists.
+frictionless problems and 2D friction cones assemble ``S W S`` (11 ms at
+10^4, from ``L S``) for the compiled kernels of :mod:`.kernels` and the
+active-set finish; other problems with friction cones (3D, UNION contacts)
+use the matrix-free product when the factor exists.
 """
 from __future__ import annotations
 
