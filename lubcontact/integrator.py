@@ -20,6 +20,8 @@ from .scene import Scene
 from .solvers import SolveResult, check_status, solve
 
 ON_FAILURE = ("raise", "warn", "ignore", "fallback")
+#: options of :func:`~lubcontact.fixed_point.solve_coulomb` itself, not passed to frictionless solves
+FIXED_POINT_OPTIONS = ("joint", "forcing", "anderson")
 
 
 @dataclass
@@ -113,7 +115,8 @@ class Simulation:
     tol : float
         Solver tolerance.
     solver_options : dict, optional
-        Extra keyword arguments for the solver.
+        Extra keyword arguments for the solver; ``joint``, ``forcing`` and
+        ``anderson`` go to the fixed point on s only (frictional steps).
     on_failure : {"raise", "warn", "ignore", "fallback"}
         Policy when a step's solve does not converge: ``raise`` stops with
         :class:`~lubcontact.solvers.SolverError` before the state is touched,
@@ -238,7 +241,8 @@ class Simulation:
         if problem.cones.has_friction and self.fixed_point:
             return solve_coulomb(problem, method, tol=self.tol, tol_fp=self.tol_fp,
                                  max_outer=self.max_outer, warm_start=guess, shift=shift, **options)
-        return solve(problem, method, tol=self.tol, warm_start=guess, **options)
+        convex_options = {k: v for k, v in options.items() if k not in FIXED_POINT_OPTIONS}
+        return solve(problem, method, tol=self.tol, warm_start=guess, **convex_options)
 
     def _apply(self, problem: StepProblem, result: SolveResult) -> None:
         grains = self.scene.grains

@@ -45,3 +45,19 @@ def test_fallback_resolves_the_step_with_the_reference():
     assert report.result.status == "converged" and report.result.method == "clarabel"
     assert report.result.info["fallback_from"][:2] == ("apgd", "max_iter")
     assert report.gaps_after.min() >= -1e-9
+
+
+def test_fixed_point_options_reach_only_frictional_steps():
+    """``joint`` is an option of the fixed point on s: frictionless steps must not receive it,
+    and frictionless and frictional runs with it match the runs without it."""
+    from lubcontact.laws import Coulomb, Inelastic
+
+    for law in (Inelastic(), Coulomb(0.3)):
+        runs = []
+        for options in ({}, {"joint": 5}):
+            sim = Simulation(scenes.settling_pile(30, seed=2), law, 0.05, solver="apgd-jacobi",
+                             tol=1e-9, solver_options=options)
+            sim.run(20)
+            runs.append(sim.scene.grains.velocities.copy())
+        speed = np.abs(runs[0]).max()
+        np.testing.assert_allclose(runs[1], runs[0], rtol=0, atol=1e-6 * speed)
