@@ -78,6 +78,10 @@ class RunConfig:
         docs/validation.md).
     tol_fp, max_outer : float, int
         Tolerance and outer-iteration cap of that fixed point.
+    joint : int
+        Solve Coulomb's problem jointly inside the first APGD run, updating
+        the shift every ``joint`` iterations, before the outer loop checks it
+        (``solve_coulomb(joint=...)``; 0: plain outer loop).
     friction : float or None
         Coulomb coefficient overriding the preset's ``mu`` (None: the preset's).
     checkpoint_every, sample_every, frame_every : int
@@ -113,6 +117,7 @@ class RunConfig:
     fixed_point: bool = False
     tol_fp: float = 1e-8
     max_outer: int = 50
+    joint: int = 0
     friction: float | None = None
     checkpoint_every: int = 200
     sample_every: int = 10
@@ -137,7 +142,7 @@ class RunConfig:
         for name in ("n_grains", "checkpoint_every", "sample_every", "bins_per_radius", "max_outer"):
             if int(getattr(self, name)) < 1:
                 raise ValueError(f"{name}: must be >= 1, got {getattr(self, name)}")
-        for name in ("steps", "frame_every", "cross_check_every", "settle_steps"):
+        for name in ("steps", "frame_every", "cross_check_every", "settle_steps", "joint"):
             if int(getattr(self, name)) < 0:
                 raise ValueError(f"{name}: must be >= 0, got {getattr(self, name)}")
         if not self.tol_fp > 0:
@@ -265,7 +270,8 @@ class FlowRun:
         self.sim = Simulation(scene, self.params.law(config.model),
                               flow.time_step(self.params, config.dt_fraction), solver=config.solver,
                               tol=config.tol, on_failure="ignore", fixed_point=config.fixed_point,
-                              tol_fp=config.tol_fp, max_outer=config.max_outer)
+                              tol_fp=config.tol_fp, max_outer=config.max_outer,
+                              solver_options={"joint": config.joint} if config.joint else None)
         r = self.params.radius
         top = float(scene.grains.positions[:, 1].max() + 2 * r)
         self.profiles = measure.ProfileAccumulator(
@@ -534,6 +540,8 @@ def _add_common(parser: argparse.ArgumentParser) -> None:
                         help="tolerance of the fixed point on s")
     parser.add_argument("--max-outer", type=int, default=defaults.max_outer,
                         help="outer-iteration cap of the fixed point on s")
+    parser.add_argument("--joint", type=int, default=defaults.joint,
+                        help="fixed point: update the shift inside APGD every that many iterations")
     parser.add_argument("--mu", dest="friction", type=float, default=None,
                         help="Coulomb coefficient (default: the preset's)")
     parser.add_argument("--checkpoint-every", type=int, default=defaults.checkpoint_every)
@@ -572,7 +580,8 @@ def run_main(argv: list[str] | None = None) -> int:
     if args.resume and checkpoint.exists():
         changes = {"friction": args.friction} if args.friction is not None else {}
         if args.fixed_point:
-            changes.update(fixed_point=True, tol_fp=args.tol_fp, max_outer=args.max_outer)
+            changes.update(fixed_point=True, tol_fp=args.tol_fp, max_outer=args.max_outer,
+                           joint=args.joint)
         run = FlowRun.resume(checkpoint, args.out, steps=args.steps, **changes)
         print(f"resuming {checkpoint} at step {run.steps_done}")
     else:

@@ -124,7 +124,9 @@ def final_state(run):
 
 
 RESUME_CASES = {"dry-clarabel-fixed-point": dict(model="dry"),
-                "gluey-apgd": dict(model="gluey", solver="apgd", fixed_point=False, tol=1e-6)}
+                "gluey-apgd": dict(model="gluey", solver="apgd", fixed_point=False, tol=1e-6),
+                "dry-apgd-joint-fixed-point": dict(model="dry", solver="apgd", tol=1e-6, tol_fp=1e-6,
+                                                   joint=5)}
 
 
 @pytest.mark.parametrize("case", RESUME_CASES)
@@ -139,6 +141,8 @@ def test_resume_from_checkpoint_reaches_the_uninterrupted_state(tmp_path, case):
     assert straight.last_report.contacts.count > 5          # grains touched the bed and each other
     if config.model == "gluey":
         assert np.count_nonzero(straight.sim.state.gamma < 0) > 5
+    if config.joint:                                        # the joint phase of the fixed point ran
+        assert straight.last_report.result.info["joint_iterations"] > 0
 
     first = experiment.FlowRun(config, scene, tmp_path)
     first.advance(20)                                       # checkpoint written at step 20
@@ -206,6 +210,8 @@ def test_config_rejects_bad_values():
         small_config(friction=-0.1)
     with pytest.raises(ValueError, match="tol_fp"):
         small_config(tol_fp=0.0)
+    with pytest.raises(ValueError, match="joint"):
+        small_config(joint=-1)
     with pytest.raises(ValueError, match="angles"):
         experiment.parse_angles("15:28")
     np.testing.assert_allclose(experiment.parse_angles("15:28:1"), np.arange(15, 29))
