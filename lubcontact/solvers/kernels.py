@@ -8,6 +8,11 @@ bookkeeping), about twice as fast as the numpy loop on the 10^4-grain pile
 updated inside, :func:`apgd_cone2d`), about 3x faster than the numpy loop on
 the 1000-grain frictional settling pile. The numpy loop remains the general
 path (3D cones, UNION contacts).
+
+Both loops share the steps of APGD through small helpers (start, backtracking
+test, residual record and stop, extrapolation with restart), inlined into the
+loops by numba (``inline="always"``): as plain calls they made the box loop
+about 20 % slower per iteration on the 1000-grain pile.
 """
 from __future__ import annotations
 
@@ -23,6 +28,74 @@ def matvec(indptr, indices, values, x, out):
         for k in range(indptr[i], indptr[i + 1]):
             total += values[k] * x[indices[k]]
         out[i] = total
+
+
+@numba.njit(cache=True, inline="always")
+def loop_arrays(indptr, indices, values, z0, max_iter):
+    """Work arrays of an APGD loop started at ``z0``.
+
+    Returns ``x_old = z0``, ``wx_old = W z0``, the extrapolated point ``y`` and
+    ``wy`` (copies of them), the trial point ``x`` and ``wx`` (uninitialised),
+    the best iterate (``z0``) and the residual history (length ``max_iter``).
+    """
+    x_old = z0.copy()
+    wx_old = np.empty(z0.size)
+    matvec(indptr, indices, values, x_old, wx_old)
+    return (x_old, wx_old, x_old.copy(), wx_old.copy(), np.empty(z0.size), np.empty(z0.size),
+            z0.copy(), np.empty(max_iter))
+
+
+@numba.njit(cache=True, inline="always")
+def step_accepted(x, y, wx, wy, lipschitz):
+    """Backtracking test of the step ``y -> x``: ``(x - y).W(x - y) <= L |x - y|^2``
+    (to a relative 1e-12), with ``wx = W x`` and ``wy = W y``."""
+    num = 0.0
+    den = 0.0
+    for i in range(x.size):
+        d = x[i] - y[i]
+        num += d * (wx[i] - wy[i])
+        den += d * d
+    return num <= lipschitz * den * (1.0 + 1e-12)
+
+
+@numba.njit(cache=True, inline="always")
+def record_residual(k, residual, x, history, best, best_residual, first, tol, divergence):
+    """Store the residual of iteration ``k``, keep the best iterate and test the stop.
+
+    Returns
+    -------
+    best_residual, first residual, code (0 converged, 2 diverged: non-finite or
+    above ``divergence * max(first, 1)``, -1 go on).
+    """
+    history[k] = residual
+    if first < 0.0:
+        first = residual
+    if residual < best_residual:
+        best_residual = residual
+        best[:] = x
+    code = -1
+    if residual <= tol:
+        code = 0
+    elif not np.isfinite(residual) or residual > divergence * max(first, 1.0):
+        code = 2
+    return best_residual, first, code
+
+
+@numba.njit(cache=True, inline="always")
+def extrapolate(theta, uphill, x, wx, x_old, wx_old, y, wy):
+    """Nesterov step ``y = x + beta (x - x_old)`` (and ``wy``), restarted (``beta = 0``,
+    ``theta = 1``) when ``uphill > 0``; moves ``x`` into ``x_old``. Returns the new ``theta``."""
+    theta_new = 0.5 * (-theta * theta + theta * np.sqrt(theta * theta + 4.0))
+    beta = theta * (1.0 - theta) / (theta * theta + theta_new)
+    if uphill > 0.0:
+        theta_new = 1.0
+        beta = 0.0
+    for i in range(x.size):
+        y[i] = x[i] + beta * (x[i] - x_old[i])
+        wy[i] = wx[i] + beta * (wx[i] - wx_old[i])
+        x_old[i] = x[i]
+        wx_old[i] = wx[i]
+    return theta_new
 
 
 @numba.njit(cache=True)
@@ -44,36 +117,18 @@ def apgd_box(indptr, indices, values, b, lower, upper, ratio, sign, z0, tol, max
     """
     n = b.size
     rms = 1.0 / np.sqrt(max(n, 1))
-    x_old = z0.copy()
-    wx_old = np.empty(n)
-    matvec(indptr, indices, values, x_old, wx_old)
-    y = x_old.copy()
-    wy = wx_old.copy()
-    x = np.empty(n)
-    wx = np.empty(n)
-    best = z0.copy()
-    best_residual = np.inf
-    first = -1.0
-    history = np.empty(max_iter)
+    x_old, wx_old, y, wy, x, wx, best, history = loop_arrays(indptr, indices, values, z0, max_iter)
     previous = np.zeros(n, dtype=np.bool_)
     unchanged = -1
-    products = 1
-    theta = 1.0
-    status = 1
-    iterations = max_iter
+    best_residual, first = np.inf, -1.0
+    products, theta, status, iterations = 1, 1.0, 1, max_iter
     for k in range(max_iter):
         while True:
             for i in range(n):
                 x[i] = min(max(y[i] - (wy[i] + b[i]) / lipschitz, lower[i]), upper[i])
             matvec(indptr, indices, values, x, wx)
             products += 1
-            num = 0.0
-            den = 0.0
-            for i in range(n):
-                d = x[i] - y[i]
-                num += d * (wx[i] - wy[i])
-                den += d * d
-            if num <= lipschitz * den * (1.0 + 1e-12):
+            if step_accepted(x, y, wx, wy, lipschitz):
                 break
             lipschitz *= 2.0
         squares = 0.0
@@ -89,37 +144,18 @@ def apgd_box(indptr, indices, values, b, lower, upper, ratio, sign, z0, tol, max
             if active != previous[i]:
                 changes += 1
                 previous[i] = active
-        residual = np.sqrt(squares) * rms
-        history[k] = residual
-        if first < 0.0:
-            first = residual
-        if residual < best_residual:
-            best_residual = residual
-            best[:] = x
-        if residual <= tol:
-            status, iterations = 0, k + 1
-            break
-        if not np.isfinite(residual) or residual > divergence * max(first, 1.0):
-            status, iterations = 2, k + 1
+        best_residual, first, code = record_residual(k, np.sqrt(squares) * rms, x, history, best,
+                                                     best_residual, first, tol, divergence)
+        if code >= 0:
+            status, iterations = code, k + 1
             break
         unchanged = unchanged + 1 if changes == 0 else 0
         if stable > 0 and unchanged >= stable:
             status, iterations = 3, k + 1
             break
-        theta_new = 0.5 * (-theta * theta + theta * np.sqrt(theta * theta + 4.0))
-        beta = theta * (1.0 - theta) / (theta * theta + theta_new)
-        if uphill > 0.0:
-            theta_new = 1.0
-            beta = 0.0
-        for i in range(n):
-            y[i] = x[i] + beta * (x[i] - x_old[i])
-            wy[i] = wx[i] + beta * (wx[i] - wx_old[i])
-            x_old[i] = x[i]
-            wx_old[i] = wx[i]
-        theta = theta_new
+        theta = extrapolate(theta, uphill, x, wx, x_old, wx_old, y, wy)
         lipschitz *= 0.9
     return best, best_residual, history[:iterations], status, iterations, products, x, lipschitz
-
 
 
 @numba.njit(cache=True)
@@ -170,24 +206,12 @@ def apgd_cone2d(indptr, indices, values, b, base, lower, upper, cone_n, cone_t, 
     n = b.size
     b = b.copy()
     rms = 1.0 / np.sqrt(max(n, 1))
-    x_old = z0.copy()
-    wx_old = np.empty(n)
-    matvec(indptr, indices, values, x_old, wx_old)
-    y = x_old.copy()
-    wy = wx_old.copy()
-    x = np.empty(n)
-    wx = np.empty(n)
+    x_old, wx_old, y, wy, x, wx, best, history = loop_arrays(indptr, indices, values, z0, max_iter)
     trial = np.empty(n)
     projected = np.empty(n)
     gradient = np.empty(n)
-    best = z0.copy()
-    best_residual = np.inf
-    first = -1.0
-    history = np.empty(max_iter)
-    products = 1
-    theta = 1.0
-    status = 1
-    iterations = max_iter
+    best_residual, first = np.inf, -1.0
+    products, theta, status, iterations = 1, 1.0, 1, max_iter
     for k in range(max_iter):
         while True:
             for i in range(n):
@@ -195,13 +219,7 @@ def apgd_cone2d(indptr, indices, values, b, base, lower, upper, cone_n, cone_t, 
             project_cones(trial, lower, upper, cone_n, cone_t, cone_mu, x)
             matvec(indptr, indices, values, x, wx)
             products += 1
-            num = 0.0
-            den = 0.0
-            for i in range(n):
-                d = x[i] - y[i]
-                num += d * (wx[i] - wy[i])
-                den += d * d
-            if num <= lipschitz * den * (1.0 + 1e-12):
+            if step_accepted(x, y, wx, wy, lipschitz):
                 break
             lipschitz *= 2.0
         for i in range(n):
@@ -218,32 +236,14 @@ def apgd_cone2d(indptr, indices, values, b, base, lower, upper, cone_n, cone_t, 
         for i in range(n):
             squares += (x[i] * ratio[i] - projected[i]) ** 2
             uphill += (wy[i] + b[i]) * (x[i] - x_old[i])
-        residual = np.sqrt(squares) * rms
-        history[k] = residual
-        if first < 0.0:
-            first = residual
-        if residual < best_residual:
-            best_residual = residual
-            best[:] = x
-        if residual <= tol:
-            status, iterations = 0, k + 1
-            break
-        if not np.isfinite(residual) or residual > divergence * max(first, 1.0):
-            status, iterations = 2, k + 1
+        best_residual, first, code = record_residual(k, np.sqrt(squares) * rms, x, history, best,
+                                                     best_residual, first, tol, divergence)
+        if code >= 0:
+            status, iterations = code, k + 1
             break
         if every > 0 and (k + 1) % every == 0:
             for c in range(cone_n.size):
                 b[cone_n[c]] = gradient[cone_n[c]] - wx[cone_n[c]]
-        theta_new = 0.5 * (-theta * theta + theta * np.sqrt(theta * theta + 4.0))
-        beta = theta * (1.0 - theta) / (theta * theta + theta_new)
-        if uphill > 0.0:
-            theta_new = 1.0
-            beta = 0.0
-        for i in range(n):
-            y[i] = x[i] + beta * (x[i] - x_old[i])
-            wy[i] = wx[i] + beta * (wx[i] - wx_old[i])
-            x_old[i] = x[i]
-            wx_old[i] = wx[i]
-        theta = theta_new
+        theta = extrapolate(theta, uphill, x, wx, x_old, wx_old, y, wy)
         lipschitz *= 0.9
     return best, best_residual, history[:iterations], status, iterations, products, x, lipschitz, b
