@@ -575,17 +575,23 @@ def _empty(problem) -> MethodOutput | None:
     return None
 
 
-@register("pgd")
-def pgd(problem, *, tol: float = 1e-8, max_iter: int = 20000, warm_start=None,
-        scaling: bool = False, operator: str = "auto") -> MethodOutput:
-    """Projected gradient descent, step ``1/L`` (see module docstring)."""
+def _plain(run, problem, tol, max_iter, warm_start, scaling, operator) -> MethodOutput:
+    """A method without finish: set-up, warm-start test, then ``run(data, z, tol, max_iter)``
+    (returning tracker, status, iterations)."""
     if (out := _empty(problem)) is not None:
         return out
     data, z, setup, start = _common(problem, warm_start, scaling, operator)
     if (out := _accept_warm_start(problem, data, z, tol, warm_start, setup, start)) is not None:
         return out
-    tracker, status, iterations = run_pgd(data, z, tol, max_iter)
+    tracker, status, iterations = run(data, z, tol, max_iter)
     return _finalise(problem, data, tracker, status, iterations, setup, start)
+
+
+@register("pgd")
+def pgd(problem, *, tol: float = 1e-8, max_iter: int = 20000, warm_start=None,
+        scaling: bool = False, operator: str = "auto") -> MethodOutput:
+    """Projected gradient descent, step ``1/L`` (see module docstring)."""
+    return _plain(run_pgd, problem, tol, max_iter, warm_start, scaling, operator)
 
 
 def _apgd(problem, tol, max_iter, warm_start, scaling, operator, active_set) -> MethodOutput:
@@ -636,6 +642,14 @@ def _is_cone_2d(cones) -> bool:
     return coulomb[0].size > 0 and union[0].size == 0 and cones.tangent_dim == 1
 
 
+def _probe_lipschitz(data: DualData, z: np.ndarray) -> float:
+    """Starting Lipschitz estimate of the compiled loops: ``|W d| / |d|`` for a
+    deterministic random ``d`` (the loops' backtracking corrects it)."""
+    probe = z + np.random.default_rng(0).uniform(-1.0, 1.0, z.size)
+    return max(float(np.linalg.norm(data.product(probe) - data.product(z)) /
+                     np.linalg.norm(probe - z)), 1e-12)
+
+
 def run_apgd_cones(data: DualData, cones, z: np.ndarray, tol: float, max_iter: int,
                    base: np.ndarray | None = None, every: int = 0):
     """APGD in the compiled kernel :func:`.kernels.apgd_cone2d` (2D friction cones).
@@ -648,9 +662,7 @@ def run_apgd_cones(data: DualData, cones, z: np.ndarray, tol: float, max_iter: i
     kernel = _cone_kernel()
     matrix = data.assembled()
     normal_rows, tangent_rows, mu = cones.projector.pieces[0]
-    probe = z + np.random.default_rng(0).uniform(-1.0, 1.0, z.size)
-    lipschitz = max(float(np.linalg.norm(data.product(probe) - data.product(z)) /
-                          np.linalg.norm(probe - z)), 1e-12)
+    lipschitz = _probe_lipschitz(data, z)
     best, best_residual, history, code, iterations, products, _, _, offset = kernel(
         matrix.indptr, matrix.indices, matrix.data, data.offset,
         data.offset if base is None else base, data.project.lower, data.project.upper,
@@ -668,9 +680,7 @@ def _run_apgd_fused(data: DualData, z: np.ndarray, tol: float, max_iter: int,
     """APGD in the compiled kernel; returns to Python only for active-set solves."""
     kernel = _box_kernel()
     matrix = data.matrix
-    probe = z + np.random.default_rng(0).uniform(-1.0, 1.0, z.size)
-    lipschitz = max(float(np.linalg.norm(data.product(probe) - data.product(z)) /
-                          np.linalg.norm(probe - z)), 1e-12)
+    lipschitz = _probe_lipschitz(data, z)
     sign = finish.sign if finish is not None else np.zeros(z.size)
     stable = finish.stable_iterations if finish is not None else 0
     chunk = finish.period if finish is not None and finish.period > 0 else max_iter
@@ -729,11 +739,5 @@ def apgd_active_set(problem, *, tol: float = 1e-8, max_iter: int = 20000, warm_s
 def bb(problem, *, tol: float = 1e-8, max_iter: int = 20000, warm_start=None,
        scaling: bool = False, operator: str = "auto") -> MethodOutput:
     """Spectral (Barzilai-Borwein) projected gradient with a non-monotone line search."""
-    if (out := _empty(problem)) is not None:
-        return out
-    data, z, setup, start = _common(problem, warm_start, scaling, operator)
-    if (out := _accept_warm_start(problem, data, z, tol, warm_start, setup, start)) is not None:
-        return out
-    tracker, status, iterations = run_bb(data, z, tol, max_iter)
-    return _finalise(problem, data, tracker, status, iterations, setup, start)
+    return _plain(run_bb, problem, tol, max_iter, warm_start, scaling, operator)
 
