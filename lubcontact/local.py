@@ -21,7 +21,7 @@ The convex relaxation solved for a frozen shift ``s`` is
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from functools import cached_property
 
 import numpy as np
@@ -29,7 +29,7 @@ import scipy.sparse as sp
 
 from . import checks
 from .cones import ConeKind, Cones
-from .problem import Scaling
+from .problem import ConicProblemMixin, Scaling
 
 
 def contact_major_permutation(n_contacts: int, dim: int) -> np.ndarray:
@@ -51,7 +51,7 @@ def contact_major_permutation(n_contacts: int, dim: int) -> np.ndarray:
 
 
 @dataclass
-class LocalProblem:
+class LocalProblem(ConicProblemMixin):
     """``u = W r + q`` with Coulomb cones, in our force layout.
 
     Attributes
@@ -114,15 +114,7 @@ class LocalProblem:
         return cls(delassus=delassus[order][:, order].tocsr(), free_velocity=q[order], cones=cones,
                    name=name)
 
-    # -- protocol shared with StepProblem -------------------------------------------------------
-    @property
-    def n_contacts(self) -> int:
-        return self.cones.count
-
-    @property
-    def n_rows(self) -> int:
-        return self.cones.n_rows
-
+    # -- protocol shared with StepProblem (the common members: ConicProblemMixin) ---------------
     @property
     def dim(self) -> int:
         return self.cones.tangent_dim + 1
@@ -145,10 +137,6 @@ class LocalProblem:
     def dual_objective(self, forces: np.ndarray) -> float:
         return float(0.5 * forces @ (self.delassus @ forces) + forces @ self.offset)
 
-    def natural_residual(self, forces: np.ndarray) -> float:
-        """``|r - P_K(r - (W r + b))|`` in this problem's units."""
-        return self.cones.natural_residual(forces, self.gradient(forces))
-
     def normalized(self) -> "LocalProblem":
         """The same problem with ``W`` of unit mean diagonal and ``q`` of unit rms.
 
@@ -164,15 +152,6 @@ class LocalProblem:
         return LocalProblem(delassus=self.delassus * (force / speed),
                             free_velocity=self.free_velocity / speed, cones=self.cones,
                             shift=self.shift / speed, name=self.name, scaling=scaling)
-
-    def with_shift(self, shift: np.ndarray) -> "LocalProblem":
-        """A copy with another shift ``s`` (same matrices)."""
-        return replace(self, shift=np.asarray(shift, dtype=float).copy())
-
-    def with_cones(self, cones: Cones) -> "LocalProblem":
-        """A copy with other force sets of the same layout."""
-        checks.require(cones.n_rows == self.n_rows, "cones", "must keep the row layout", cones.n_rows)
-        return replace(self, cones=cones)
 
     # -- FCLIB layout ---------------------------------------------------------------------------
     def to_contact_major(self, vector: np.ndarray) -> np.ndarray:

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
 from functools import cached_property
+from typing import Self
 
 import numpy as np
 import scipy.sparse as sp
@@ -37,8 +38,39 @@ class Scaling:
     length: float
 
 
+class ConicProblemMixin:
+    """Members shared by :class:`StepProblem` and :class:`lubcontact.local.LocalProblem`.
+
+    Both are dataclasses with fields ``cones`` (:class:`Cones`) and ``shift``
+    (ndarray, shape (nc,)) and a method ``gradient(forces)`` (``W lam + b``);
+    the members below derive from them only.
+    """
+
+    @property
+    def n_contacts(self) -> int:
+        return self.cones.count
+
+    @property
+    def n_rows(self) -> int:
+        return self.cones.n_rows
+
+    def natural_residual(self, forces: np.ndarray) -> float:
+        """``|lam - P_K(lam - (W lam + b))|`` in this problem's units."""
+        return self.cones.natural_residual(forces, self.gradient(forces))
+
+    def with_shift(self, shift: np.ndarray) -> Self:
+        """A copy with another shift ``s`` (same matrices)."""
+        return replace(self, shift=np.asarray(shift, dtype=float).copy())
+
+    def with_cones(self, cones: Cones) -> Self:
+        """A copy with other force sets of the same layout."""
+        checks.require(cones.n_rows == self.n_rows, "cones", "must keep the row layout",
+                       cones.n_rows)
+        return replace(self, cones=cones)
+
+
 @dataclass
-class StepProblem:
+class StepProblem(ConicProblemMixin):
     """One time step's contact problem.
 
     Attributes
@@ -85,14 +117,6 @@ class StepProblem:
         self.jacobian = sp.csr_matrix(self.jacobian)
 
     @property
-    def n_contacts(self) -> int:
-        return self.cones.count
-
-    @property
-    def n_rows(self) -> int:
-        return self.cones.n_rows
-
-    @property
     def n_dof(self) -> int:
         return self.mass.shape[0]
 
@@ -133,10 +157,6 @@ class StepProblem:
 
     def dual_objective(self, forces: np.ndarray) -> float:
         return float(0.5 * forces @ (self.gradient(forces) - self.offset) + forces @ self.offset)
-
-    def natural_residual(self, forces: np.ndarray) -> float:
-        """``|lam - P_K(lam - (W lam + b))|`` in this problem's units."""
-        return self.cones.natural_residual(forces, self.gradient(forces))
 
     def gaps_after(self, velocity: np.ndarray) -> np.ndarray:
         """Gaps after the step, ``D + dt u_n`` (without the shift), shape (nc,)."""
@@ -187,12 +207,3 @@ class StepProblem:
         return cls(mass=arrays["mass"], free_velocity=arrays["free_velocity"], jacobian=jacobian,
                    gaps=arrays["gaps"], cones=cones, dt=float(arrays["dt"]), shift=arrays["shift"],
                    keys=keys)
-
-    def with_shift(self, shift: np.ndarray) -> "StepProblem":
-        """A copy with another shift ``s`` (same matrices)."""
-        return replace(self, shift=np.asarray(shift, dtype=float).copy())
-
-    def with_cones(self, cones: Cones) -> "StepProblem":
-        """A copy with other force sets of the same layout."""
-        checks.require(cones.n_rows == self.n_rows, "cones", "must keep the row layout", cones.n_rows)
-        return replace(self, cones=cones)
