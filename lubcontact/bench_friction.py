@@ -179,8 +179,12 @@ def select_problems(patterns: list[str] | None, quick: bool) -> list[ExternalPro
 
 def external_rows(problems: list[ExternalProblem], folder: Path, methods: list[str], tol: float,
                   max_outer: int, forcing: float, anderson: int, max_iter: int | None = None,
-                  joint: int = 0, out=print) -> list[dict]:
-    """Solve each available problem with each method; one row per (problem, method)."""
+                  joint: int = 0, tol_fp: float | None = None, out=print) -> list[dict]:
+    """Solve each available problem with each method; one row per (problem, method).
+
+    ``tol`` is the inner tolerance and, unless ``tol_fp`` is given, the fixed point's.
+    """
+    tol_fp = tol if tol_fp is None else tol_fp
     from .compare import fclib_error
     from .fixed_point import coulomb_error
     from .io import read_problem
@@ -197,7 +201,8 @@ def external_rows(problems: list[ExternalProblem], folder: Path, methods: list[s
             loaded = True
         for method in methods:
             options = fixed_point_options(method, forcing, anderson, max_iter, joint)
-            result, wall, message = timed_coulomb(problem, method, tol, tol, max_outer, **options)
+            result, wall, message = timed_coulomb(problem, method, tol, tol_fp, max_outer,
+                                                  **options)
             row = dict(problem=entry.name, contacts=problem.n_contacts, dim=problem.dim,
                        method=method, **outcome(result, wall, message))
             if result is not None:
@@ -324,6 +329,8 @@ def parser() -> argparse.ArgumentParser:
                         help="methods around which the fixed point runs, comma separated")
     parser.add_argument("--tol", type=float, default=1e-10,
                         help="inner tolerance and fixed-point tolerance (external problems)")
+    parser.add_argument("--tol-fp", type=float, default=None,
+                        help="fixed-point tolerance of the external problems if not --tol")
     parser.add_argument("--max-outer", type=int, default=1000,
                         help="cap on the outer iterations of the fixed point")
     parser.add_argument("--forcing", type=float, default=1e-4,
@@ -374,6 +381,8 @@ def _check(cli: argparse.ArgumentParser, args) -> None:
     for option in ("tol", "pile_tol"):
         if not getattr(args, option) > 0:
             cli.error(f"--{option.replace('_', '-')}: must be > 0, got {getattr(args, option)}")
+    if args.tol_fp is not None and not args.tol_fp > 0:
+        cli.error(f"--tol-fp: must be > 0, got {args.tol_fp}")
     if args.joint < 0:
         cli.error(f"--joint: must be >= 0, got {args.joint}")
     optional = [value for value in (args.max_iter, args.pile) if value is not None]
@@ -392,13 +401,14 @@ def main(argv: list[str] | None = None) -> int:
         problems = select_problems(patterns, args.quick)
         if not problems:
             cli.error(f"--problems: nothing matches {args.problems!r}")
-        print(f"# external problems from {args.folder}: tol = tol_fp = {args.tol:g}, "
+        tol_fp = args.tol if args.tol_fp is None else args.tol_fp
+        print(f"# external problems from {args.folder}: tol = {args.tol:g}, tol_fp = {tol_fp:g}, "
               f"max {args.max_outer} outer iterations, iterative methods with forcing "
               f"{args.forcing:g}, Anderson {args.anderson}, inner cap {args.max_iter or 'default'}, "
               f"joint {args.joint}")
         rows = external_rows(problems, args.folder, _names(args.methods), args.tol,
                              args.max_outer, args.forcing, args.anderson, args.max_iter,
-                             args.joint)
+                             args.joint, tol_fp)
         print(format_table(rows, EXTERNAL_COLUMNS))
     if args.pile is not None:
         print(f"\n# pile step: Coulomb mu = {FRICTION}, dt = {PILE_DT}, tol = tol_fp = "
