@@ -19,6 +19,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy import optimize
 
 from . import checks
 from .scene import Scene
@@ -94,8 +95,14 @@ class ProfileAccumulator:
         self.momentum = np.zeros(k) if self.momentum is None else np.asarray(self.momentum, float)
 
     def add(self, scene: Scene) -> None:
-        """Accumulate the current state of ``scene``."""
+        """Accumulate the current state of ``scene``.
+
+        The grid grows upwards (slabs as wide as its top one) to cover every
+        grain: a flowing layer dilates above its settled height, and a grid cut
+        below the free surface would hide the dilute surface layer.
+        """
         grains = scene.grains
+        self._cover(float(np.max(grains.positions[:, 1] + grains.radii, initial=self.edges[-1])))
         areas = slab_areas(grains.positions[:, 1], grains.radii, self.edges)
         self.area += areas.sum(axis=0)
         self.momentum += areas.T @ grains.velocities[:, 0]
@@ -109,6 +116,16 @@ class ProfileAccumulator:
             velocity = np.where(self.area > 0, self.momentum / self.area, np.nan)
         return Profile(edges=self.edges.copy(), packing=self.area / (count * self.period * widths),
                        velocity=velocity)
+
+    def _cover(self, top: float) -> None:
+        """Append empty slabs, as wide as the top one, until the grid reaches ``top``."""
+        if top <= self.edges[-1]:
+            return
+        width = self.edges[-1] - self.edges[-2]
+        extra = int(np.ceil((top - self.edges[-1]) / width))
+        self.edges = np.concatenate([self.edges, self.edges[-1] + width * np.arange(1, extra + 1)])
+        self.area = np.concatenate([self.area, np.zeros(extra)])
+        self.momentum = np.concatenate([self.momentum, np.zeros(extra)])
 
     def reset(self) -> None:
         self.area[:] = 0.0
@@ -170,47 +187,127 @@ def gamma_histogram(gamma: np.ndarray, gamma_min: np.ndarray, bins: int = 20) ->
 
 
 def layer_height(prof: Profile, fraction: float = 0.5) -> float:
-    """Free-surface height: top of the highest slab whose packing exceeds ``fraction`` of the
-    median packing of the occupied slabs (length)."""
+    """Free-surface height: where the packing falls to ``fraction`` of the bulk packing (length).
+
+    The bulk packing is the median over the occupied slabs; the crossing above
+    the highest slab at or over the threshold is interpolated linearly between
+    slab centres.
+
+    Raises
+    ------
+    ValueError
+        If the top slab of the grid is still at or over the threshold: the
+        surface lies above the grid and cannot be located.
+    """
     occupied = prof.packing > 0
-    if not np.any(occupied):
-        return float(prof.edges[0])
+    checks.require(bool(np.any(occupied)), "prof", "the profile holds no grain", 0)
     threshold = fraction * float(np.median(prof.packing[occupied]))
-    dense = np.flatnonzero(prof.packing >= threshold)
-    return float(prof.edges[dense[-1] + 1])
+    last = int(np.flatnonzero(prof.packing >= threshold)[-1])
+    checks.require(last + 1 < prof.packing.size, "prof",
+                   "the top slab is still dense: the free surface lies above the profile grid",
+                   prof.packing[-1])
+    z, phi = prof.centres, prof.packing
+    weight = (phi[last] - threshold) / (phi[last] - phi[last + 1])
+    return float(z[last] + weight * (z[last + 1] - z[last]))
 
 
-def bagnold_exponent(prof: Profile, bottom: float, top: float, depth_range=(0.15, 0.85)
-                     ) -> tuple[float, float]:
-    """Exponent ``a`` of ``u_s - u(z) ~ (h - z)^a`` fitted in log-log.
+@dataclass
+class BagnoldFit:
+    """Least-squares fit of ``u(z) = u_s - A (h - z)^n`` (:func:`fit_bagnold`).
+
+    Attributes
+    ----------
+    exponent : float
+        ``n`` (Bagnold: 3/2).
+    exponent_error : float
+        Standard error of ``n`` from the fit's Jacobian, with slabs taken as
+        independent (they are not quite: a lower bound).
+    surface_velocity : float
+        ``u_s`` (length / time), fitted, not read from a slab.
+    amplitude : float
+        ``A`` (length^(1 - n) / time).
+    surface : float
+        ``h``, the free surface the depth is measured from (length).
+    fit_range : (float, float)
+        Heights of the lowest and highest slab centre used (length).
+    slabs : int
+        Number of slabs fitted.
+    rms_residual : float
+        Root mean square of ``u - fit`` over those slabs (length / time).
+    """
+
+    exponent: float
+    exponent_error: float
+    surface_velocity: float
+    amplitude: float
+    surface: float
+    fit_range: tuple[float, float]
+    slabs: int
+    rms_residual: float
+
+
+EXPONENT_BOUNDS = (0.2, 5.0)
+
+
+def _bagnold_linear_part(depth: np.ndarray, u: np.ndarray, exponent: float):
+    """Best ``(u_s, A)`` for a given exponent (linear least squares) and the residual."""
+    design = np.stack([np.ones_like(depth), -depth**exponent], axis=1)
+    coefficients = np.linalg.lstsq(design, u, rcond=None)[0]
+    return coefficients, u - design @ coefficients
+
+
+def fit_bagnold(prof: Profile, bottom: float, surface: float, diameter: float, *,
+                bed_layers: float = 2.0, surface_layers: float = 1.0) -> BagnoldFit:
+    """Fit ``u(z) = u_s - A (h - z)^n`` on the dense part of a time-averaged profile.
+
+    ``u_s``, ``A`` and ``n`` are free (least squares on ``u`` itself, not on
+    ``log(u_s - u)``, so slabs near the surface where ``u_s - u`` is small and
+    noisy carry no excess weight); the depth is measured from the free surface
+    ``h`` of the packing profile (:func:`layer_height`), not from the top grain.
+    Slabs within ``bed_layers`` diameters of the bed top (the layers that feel
+    the bed) and within ``surface_layers`` diameters of ``h`` (the dilute
+    surface layer) are left out.
 
     Parameters
     ----------
     prof : Profile
         A time-averaged profile.
-    bottom, top : float
-        Heights of the bed top and of the free surface (length).
-    depth_range : (float, float)
-        Fraction of the depth ``h = top - bottom`` used for the fit (skips the
-        bed and the dilute surface).
+    bottom : float
+        Height of the bed top (length).
+    surface : float
+        Free-surface height ``h`` (length).
+    diameter : float
+        Mean grain diameter (length), the unit of the margins.
+    bed_layers, surface_layers : float
+        Margins left out at the bed and below the surface (grain diameters).
 
     Returns
     -------
-    exponent : float
-    surface_velocity : float
-        ``u_s``, the velocity of the slab just below ``top``.
+    BagnoldFit
     """
+    checks.require(surface > bottom, "surface", "must be above bottom", surface)
+    diameter = checks.positive_scalar("diameter", diameter)
+    low, high = bottom + bed_layers * diameter, surface - surface_layers * diameter
     z, u = prof.centres, prof.velocity
-    checks.require(top > bottom, "top", "must be above bottom", top)
-    below_top = np.flatnonzero((z < top) & np.isfinite(u))
-    checks.require(below_top.size > 3, "prof", "too few slabs below the surface", below_top.size)
-    surface = u[below_top[-1]]
-    depth = (top - z) / (top - bottom)
-    use = (depth > depth_range[0]) & (depth < depth_range[1]) & np.isfinite(u) & (surface - u > 0)
-    checks.require(np.count_nonzero(use) >= 3, "prof", "too few slabs with u < u_s to fit",
+    use = (z > low) & (z < high) & np.isfinite(u)
+    checks.require(np.count_nonzero(use) >= 5, "prof", "fewer than 5 slabs in the dense part",
                    np.count_nonzero(use))
-    slope = np.polyfit(np.log(depth[use]), np.log(surface - u[use]), 1)[0]
-    return float(slope), float(surface)
+    depth, u = surface - z[use], u[use]
+    search = optimize.minimize_scalar(
+        lambda n: float(np.sum(_bagnold_linear_part(depth, u, n)[1]**2)),
+        bounds=EXPONENT_BOUNDS, method="bounded", options={"xatol": 1e-10})
+    exponent = float(search.x)
+    checks.require(EXPONENT_BOUNDS[0] + 1e-3 < exponent < EXPONENT_BOUNDS[1] - 1e-3, "prof",
+                   f"fitted exponent at the search bound {EXPONENT_BOUNDS}", exponent)
+    (u_s, amplitude), residual = _bagnold_linear_part(depth, u, exponent)
+    power = depth**exponent
+    jacobian = np.stack([np.ones_like(depth), -power, -amplitude * power * np.log(depth)], axis=1)
+    variance = np.sum(residual**2) / max(depth.size - 3, 1)
+    covariance = variance * np.linalg.pinv(jacobian.T @ jacobian)
+    return BagnoldFit(exponent=exponent, exponent_error=float(np.sqrt(covariance[2, 2])),
+                      surface_velocity=float(u_s), amplitude=float(amplitude),
+                      surface=float(surface), fit_range=(float(z[use][0]), float(z[use][-1])),
+                      slabs=int(depth.size), rms_residual=float(np.sqrt(np.mean(residual**2))))
 
 
 @dataclass

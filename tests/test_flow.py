@@ -68,26 +68,72 @@ def test_profile_of_a_square_lattice_and_flow_rate():
     grains = Grains.create(centres, 0.5, masses=1.0, velocities=np.stack(
         [speeds, np.zeros_like(speeds)], axis=1))
     scene = Scene.create(grains, period=10.0)
-    prof = measure.profile(scene, np.arange(0.0, 5.01, 1.0))
-    np.testing.assert_allclose(prof.packing, np.pi / 4, rtol=1e-12)
-    np.testing.assert_allclose(prof.velocity, 0.1 * (np.arange(5) + 0.5), rtol=1e-12)
+    prof = measure.profile(scene, np.arange(0.0, 6.01, 1.0))
+    np.testing.assert_allclose(prof.packing, [np.pi / 4] * 5 + [0.0], rtol=1e-12)
+    np.testing.assert_allclose(prof.velocity[:5], 0.1 * (np.arange(5) + 0.5), rtol=1e-12)
     assert measure.flow_rate(scene) == pytest.approx(np.pi * 0.25 * speeds.sum() / 10.0, rel=1e-13)
     assert measure.kinetic_energy(scene) == pytest.approx(0.5 * np.sum(speeds**2), rel=1e-13)
-    assert measure.layer_height(prof) == pytest.approx(5.0)
+    assert measure.layer_height(prof) == pytest.approx(5.0)     # half-way from full to empty
+    with pytest.raises(ValueError, match="above the profile grid"):
+        measure.layer_height(measure.profile(scene, np.arange(0.0, 4.51, 0.5)))
 
 
-def test_bagnold_exponent_of_an_exact_profile():
-    h, bottom = 20.0, 1.0
-    edges = np.linspace(0.0, bottom + h, 85)
+def test_profile_grid_grows_to_cover_a_dilated_layer():
+    """Grains above the grid's top are not dropped: slabs of the top width are appended."""
+    grains = Grains.create([[1.0, 1.0], [3.0, 6.3]], 0.5, masses=1.0,
+                           velocities=[[2.0, 0.0], [5.0, 0.0]])
+    accumulator = measure.ProfileAccumulator(np.arange(0.0, 4.01, 0.5), period=4.0)
+    accumulator.add(Scene.create(grains, period=4.0))
+    np.testing.assert_allclose(accumulator.edges, np.arange(0.0, 7.01, 0.5))
+    np.testing.assert_allclose(accumulator.area.sum(), 2 * np.pi * 0.25, rtol=1e-13)
+    np.testing.assert_allclose(accumulator.momentum.sum(), 7 * np.pi * 0.25, rtol=1e-13)
+
+
+def bagnold_layer(n=1.5, u_s=9.0, amplitude=0.08, bottom=2.0, surface=42.3, dz=0.5):
+    """A synthetic time-averaged layer of grains of diameter 2, shaped like the saved 22-degree
+    runs: ``u = u_s - A (h - z)^n`` in the dense part (packing 0.78); a dilute surface layer
+    where the packing falls linearly to 0 over 2.5 diameters centred on h and the shear rate
+    does not vanish (u continues linearly above the depth of 1.5 diameters, with the slope it
+    has there); a slower first layer on the bed (0.6 u over one diameter)."""
+    edges = np.arange(0.0, surface + 5.0, dz)
     z = 0.5 * (edges[1:] + edges[:-1])
-    depth = np.clip(bottom + h - z, 0, h)
-    u = h**1.5 - depth**1.5
-    prof = measure.Profile(edges, np.ones_like(z), u)
-    exponent, surface = measure.bagnold_exponent(prof, bottom, bottom + h)
-    # u_s is the top slab's velocity, not h^1.5 exactly: the fit sees a small offset
-    assert exponent == pytest.approx(1.5, abs=0.02)
-    parabolic = measure.Profile(edges, np.ones_like(z), h**2 - depth**2)
-    assert measure.bagnold_exponent(parabolic, bottom, bottom + h)[0] == pytest.approx(2.0, abs=0.03)
+    packing = np.clip(0.78 * (surface + 2.5 - z) / 5.0, 0.0, 0.78)
+    depth, sheared = surface - z, 3.0
+    u = np.where(depth > sheared, u_s - amplitude * np.abs(depth)**n,
+                 u_s - amplitude * sheared**n + amplitude * n * sheared**(n - 1) * (sheared - depth))
+    u = np.where(z < bottom + 2.0, 0.6 * u, u)
+    return measure.Profile(edges, packing, np.where(packing > 0, u, np.nan))
+
+
+def test_bagnold_fit_recovers_a_profile_with_a_dilute_surface_and_a_slow_bed_layer():
+    """u_s, A, n = 9, 0.08, 1.5 come back from the dense part, depth from the packing's surface.
+
+    The former fit (log-log of u_top - u against depth from the top edge of the last
+    half-dense slab, u_top read in that slab, inside the sheared surface layer) gave
+    n = 1.453 here. The default surface margin (1 diameter) lets two slabs of the 1.5-diameter
+    sheared layer into the fit: n is off by 6e-4, u_s by 3e-3."""
+    prof = bagnold_layer()
+    surface = measure.layer_height(prof)
+    assert surface == pytest.approx(42.3, abs=1e-9)
+    fit = measure.fit_bagnold(prof, bottom=2.0, surface=surface, diameter=2.0)
+    assert fit.exponent == pytest.approx(1.5, abs=1e-3)
+    assert fit.surface_velocity == pytest.approx(9.0, abs=5e-3)
+    assert fit.amplitude == pytest.approx(0.08, rel=1e-2)
+    assert fit.fit_range[0] > 6.0 and fit.fit_range[1] < 40.3
+    parabolic = measure.fit_bagnold(bagnold_layer(n=2.0, amplitude=0.005), 2.0, surface, 2.0)
+    assert parabolic.exponent == pytest.approx(2.0, abs=1e-3)
+    # the slow bed layer biases the fit once it is let in
+    assert measure.fit_bagnold(prof, 2.0, surface, 2.0, bed_layers=0.0).exponent < 1.4
+
+
+def test_bagnold_fit_rejects_too_few_slabs_and_a_surface_below_the_bed():
+    prof = bagnold_layer()
+    with pytest.raises(ValueError, match="surface"):
+        measure.fit_bagnold(prof, bottom=10.0, surface=5.0, diameter=2.0)
+    with pytest.raises(ValueError, match="fewer than 5 slabs"):
+        measure.fit_bagnold(prof, bottom=2.0, surface=12.0, diameter=2.0, bed_layers=3.0)
+    with pytest.raises(ValueError, match="diameter"):
+        measure.fit_bagnold(prof, bottom=2.0, surface=42.0, diameter=0.0)
 
 
 def test_contact_states_and_gamma_histogram():
@@ -268,5 +314,6 @@ def test_dry_thick_layer_flows_steadily_at_22_degrees_with_a_bagnold_profile(tmp
     assert run.summary()["state"] == "steady"
     prof = run.profiles.profile()
     bed_top = 2.0 * run.sim.scene.fixed_radii.max()
-    exponent, _ = measure.bagnold_exponent(prof, bed_top, measure.layer_height(prof))
-    assert exponent == pytest.approx(1.5, abs=0.3)
+    fit = measure.fit_bagnold(prof, bed_top, measure.layer_height(prof),
+                              2.0 * float(run.sim.scene.grains.radii.mean()))
+    assert fit.exponent == pytest.approx(1.5, abs=0.3)
