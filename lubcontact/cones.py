@@ -175,8 +175,17 @@ class Cones:
         return self.projector.polar(forces)
 
     def natural_residual(self, forces: np.ndarray, gradient: np.ndarray) -> float:
-        """``|lam - P_K(lam - grad)|``, the natural-map residual (Euclidean norm)."""
-        return float(np.linalg.norm(forces - self.project(forces - gradient)))
+        """``|lam - P_K(lam - grad)|``, the natural-map residual (Euclidean norm).
+
+        A UNION contact is measured on the piece its force lies on (pulled if
+        ``lam_n < 0``, else pushed): stationarity on a union of convex sets is
+        local, and the projection of ``lam - grad`` onto the whole union can
+        jump to the other piece at a point that is optimal on its own.
+        """
+        cones = self
+        if np.any(self.kinds == ConeKind.UNION):
+            cones = self.with_branches(self.split(forces)[0] < 0)
+        return float(np.linalg.norm(forces - cones.project(forces - gradient)))
 
     def velocity_violation(self, constraint: np.ndarray) -> np.ndarray:
         """How far each contact's ``g_c`` lies outside ``K_c*`` (>= 0, length units).

@@ -166,3 +166,21 @@ def test_polar_projection_rejects_union_contacts():
                   tangential=np.array([0]), tangent_dim=1)
     with pytest.raises(ValueError, match="UNION"):
         cones.project_polar(np.zeros(2))
+
+
+def test_union_natural_residual_is_measured_on_the_piece_of_the_force():
+    """A force on the edge of the pushed cone, stationary there (``lam - grad`` lies along the
+    outward normal), whose step ``lam - grad`` lands nearer the pulled half-line: the residual
+    on the union (2.73 here) would call an optimal point wrong; on its piece it is zero."""
+    cones = Cones(kinds=np.array([ConeKind.UNION], dtype=np.int8), mu=np.array([0.5]),
+                  tangential=np.array([0]), tangent_dim=1)
+    forces = np.array([1.0, 0.5])                      # |lam_t| = mu lam_n: the cone's edge
+    outward = np.array([-0.5, 1.0]) / np.sqrt(1.25)
+    gradient = -6.0 * outward
+    step = forces - gradient
+    assert np.linalg.norm(step - cones.project(step)) < np.linalg.norm(step - forces)
+    np.testing.assert_allclose(np.linalg.norm(forces - cones.project(step)), 2.73, atol=0.01)
+    assert cones.natural_residual(forces, gradient) < 1e-12
+    pulled = np.array([-1.0, 0.0])                     # pulled piece: lam_t = 0, any slip
+    assert cones.natural_residual(pulled, np.array([0.0, 2.0])) < 1e-12
+    assert cones.natural_residual(pulled, np.array([1.0, 0.0])) == pytest.approx(1.0)
