@@ -10,6 +10,7 @@ are listed in ``FINDINGS`` with the measured error and fail as ``xfail``
 """
 from __future__ import annotations
 
+import ctypes
 import time
 import warnings
 from functools import lru_cache
@@ -266,3 +267,13 @@ def test_check_hard_command_prints_the_matrix(capsys):
     assert "single_contact" in out and "pgd" in out and "ok" in out
     table = matrix(run_case(CASES["wedge_planes"], ["clarabel"], 1e-9, None), markdown=True)
     assert table.splitlines()[0].startswith("| case | clarabel |")
+
+
+def test_osqp_prints_nothing(capfd):
+    """OSQP's C code reports polishing on standard output ("Polishing not needed ..." on
+    `single_contact`); `osqp` silences it so command tables stay readable. The C library's
+    buffer is flushed before reading, or buffered text would escape the capture."""
+    result = solve(CASES["single_contact"].problem, "osqp", tol=1e-9)
+    assert result.status == CONVERGED
+    ctypes.CDLL(None).fflush(None)
+    assert "Polishing" not in capfd.readouterr().out

@@ -22,6 +22,10 @@ contacts are rejected.
 """
 from __future__ import annotations
 
+import contextlib
+import ctypes
+import os
+import sys
 import time
 from dataclasses import dataclass
 
@@ -167,6 +171,37 @@ def clarabel_direct(problem, *, tol: float = 1e-10, max_iter: int = 200, warm_st
                         info={"raw_status": raw, "polished": polished, "polish_time": polish_time})
 
 
+@contextlib.contextmanager
+def _silenced_stdout():
+    """Send what C code writes to file descriptor 1 to ``/dev/null`` for the block
+    (a no-op where standard output has no descriptor, e.g. some notebooks)."""
+    try:
+        descriptor = sys.stdout.fileno()
+    except (AttributeError, OSError, ValueError):
+        yield
+        return
+    sys.stdout.flush()
+    saved = os.dup(descriptor)
+    try:
+        with open(os.devnull, "w") as sink:
+            os.dup2(sink.fileno(), descriptor)
+            try:
+                yield
+            finally:
+                _flush_c_streams()
+    finally:
+        os.dup2(saved, descriptor)
+        os.close(saved)
+
+
+def _flush_c_streams() -> None:
+    """``fflush(NULL)``: empty the C library's buffers while they still go to ``/dev/null``."""
+    try:
+        ctypes.CDLL(None).fflush(None)
+    except (OSError, AttributeError):
+        pass
+
+
 @register("osqp")
 def osqp_method(problem, *, tol: float = 1e-10, max_iter: int = 100000, warm_start=None,
                 polish: bool = True) -> MethodOutput:
@@ -184,7 +219,8 @@ def osqp_method(problem, *, tol: float = 1e-10, max_iter: int = 100000, warm_sta
     if warm_start is not None:
         solver.warm_start(x=np.asarray(warm_start, dtype=float))
     built = time.perf_counter()
-    result = solver.solve(raise_error=False)
+    with _silenced_stdout():             # OSQP's C code prints its polishing notes
+        result = solver.solve(raise_error=False)
     done = time.perf_counter()
     raw = str(result.info.status)
     status = CONVERGED if raw == "solved" else INACCURATE if "inaccurate" in raw else \
