@@ -261,3 +261,90 @@ def test_the_exact_finish_leaves_frictional_and_unconverged_results_alone(fricti
     result = solve(problem, "apgd", tol=1e-14, max_iter=50)
     assert result.status == "max_iter" and "exact_finish" not in result.info
     assert result.iterations == 50
+
+
+# -- gluey + friction (UNION cones) in the compiled loop ------------------------------------------
+def compiled_projection(cones, forces):
+    """``P_K(forces)`` by :func:`lubcontact.solvers.kernels.project_cones` (2D cones)."""
+    from lubcontact.solvers.kernels import project_cones
+
+    projector = cones.projector
+    (cone_n, cone_t, cone_mu), (union_n, union_t, union_mu) = projector.pieces
+    out = np.empty_like(forces)
+    project_cones(forces, projector.lower, projector.upper, np.concatenate([cone_n, union_n]),
+                  np.concatenate([cone_t[:, 0], union_t[:, 0]]),
+                  np.concatenate([cone_mu, union_mu]),
+                  np.repeat([False, True], [cone_n.size, union_n.size]), out)
+    return out
+
+
+def test_compiled_projection_equals_cones_project_on_mixed_2d_cones():
+    """Random box/Coulomb/UNION mixes, plus the apex, cone edges and a tie (mu = 3/4 at
+    ``(n, t) = (-1, +-3)``: both pieces at distance 3, the friction cone wins)."""
+    rng = np.random.default_rng(7)
+    kinds = rng.choice(list(ConeKind), 600).astype(np.int8)
+    kinds[:6] = ConeKind.UNION
+    friction = np.flatnonzero((kinds == ConeKind.COULOMB) | (kinds == ConeKind.UNION))
+    mu = rng.choice([0.0, 0.3, 0.75, 1.0], kinds.size)
+    mu[:6] = 0.75
+    cones = Cones(kinds=kinds, mu=mu, tangential=friction, tangent_dim=1)
+    forces = rng.normal(size=cones.n_rows) * rng.choice([1e-3, 1.0, 1e3], cones.n_rows)
+    normal, tangential = cones.split(forces)
+    normal[:6] = [-1.0, -1.0, 0.0, 0.0, 4.0, -0.75]
+    # tie, tie, apex, n = 0, cone edge, polar edge
+    tangential[:6, 0] = [3.0, -3.0, 0.0, 1.0, 3.0, 1.0]
+    expected = cones.project(forces)
+    np.testing.assert_array_equal(compiled_projection(cones, forces), expected)
+    assert expected[0] > 0 and expected[1] > 0                         # ties go to the cone
+    union = cones.tangential[kinds[cones.tangential] == ConeKind.UNION]
+    pulled = expected[union] < 0
+    assert 0 < pulled.sum() < union.size                               # both pieces taken
+
+
+@pytest.fixture(scope="module")
+def gluey_problems():
+    """UNION problems: the hard case ``gamma_states_gluey_coulomb`` and a step of a 60-grain
+    settling pile with every contact at gamma_min (GlueyCoulomb, mu = 0.3), with references."""
+    from lubcontact.laws import GlueyCoulomb
+
+    law = GlueyCoulomb(0.3, gamma_min=-0.05)
+    simulation = Simulation(scenes.settling_pile(60, seed=3), law, 0.05, solver="apgd-jacobi",
+                            tol=1e-8, on_failure="ignore")
+    simulation.run(30)
+    contacts = find_contacts(simulation.scene, simulation.d_max)
+    pile = simulation.build_problem(contacts, law.cones(contacts, law.gamma_min(contacts)))
+    problems = [load_cases()["gamma_states_gluey_coulomb"].problem, pile]
+    return [(problem, solve(problem, "clarabel", tol=1e-10)) for problem in problems]
+
+
+@pytest.mark.parametrize("scaling", [False, True])
+def test_compiled_and_numpy_union_apgd_loops_agree(gluey_problems, scaling):
+    """The compiled loop and the numpy loop on the same data: same iterations, same forces
+    to rounding, both pushed and pulled contacts in the solution."""
+    from lubcontact.solvers.gradient import prepare, run_apgd, run_apgd_cones
+
+    for problem, _ in gluey_problems:
+        scaled = problem.normalized()
+        assert np.count_nonzero(scaled.cones.kinds == ConeKind.UNION) >= 3
+        data = prepare(scaled, scaling, "matrix")
+        z = np.zeros(scaled.n_rows)
+        plain, plain_status, plain_iterations, _ = run_apgd(data, z, 1e-10, 20000)
+        compiled, status, iterations, _ = run_apgd_cones(data, scaled.cones, z, 1e-10, 20000)
+        assert status == plain_status == "converged" and iterations == plain_iterations
+        scale = np.abs(plain.best).max()
+        assert np.abs(compiled.best - plain.best).max() <= 1e-10 * scale
+        normal = plain.best[: scaled.n_contacts]
+        assert np.any(normal < -1e-6 * scale) and np.any(normal > 1e-6 * scale)
+
+
+@pytest.mark.parametrize("method", ["apgd", "apgd-jacobi"])
+def test_union_apgd_runs_compiled_and_matches_clarabel(gluey_problems, method):
+    """``solve`` takes the compiled loop on 2D UNION problems (``factor``: the numpy loop);
+    both reach Clarabel's branch-rule solution."""
+    for problem, reference in gluey_problems:
+        compiled = solve(problem, method, tol=1e-10)
+        plain = solve(problem, method, tol=1e-10, operator="factor")
+        assert compiled.info["fused_kernel"] and not plain.info["fused_kernel"]
+        assert compiled.status == plain.status == reference.status == "converged"
+        for result in (compiled, plain):
+            assert velocity_error(problem, result.velocities, reference.velocities) <= ACCURACY

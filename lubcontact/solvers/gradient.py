@@ -48,10 +48,10 @@ Operator
 or matrix-free as ``L^T (L x)`` (``operator="factor"``). Measured on the
 10^4-grain pile (docs/benchmarks.md) both cost about the same per product
 (0.25 ms vs 0.22 ms with a CSR copy of ``L^T``). With ``"auto"``:
-frictionless problems and 2D friction cones assemble ``S W S`` (11 ms at
-10^4, from ``L S``) for the compiled kernels of :mod:`.kernels` and the
-active-set finish; other problems with friction cones (3D, UNION contacts)
-use the matrix-free product when the factor exists.
+frictionless problems and 2D friction cones (UNION contacts included)
+assemble ``S W S`` (11 ms at 10^4, from ``L S``) for the compiled kernels of
+:mod:`.kernels` and the active-set finish; problems with 3D friction cones use
+the matrix-free product when the factor exists.
 """
 from __future__ import annotations
 
@@ -80,7 +80,8 @@ def _box_kernel():
 
 
 def _cone_kernel():
-    """The compiled APGD loop with 2D friction cones, or None when numba is unavailable."""
+    """The compiled APGD loop with 2D friction (and UNION) cones, or None when numba is
+    unavailable."""
     try:
         from .kernels import apgd_cone2d
     except ImportError:
@@ -637,9 +638,9 @@ def _is_box(cones) -> bool:
 
 
 def _is_cone_2d(cones) -> bool:
-    """True when K is a product of a box and 2D friction cones (no UNION contact)."""
+    """True when K is a product of a box and 2D friction cones (Coulomb or UNION contacts)."""
     coulomb, union = cones.projector.pieces
-    return coulomb[0].size > 0 and union[0].size == 0 and cones.tangent_dim == 1
+    return coulomb[0].size + union[0].size > 0 and cones.tangent_dim == 1
 
 
 def _probe_lipschitz(data: DualData, z: np.ndarray) -> float:
@@ -652,7 +653,7 @@ def _probe_lipschitz(data: DualData, z: np.ndarray) -> float:
 
 def run_apgd_cones(data: DualData, cones, z: np.ndarray, tol: float, max_iter: int,
                    base: np.ndarray | None = None, every: int = 0):
-    """APGD in the compiled kernel :func:`.kernels.apgd_cone2d` (2D friction cones).
+    """APGD in the compiled kernel :func:`.kernels.apgd_cone2d` (2D friction and UNION cones).
 
     With ``every > 0`` and ``base`` (the iteration offset without shift) it
     solves Coulomb's problem, updating the shift every ``every`` iterations
@@ -661,12 +662,14 @@ def run_apgd_cones(data: DualData, cones, z: np.ndarray, tol: float, max_iter: i
     """
     kernel = _cone_kernel()
     matrix = data.assembled()
-    normal_rows, tangent_rows, mu = cones.projector.pieces[0]
+    (cone_n, cone_t, cone_mu), (union_n, union_t, union_mu) = cones.projector.pieces
+    union = np.repeat([False, True], [cone_n.size, union_n.size])
     lipschitz = _probe_lipschitz(data, z)
     best, best_residual, history, code, iterations, products, _, _, offset = kernel(
         matrix.indptr, matrix.indices, matrix.data, data.offset,
         data.offset if base is None else base, data.project.lower, data.project.upper,
-        normal_rows, tangent_rows[:, 0].copy(), mu, data.ratio, z, tol, max_iter, lipschitz,
+        np.concatenate([cone_n, union_n]), np.concatenate([cone_t[:, 0], union_t[:, 0]]),
+        np.concatenate([cone_mu, union_mu]), union, data.ratio, z, tol, max_iter, lipschitz,
         _DIVERGENCE_FACTOR, every)
     data.products += products
     tracker = _Tracker(data, tol)

@@ -6,8 +6,9 @@ projection, the residual, the restart test and the extrapolation: the box case
 bookkeeping), about twice as fast as the numpy loop on the 10^4-grain pile
 (docs/benchmarks.md); and 2D friction cones (optionally with the Coulomb shift
 updated inside, :func:`apgd_cone2d`), about 3x faster than the numpy loop on
-the 1000-grain frictional settling pile. The numpy loop remains the general
-path (3D cones, UNION contacts).
+the 1000-grain frictional settling pile; its projection also covers the 2D
+UNION contacts of gluey + friction steps. The numpy loop remains the general
+path (3D cones).
 
 Both loops share the steps of APGD through small helpers (start, backtracking
 test, residual record and stop, extrapolation with restart), inlined into the
@@ -158,39 +159,59 @@ def apgd_box(indptr, indices, values, b, lower, upper, ratio, sign, z0, tol, max
     return best, best_residual, history[:iterations], status, iterations, products, x, lipschitz
 
 
+@numba.njit(cache=True, inline="always")
+def friction_cone_point(normal, tangent, mu):
+    """Projection of ``(normal, tangent)`` onto the 2D friction cone ``{|t| <= mu n}``,
+    with the floating-point operations of :func:`lubcontact.cones.project_friction_cone`
+    (``size > 0`` where the boundary is reached: ``size = 0`` is inside or polar)."""
+    size = np.sqrt(tangent * tangent)
+    if size <= mu * normal and normal >= 0.0:
+        return normal, tangent
+    if mu * size <= -normal:
+        return 0.0, 0.0
+    scale = (normal + mu * size) / (1.0 + mu * mu)
+    return scale, (mu * scale / size) * tangent
+
+
 @numba.njit(cache=True)
-def project_cones(x, lower, upper, cone_n, cone_t, cone_mu, out):
+def project_cones(x, lower, upper, cone_n, cone_t, cone_mu, cone_union, out):
     """``out = P_K(x)``: rows clipped to ``[lower, upper]``, then each 2D friction cone
-    ``{|t| <= mu n}`` (normal row ``cone_n[c]``, tangential row ``cone_t[c]``) projected."""
+    ``{|t| <= mu n}`` (normal row ``cone_n[c]``, tangential row ``cone_t[c]``) projected.
+
+    A contact with ``cone_union[c]`` is a UNION contact: it goes to the nearer of its
+    friction cone and the pulled half-line ``{n <= 0, t = 0}``, ties to the cone (as
+    :class:`lubcontact.cones.ConeProjector`).
+    """
     for i in range(x.size):
         out[i] = min(max(x[i], lower[i]), upper[i])
     for c in range(cone_n.size):
         normal = x[cone_n[c]]
         tangent = x[cone_t[c]]
-        mu = cone_mu[c]
-        size = abs(tangent)
-        if size <= mu * normal and normal >= 0.0:
-            out[cone_n[c]] = normal
-            out[cone_t[c]] = tangent
-        elif mu * size <= -normal:
-            out[cone_n[c]] = 0.0
-            out[cone_t[c]] = 0.0
-        else:
-            scale = (normal + mu * size) / (1.0 + mu * mu)
-            out[cone_n[c]] = scale
-            out[cone_t[c]] = mu * scale * (1.0 if tangent > 0.0 else -1.0)
+        new_n, new_t = friction_cone_point(normal, tangent, cone_mu[c])
+        if cone_union[c]:
+            pull_n = min(normal, 0.0)
+            d_cone = (new_n - normal) * (new_n - normal) + (new_t - tangent) * (new_t - tangent)
+            d_pull = (pull_n - normal) * (pull_n - normal) + tangent * tangent
+            if not d_cone <= d_pull:
+                new_n, new_t = pull_n, 0.0
+        out[cone_n[c]] = new_n
+        out[cone_t[c]] = new_t
 
 
 @numba.njit(cache=True)
-def apgd_cone2d(indptr, indices, values, b, base, lower, upper, cone_n, cone_t, cone_mu, ratio,
-                z0, tol, max_iter, lipschitz, divergence, every):
+def apgd_cone2d(indptr, indices, values, b, base, lower, upper, cone_n, cone_t, cone_mu,
+                cone_union, ratio, z0, tol, max_iter, lipschitz, divergence, every):
     """APGD (restart, backtracking) on ``min 1/2 z.Wz + b.z, z in K`` with 2D friction cones.
 
     Mirrors :func:`lubcontact.solvers.gradient.run_apgd` (no active-set
-    bookkeeping). With ``every > 0`` the problem is Coulomb's, not its convex
-    relaxation: every ``every`` iterations the shift is updated from the
-    current iterate, ``b_n = base_n + mu |g_T|`` on the cone contacts (``base``:
-    the offset without shift, ``g = W z + b``), keeping the momentum (on the
+    bookkeeping), with :func:`project_cones` as the projection: contacts with
+    ``cone_union`` are UNION contacts, projected onto the nearer piece in the
+    steps and in the stopping measure alike (as the numpy loop's
+    :meth:`~lubcontact.solvers.gradient.DualData.residual`). With
+    ``every > 0`` the problem is Coulomb's, not its convex relaxation: every
+    ``every`` iterations the shift is updated from the current iterate,
+    ``b_n = base_n + mu |g_T|`` on the cone contacts (``base``: the offset
+    without shift, ``g = W z + b``), keeping the momentum (on the
     1000-grain settling pile, restarting it at each update stalled the residual
     at 2e-9; with updates every iteration and no restart it reached 1e-10);
     the stopping measure is then the natural residual with the shift
@@ -216,7 +237,7 @@ def apgd_cone2d(indptr, indices, values, b, base, lower, upper, cone_n, cone_t, 
         while True:
             for i in range(n):
                 trial[i] = y[i] - (wy[i] + b[i]) / lipschitz
-            project_cones(trial, lower, upper, cone_n, cone_t, cone_mu, x)
+            project_cones(trial, lower, upper, cone_n, cone_t, cone_mu, cone_union, x)
             matvec(indptr, indices, values, x, wx)
             products += 1
             if step_accepted(x, y, wx, wy, lipschitz):
@@ -230,7 +251,7 @@ def apgd_cone2d(indptr, indices, values, b, base, lower, upper, cone_n, cone_t, 
                     gradient[cone_t[c]])
         for i in range(n):
             trial[i] = x[i] * ratio[i] - gradient[i] / ratio[i]
-        project_cones(trial, lower, upper, cone_n, cone_t, cone_mu, projected)
+        project_cones(trial, lower, upper, cone_n, cone_t, cone_mu, cone_union, projected)
         squares = 0.0
         uphill = 0.0
         for i in range(n):
