@@ -182,10 +182,10 @@ def run_case(case: PileCase, methods, tol: float, reference_tol: float, max_iter
     problem = case.problem
     radius = float(np.mean(case.scene.grains.radii))
     reference, reference_wall = timed_solve(problem, "clarabel", reference_tol, None)
-    out(_row(case, "clarabel (ref)", reference, reference_wall, 0.0,
-             problem.gaps_after(reference.velocities).min(), radius))
+    reference_gaps = problem.gaps_after(reference.velocities)
+    out(_row(case, "clarabel (ref)", reference, reference_wall, 0.0, reference_gaps.min(), radius))
     closed = np.abs(problem.gaps) <= 1e-9 * radius
-    opening = closed & (problem.gaps_after(reference.velocities) > 1e-9 * radius)
+    opening = closed & (reference_gaps > 1e-9 * radius)
     out(f"# {case.label} N={case.n_grains}: {np.count_nonzero(opening)} of "
         f"{np.count_nonzero(closed)} closed contacts open in the step")
     totals = {}

@@ -11,7 +11,7 @@ benchmarks folder (:data:`lubcontact.problem_sets.BENCHMARKS`, or
 so. Each is solved by :func:`lubcontact.fixed_point.solve_coulomb` around
 every method of ``--methods`` (default: the fast ``apgd-jacobi`` and
 ``clarabel-direct``, Clarabel on the conic form: the cvxpy ``clarabel`` needs
-a step problem), with ``tol = tol_fp = --tol``. Iterative methods use inexact
+a step problem), with ``tol = --tol`` and ``tol_fp = --tol-fp`` (default ``--tol``). Iterative methods use inexact
 inner solves (``--forcing``) and ``--anderson``; interior-point methods
 (Clarabel, SCS, OSQP) solve each inner problem to ``--tol`` with Anderson 5.
 The error is the Siconos/FCLIB measure of MODEL.md section 6
@@ -245,25 +245,19 @@ class PileStep:
 def settling_step(n_grains: int, steps: int = PILE_STEPS, dt: float = PILE_DT,
                   seed: int = SETTLING_SEED) -> PileStep:
     """The step after ``steps`` steps of a frictional settling pile (module docstring)."""
-    from .contacts import find_contacts
     from .integrator import Simulation
     from .laws import Coulomb
-    from .problem_sets import matched_warm_start
     from .scenes import settling_pile
+    from .solvers import CONVERGED
 
     start = time.perf_counter()
     sim = Simulation(settling_pile(n_grains, seed=seed), Coulomb(FRICTION), dt,
                      solver="clarabel-direct", tol=1e-8, tol_fp=1e-6, on_failure="ignore")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        sim.run(steps - 1)
-        last = sim.step()
-    failed = sum(status != "converged" for status in sim.trajectory.status)
-    contacts = find_contacts(sim.scene, sim.d_max)
-    cones = sim.law.cones(contacts, sim.state.lookup(contacts.keys))
-    problem = sim.build_problem(contacts, cones)
-    forces, shift = matched_warm_start(last.problem, last.result.forces,
-                                       last.result.info["shift"], problem)
+        sim.run(steps)
+    failed = sum(status != CONVERGED for status in sim.trajectory.status)
+    _, _, problem, forces, shift = sim.next_problem()
     speed = float(np.abs(sim.scene.grains.velocities).max())
     note = (f"settling_pile({n_grains}, seed={seed}) after {steps} steps of dt = {dt:g} "
             f"(fixed point around clarabel-direct, {failed} steps not converged, "

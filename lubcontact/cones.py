@@ -131,6 +131,10 @@ class Cones:
     def join(self, normal: np.ndarray, tangential: np.ndarray) -> np.ndarray:
         return np.concatenate([normal, np.reshape(tangential, -1)])
 
+    def pulled(self, forces: np.ndarray) -> np.ndarray:
+        """The UNION contacts whose force lies on the pulled piece (``lam_n < 0``), shape (nc,)."""
+        return (self.kinds == ConeKind.UNION) & (forces[: self.count] < 0)
+
     def with_branches(self, pulled: np.ndarray) -> "Cones":
         """Convex cones with each UNION contact replaced by one of its pieces.
 
@@ -184,7 +188,7 @@ class Cones:
         """
         cones = self
         if np.any(self.kinds == ConeKind.UNION):
-            cones = self.with_branches(self.split(forces)[0] < 0)
+            cones = self.with_branches(self.pulled(forces))
         return float(np.linalg.norm(forces - cones.project(forces - gradient)))
 
     def velocity_violation(self, constraint: np.ndarray) -> np.ndarray:

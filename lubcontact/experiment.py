@@ -35,6 +35,7 @@ import numpy as np
 
 from . import flow, integrator, measure
 from .integrator import Simulation, StepReport
+from .io import save_npz
 from .laws import PairState
 from .scene import Grains, Scene
 from .solvers import CONVERGED, methods, solve
@@ -167,20 +168,6 @@ class RunConfig:
 
 
 # -- atomic files -------------------------------------------------------------------------------
-def save_npz(path: pathlib.Path, **arrays) -> None:
-    """Write ``arrays`` to ``path`` through a temporary file and a rename (atomic)."""
-    path = pathlib.Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    temporary = path.with_name(path.name + ".tmp")
-    try:
-        with open(temporary, "wb") as stream:
-            np.savez(stream, **arrays)
-        os.replace(temporary, path)
-    except BaseException:
-        temporary.unlink(missing_ok=True)
-        raise
-
-
 def save_text(path: pathlib.Path, text: str) -> None:
     """Write text atomically (temporary file, then rename)."""
     path = pathlib.Path(path)

@@ -183,7 +183,7 @@ def solve_coulomb(problem, method: str = "clarabel", *, tol: float = 1e-9, tol_f
     branches = _Branches(problem, warm_start, threshold=max(1e3 * tol, 1e-7))
     forces, inner, history = warm_start, 0, []
     joint_iterations = 0
-    if joint > 0 and branches.problem().cones.tangent_dim == 1:
+    if joint > 0 and _joint_applies(branches.problem()):
         forces, current, joint_iterations = _joint_phase(
             branches.problem(), branches.restrict(current), forces, tol,
             20000 if max_iter is None else max_iter, joint)
@@ -228,18 +228,25 @@ def _joint_phase(convex, shift: np.ndarray, warm_start: np.ndarray | None, tol: 
     Returns the forces and the shift ``mu |g_T|`` they map to (physical units)
     and the iterations done; the outer loop checks them.
     """
-    from .solvers.gradient import prepare, run_apgd_cones
+    from .solvers.gradient import _initial, prepare, run_apgd_cones
 
     scaled = convex.with_shift(shift).normalized()
     data = prepare(scaled, scaling=True, operator="matrix")
-    start = np.zeros(scaled.n_rows) if warm_start is None else warm_start / scaled.scaling.force
-    z = data.project(start / data.scale)
+    z = _initial(data, None if warm_start is None else warm_start / scaled.scaling.force,
+                 scaled.n_rows)
     base = scaled.offset.copy()
     base[: scaled.n_contacts] -= scaled.shift
     tracker, _, iterations, _ = run_apgd_cones(data, scaled.cones, z, tol, max_iter,
                                                base=data.scale * base, every=every)
     forces = tracker.best * data.scale * scaled.scaling.force
     return forces, coulomb_shift(convex, forces), iterations
+
+
+def _joint_applies(convex) -> bool:
+    """The joint phase runs in the compiled 2D cone loop: 2D friction cones and numba."""
+    from .solvers.gradient import _cone_kernel, _is_cone_2d
+
+    return _is_cone_2d(convex.cones) and _cone_kernel() is not None
 
 
 def _relative_change(new: np.ndarray, old: np.ndarray) -> float:
@@ -304,7 +311,7 @@ class _Branches:
         self.union = problem.cones.kinds == ConeKind.UNION
         self.pulled = np.zeros(problem.cones.count, dtype=bool)
         if warm_start is not None:
-            self.pulled = self.union & (warm_start[: problem.cones.count] < 0)
+            self.pulled = problem.cones.pulled(warm_start)
         self.threshold = threshold
         self.flips: list[int] = []
 
@@ -335,4 +342,3 @@ class _Branches:
         self.flips.append(int(np.count_nonzero(flip)))
         self.pulled ^= flip
         return bool(flip.any())
-

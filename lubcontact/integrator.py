@@ -205,18 +205,29 @@ class Simulation:
         normal = lookup_by_key(previous.keys, previous.normal, problem.keys)
         shift = lookup_by_key(previous.keys, previous.shift, problem.keys)
         tangential = lookup_by_key(previous.keys[previous.tangential_contacts], previous.tangential,
-                             problem.keys[cones.tangential], width=cones.tangent_dim)
+                                   problem.keys[cones.tangential], width=cones.tangent_dim)
         return cones.join(normal, tangential), shift
 
     # -- stepping --------------------------------------------------------------------------------
+    def next_problem(self):
+        """The coming step's problem and its warm start, without solving it.
+
+        Returns
+        -------
+        (Contacts, ndarray, StepProblem, ndarray or None, ndarray or None)
+            Contacts, their gamma, the step problem, and the previous step's
+            forces and shift matched by pair key (None without a previous step
+            or with ``warm_start=False``).
+        """
+        contacts = find_contacts(self.scene, self.d_max)
+        gamma = self.state.lookup(contacts.keys)
+        problem = self.build_problem(contacts, self.law.cones(contacts, gamma))
+        return (contacts, gamma, problem, *self._warm_start(problem))
+
     def step(self) -> StepReport:
         """Advance one time step; returns what the step computed."""
-        scene = self.scene
-        contacts = find_contacts(scene, self.d_max)
-        gamma = self.state.lookup(contacts.keys)
-        cones = self.law.cones(contacts, gamma)
-        problem = self.build_problem(contacts, cones)
-        guess, shift = self._warm_start(problem)
+        contacts, gamma, problem, guess, shift = self.next_problem()
+        cones = problem.cones
         result = self._solve(problem, self.solver, guess, shift, self.solver_options)
         if not result.success and self.on_failure == "fallback" and self.fallback_solver != self.solver:
             failed = result
@@ -229,8 +240,8 @@ class Simulation:
         self.state = PairState.from_contacts(contacts.keys, new_gamma)
         used_shift = result.info.get("shift", np.zeros(problem.n_contacts))
         self.previous = PreviousStep(keys=contacts.keys, normal=normal.copy(),
-                                       tangential_contacts=cones.tangential.copy(),
-                                       tangential=tangential.copy(), shift=np.asarray(used_shift))
+                                     tangential_contacts=cones.tangential.copy(),
+                                     tangential=tangential.copy(), shift=np.asarray(used_shift))
         report = StepReport(contacts=contacts, problem=problem, result=result, gamma=new_gamma,
                             gaps_after=problem.gaps_after(result.velocities))
         self._record(report)

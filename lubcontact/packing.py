@@ -28,6 +28,7 @@ from typing import Callable
 import numpy as np
 
 from . import checks
+from .io import save_npz
 from .scene import Grains, Scene
 
 _MAX_MOVES = 1000
@@ -334,8 +335,7 @@ def _settle(scene: Scene, path: Path | None, label: str, progress, *, dt: float,
     info = {"steps": steps, "max_speed": speed, "at_rest": bool(speed < speed_tol * g * dt),
             "seconds": time.perf_counter() - start}
     if path is not None:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        np.savez_compressed(path, positions=settled.grains.positions, **info)
+        save_npz(path, compressed=True, positions=settled.grains.positions, **info)
         partial.unlink(missing_ok=True)
     return settled, info
 
@@ -343,14 +343,10 @@ def _settle(scene: Scene, path: Path | None, label: str, progress, *, dt: float,
 def _save_settling(partial: Path | None, scene: Scene, steps: int, seconds: float,
                    speed: float) -> None:
     """Write the settling state so that an interrupted run resumes (atomic rename)."""
-    if partial is None:
-        return
-    partial.parent.mkdir(parents=True, exist_ok=True)
-    scratch = partial.with_name(partial.name + ".tmp.npz")
-    np.savez_compressed(scratch, positions=scene.grains.positions,
-                        velocities=scene.grains.velocities, steps=steps, seconds=seconds,
-                        max_speed=speed)
-    scratch.replace(partial)
+    if partial is not None:
+        save_npz(partial, compressed=True, positions=scene.grains.positions,
+                 velocities=scene.grains.velocities, steps=steps, seconds=seconds,
+                 max_speed=speed)
 
 
 def _resume_settling(scene: Scene, partial: Path | None) -> tuple[int, float, float]:

@@ -16,13 +16,16 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
 from functools import cached_property
-from typing import Self
+from typing import TYPE_CHECKING
 
 import numpy as np
 import scipy.sparse as sp
 
 from . import checks
 from .cones import Cones
+
+if TYPE_CHECKING:                       # typing.Self exists from Python 3.11
+    from typing import Self
 
 
 @dataclass

@@ -189,7 +189,7 @@ def matched_warm_start(previous: StepProblem, forces: np.ndarray, shift: np.ndar
     keys = previous.keys
     matched_normal = lookup_by_key(keys, normal, problem.keys)
     matched_tangential = lookup_by_key(keys[old.tangential], tangential, problem.keys[new.tangential],
-                                 width=new.tangent_dim)
+                                       width=new.tangent_dim)
     return new.join(matched_normal, matched_tangential), lookup_by_key(keys, shift, problem.keys)
 
 

@@ -291,9 +291,7 @@ def run_apgd(data: DualData, z: np.ndarray, tol: float, max_iter: int,
     tracker = _Tracker(data, tol)
     x_old = z.copy()
     wx_old = data.product(z)
-    probe = z + np.random.default_rng(0).uniform(-1.0, 1.0, z.size)
-    lipschitz = max(float(np.linalg.norm(data.product(probe) - wx_old) /
-                          np.linalg.norm(probe - z)), 1e-12)
+    lipschitz = _probe_lipschitz(data, z, wx_old)
     y, wy = z.copy(), wx_old.copy()
     theta = 1.0
     for k in range(1, max_iter + 1):
@@ -643,11 +641,13 @@ def _is_cone_2d(cones) -> bool:
     return coulomb[0].size + union[0].size > 0 and cones.tangent_dim == 1
 
 
-def _probe_lipschitz(data: DualData, z: np.ndarray) -> float:
-    """Starting Lipschitz estimate of the compiled loops: ``|W d| / |d|`` for a
-    deterministic random ``d`` (the loops' backtracking corrects it)."""
+def _probe_lipschitz(data: DualData, z: np.ndarray, product: np.ndarray | None = None) -> float:
+    """Starting Lipschitz estimate of the APGD loops: ``|W d| / |d|`` for a
+    deterministic random ``d`` (the loops' backtracking corrects it); ``product``
+    is ``W z`` when already computed."""
+    product = data.product(z) if product is None else product
     probe = z + np.random.default_rng(0).uniform(-1.0, 1.0, z.size)
-    return max(float(np.linalg.norm(data.product(probe) - data.product(z)) /
+    return max(float(np.linalg.norm(data.product(probe) - product) /
                      np.linalg.norm(probe - z)), 1e-12)
 
 

@@ -240,7 +240,7 @@ def _corrected(problem, layout, candidate, state, direction):
     norm_t, norm_slip = np.linalg.norm(tangential, axis=1), np.linalg.norm(g_t, axis=1)
     leaves = friction & (state == STICK) & (norm_t > layout.mu * normal)
     new_state[leaves] = SLIDE
-    new_direction[leaves] = _unit(tangential, fallback=tangential)[leaves]
+    new_direction[leaves] = _unit(tangential[leaves], fallback=np.zeros_like(tangential[leaves]))
     sliding = friction & (state == SLIDE)
     along = np.sum(direction * g_t, axis=1)
     new_state[sliding & (along > allowance)] = STICK

@@ -22,9 +22,9 @@ slower multithreaded factorisation, MODEL.md section 9) and equal absolute and
 relative gap/feasibility tolerances ``tol``. An interior-point gap ``tol`` only
 bounds velocities to about ``sqrt(tol)`` (worse at the friction-cone apex), so
 solutions are then polished on their active set
-(:mod:`lubcontact.solvers.polish`: frictionless, frictional and mixed
-problems; 3D problems with sliding contacts are left as they are) to reach
-velocities accurate to about 1e-12. ``info["polished"]`` says whether it was.
+(:mod:`lubcontact.solvers.polish`: frictionless, frictional, mixed and 3D
+problems, 3D sliding directions by Newton's method; a result whose active set
+does not settle is left as it is) to reach velocities accurate to about 1e-12. ``info["polished"]`` says whether it was.
 """
 from __future__ import annotations
 
@@ -114,7 +114,7 @@ def solve_branches(step: StepProblem, form: str, tol: float, max_iter: int, poly
     union = step.cones.kinds == ConeKind.UNION
     pulled = np.zeros(step.n_contacts, dtype=bool)
     if warm_start is not None:
-        pulled = union & (warm_start[: step.n_contacts] < 0)
+        pulled = step.cones.pulled(warm_start)
     threshold = max(1e3 * tol, 1e-7)
     flips, setup, solve_time, iterations = [], 0.0, 0.0, 0
     for _ in range(max_branch_rounds):
