@@ -63,9 +63,11 @@ def test_numbers_are_sane(tiny):
         assert all(0.0 <= s["success"] <= 1.0 for s in summary)
         assert min(s["time_sgm_rel"] for s in summary) == pytest.approx(1.0)
     for row in rows:
-        if row["status"] == "converged":
+        if row["status"] not in ("error", "skipped"):       # measured rows, whatever the status
             assert row["time_min_s"] <= row["time_s"] <= row["time_max_s"]
-            assert row["repeats"] == 2 and row["reproducible"]
+            assert row["reproducible"]
+            # a failure is penalised, not timed again: only converged solves are repeated
+            assert row["repeats"] == (2 if row["status"] == "converged" else 1)
     # the stored reference velocities of the pile agree with the fresh reference solve
     pile = next(r for r in data["instances"] if r["instance"] == "pile200_inelastic")
     assert pile["reference_status"] == "converged" and pile["reference_fclib_error"] < 1e-9

@@ -217,7 +217,7 @@ def settled():
 def test_settled_pile_is_at_rest_and_apgd_as_solves_it_in_one_factorisation(settled):
     """A 100-grain pile settled by the dynamics: its closed contacts carry load and stay closed."""
     scene, info, problem, reference = settled
-    assert info["at_rest"] and info["max_speed"] < 1e-6 * 0.04     # settle_pile: speed_tol g dt
+    assert info["at_rest"]
     radius = scene.grains.radii.min()
     closed = np.abs(problem.gaps) <= 1e-9 * radius
     opening = closed & (problem.gaps_after(reference.velocities) > 1e-9 * radius)

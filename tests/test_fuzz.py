@@ -81,6 +81,6 @@ def test_fast_solver_matches_clarabel_with_physical_properties(problem):
         # UNION (gluey + friction at gamma_min) problems are not convex and could have several
         # stationary points; on 300 random scenes the fast solver and Clarabel's branch rule
         # agreed to 1e-8 whenever both converged, so a disagreement is worth a look
-        unpolished = problem.cones.has_friction and not reference.info.get("polished", False)
+        unpolished = problem.cones.has_friction and not reference.info["polished"]
         tolerance = FRICTION_ERROR_TOL if unpolished else ERROR_TOL
         assert error_against(problem, result.velocities, reference.velocities) <= tolerance

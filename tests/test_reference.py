@@ -9,14 +9,17 @@ from reference.cases import CASES, load
 @pytest.mark.parametrize("name", sorted(CASES))
 def test_the_code_still_builds_the_stored_problem(name):
     """The piles come out of 80 solver steps: the solver's last bits (e.g. the exact linear solve
-    that polishes each step) move them by ~4e-12 of each array's scale; building a problem
-    differently moves them by far more. Hence an absolute tolerance of 1e-10 of the scale."""
+    that polishes each step) move them by up to 2.4e-11 of each array's scale (measured);
+    building a problem differently moves them by far more. Hence an absolute tolerance of 1e-10
+    of the scale for the piles; the other cases are built without a solver and must be exact."""
     stored, _ = load(name)
     rebuilt = CASES[name].problem()
+    relative_drift = 1e-10 if name.startswith("pile") else 0.0
     for key, value in stored.to_arrays().items():
         scale = float(np.max(np.abs(value))) if np.size(value) else 0.0
         np.testing.assert_allclose(rebuilt.to_arrays()[key], value, rtol=1e-12,
-                                   atol=max(1e-14, 1e-10 * scale), err_msg=f"{name}: {key} changed")
+                                   atol=max(1e-14, relative_drift * scale),
+                                   err_msg=f"{name}: {key} changed")
 
 
 @pytest.mark.parametrize("method", ["clarabel", "clarabel-dual"])
@@ -60,10 +63,10 @@ def test_frictional_and_mixed_solutions_are_polished_to_rounding(hard_cases, nam
     if method == "clarabel-direct" and not problem.cones.is_convex:
         pytest.skip("clarabel-direct takes convex cones only")
     polished = solve(problem, method, tol=1e-9)
-    raw = solve(problem, method, tol=1e-9, **({"polish": False} if method == "clarabel-direct" else {}))
     assert polished.status == "converged" and polished.info["polished"]
     assert polished.residual <= 1e-12
     if method == "clarabel-direct":
+        raw = solve(problem, method, tol=1e-9, polish=False)
         assert not raw.info["polished"] and raw.residual > 1e3 * polished.residual
 
 
@@ -78,7 +81,6 @@ def test_clarabel_direct_is_polished_like_the_cvxpy_reference(hard_cases, name):
     polished = solve(problem, "clarabel-direct", tol=1e-9)
     assert error_against(problem, raw.velocities, reference) > 1e-6
     assert error_against(problem, polished.velocities, reference) <= 1e-12
-    assert polished.info["polish_time"] <= polished.solve_time
 
 
 @pytest.mark.parametrize("name", ["glued_chain_free", "hex_box_glued"])
