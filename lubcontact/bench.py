@@ -24,6 +24,10 @@ solves each with every method. Errors are measured against the reference
 It then advances the pile one step with the reference velocities and solves
 the next step's problem cold and warm-started from each method's forces
 (matched by pair key), to compare iteration counts.
+
+``--condition`` also prints the condition number of the Delassus matrix on
+the reference's loaded rows (:func:`active_condition`), which sets how many
+iterations the gradient methods need on the pile.
 """
 from __future__ import annotations
 
@@ -158,6 +162,48 @@ def velocity_error(problem, velocities, reference) -> float:
     return float(np.sqrt(np.sum(mass * (velocities - reference) ** 2)) / scale)
 
 
+def active_condition(problem, forces: np.ndarray) -> tuple[float, int]:
+    """Condition number of ``W_AA``, the Delassus matrix on the rows that carry force.
+
+    Near the solution of a pile at rest the dual problem is the linear system
+    ``W_AA x_A = -b_A`` on these rows, and a gradient method converges at a
+    rate set by ``cond(W_AA)``: about ``1 - 1/cond`` per iteration for PGD,
+    ``1 - 1/sqrt(cond)`` for APGD. The extreme eigenvalues come from Lanczos
+    (``scipy.sparse.linalg.eigsh``), the smallest through a sparse LU of
+    ``W_AA`` (shift-invert at 0).
+
+    Parameters
+    ----------
+    problem : StepProblem
+    forces : ndarray, shape (n_rows,)
+        A solution; rows with ``|x_i| > 1e-12 max |x|`` are the loaded ones.
+
+    Returns
+    -------
+    (float, int)
+        ``cond(W_AA)`` (inf when ``W_AA`` is singular) and the number of loaded rows.
+    """
+    import scipy.sparse as sp
+    from scipy.sparse.linalg import LinearOperator, eigsh, splu
+
+    loaded = np.abs(forces) > 1e-12 * float(np.max(np.abs(forces), initial=0.0))
+    count = int(np.count_nonzero(loaded))
+    if count == 0:
+        return np.nan, 0
+    matrix = sp.csc_matrix(sp.csr_matrix(problem.delassus)[loaded][:, loaded])
+    if count <= 2:
+        eigenvalues = np.linalg.eigvalsh(matrix.toarray())
+        return float(eigenvalues[-1] / eigenvalues[0]) if eigenvalues[0] > 0 else np.inf, count
+    largest = eigsh(matrix, k=1, which="LA", return_eigenvectors=False)[0]
+    try:
+        inverse = splu(matrix)
+    except RuntimeError:                                    # exactly singular
+        return np.inf, count
+    inverse_operator = LinearOperator(matrix.shape, matvec=inverse.solve, dtype=float)
+    inverse_largest = eigsh(inverse_operator, k=1, which="LA", return_eigenvectors=False)[0]
+    return float(largest * inverse_largest) if inverse_largest > 0 else np.inf, count
+
+
 def timed_solve(problem, method: str, tol: float, max_iter: int | None, warm_start=None):
     from .solvers import solve
 
@@ -177,8 +223,11 @@ HEADER = (f"{'N':>6} {'nc':>6} {'pile':<5} {'method':<16} {'setup s':>8} {'solve
 
 
 def run_case(case: PileCase, methods, tol: float, reference_tol: float, max_iter, warm: bool,
-             out=print) -> dict:
-    """Solve one case with every method; print rows; return timings for the summary."""
+             out=print, condition: bool = False) -> dict:
+    """Solve one case with every method; print rows; return timings for the summary.
+
+    ``condition``: also print :func:`active_condition` of the reference solution.
+    """
     problem = case.problem
     radius = float(np.mean(case.scene.grains.radii))
     reference, reference_wall = timed_solve(problem, "clarabel", reference_tol, None)
@@ -188,6 +237,9 @@ def run_case(case: PileCase, methods, tol: float, reference_tol: float, max_iter
     opening = closed & (reference_gaps > 1e-9 * radius)
     out(f"# {case.label} N={case.n_grains}: {np.count_nonzero(opening)} of "
         f"{np.count_nonzero(closed)} closed contacts open in the step")
+    if condition:
+        value, count = active_condition(problem, reference.x)
+        out(f"# {case.label} N={case.n_grains}: cond(W_AA) = {value:.2e} on {count} loaded rows")
     totals = {}
     results = {}
     for method in methods:
@@ -261,6 +313,8 @@ def solvers_main(argv: list[str] | None = None) -> int:
                         help="settled piles built from this many settled copies side by side "
                              "(packing.settle_pile(tiles=...)); every size must be a multiple")
     parser.add_argument("--no-warm", action="store_true", help="skip the next-step re-solves")
+    parser.add_argument("--condition", action="store_true",
+                        help="print cond(W_AA) on the reference's loaded rows (active_condition)")
     args = parser.parse_args(argv)
     sizes = [int(s) for s in args.sizes.split(",") if s]
     methods = [m for m in args.methods.split(",") if m]
@@ -279,7 +333,7 @@ def solvers_main(argv: list[str] | None = None) -> int:
             timed_solve(cases[0].problem, "apgd-jacobi", 1e-3, None)
         for case in cases:
             measured = run_case(case, methods, args.tol, args.reference_tol, args.max_iter,
-                                not args.no_warm)
+                                not args.no_warm, condition=args.condition)
             summaries.append((case, measured))
     print("\nsummary")
     for case, measured in summaries:
