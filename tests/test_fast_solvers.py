@@ -377,3 +377,17 @@ def test_union_apgd_runs_compiled_and_matches_clarabel(gluey_problems, method):
         assert compiled.status == plain.status == reference.status == "converged"
         for result in (compiled, plain):
             assert velocity_error(problem, result.velocities, reference.velocities) <= ACCURACY
+
+
+def test_bench_solvers_prints_the_condition_and_a_converged_row(capsys):
+    """``lubcontact bench solvers --condition`` on a small deposited pile (CLI path, no timing)."""
+    from lubcontact.bench import solvers_main
+
+    assert solvers_main(["--sizes", "40", "--pile", "deposited", "--methods", "apgd-as",
+                         "--no-warm", "--condition", "--glued-fraction", "0"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    condition = [line for line in lines if "cond(W_AA)" in line]
+    assert len(condition) == 1
+    assert 1e2 < float(condition[0].split("= ")[1].split()[0]) < 1e4        # 9.27e+02 measured
+    row = next(line for line in lines if " apgd-as " in line)
+    assert row.split()[8] == "converged" and float(row.split()[9]) <= ACCURACY
