@@ -258,7 +258,7 @@ def settling_step(n_grains: int, steps: int = PILE_STEPS, dt: float = PILE_DT,
         sim.run(steps)
     failed = sum(status != CONVERGED for status in sim.trajectory.status)
     _, _, problem, forces, shift = sim.next_problem()
-    speed = float(np.abs(sim.scene.grains.velocities).max())
+    speed = float(np.max(np.linalg.norm(sim.scene.grains.velocities, axis=1)))
     note = (f"settling_pile({n_grains}, seed={seed}) after {steps} steps of dt = {dt:g} "
             f"(fixed point around clarabel-direct, {failed} steps not converged, "
             f"{time.perf_counter() - start:.1f} s), max speed {speed:.2f}")

@@ -187,7 +187,7 @@ class Cones:
         jump to the other piece at a point that is optimal on its own.
         """
         cones = self
-        if np.any(self.kinds == ConeKind.UNION):
+        if not self.is_convex:
             cones = self.with_branches(self.pulled(forces))
         return float(np.linalg.norm(forces - cones.project(forces - gradient)))
 

@@ -378,8 +378,8 @@ class FlowRun:
             data = dict(data)
         config = RunConfig.from_json(str(data["config"]))
         if steps is not None:
-            config.steps = int(steps)
-        config = RunConfig(**{**asdict(config), **changes})
+            changes = {**changes, "steps": int(steps)}
+        config = replace(config, **changes)
         run = cls(config, scene_from_arrays(data), path.parent if out_dir is None else out_dir)
         restore_simulation_state(run.sim, data)
         run.series = {name: list(data[f"series.{name}"]) for name in SERIES}
@@ -500,9 +500,8 @@ def initial_scene(config: RunConfig, out_dir: pathlib.Path | None = None,
 
 def settle(config: RunConfig, scene: Scene, progress: bool = False) -> Scene:
     """Sediment ``scene`` for ``config.settle_steps`` steps with ``config.settle_model``."""
-    settling = RunConfig(**{**asdict(config), "scene": "sedimentation", "model": config.settle_model,
-                            "steps": config.settle_steps, "cross_check_every": 0,
-                            "frame_every": 0})
+    settling = replace(config, scene="sedimentation", model=config.settle_model,
+                       steps=config.settle_steps, cross_check_every=0, frame_every=0)
     run = FlowRun(settling, scene)
     run.advance(settling.steps, progress)
     settled = run.sim.scene.copy()
@@ -618,8 +617,8 @@ def sweep(config: RunConfig, angles: np.ndarray, models: list[str], out_dir: pat
             if done.exists():
                 rows.append(json.loads(done.read_text()))
                 continue
-            run_config = RunConfig(**{**asdict(config), "model": model, "angle": float(angle),
-                                      "bed": str(out_dir / "bed.npz")})
+            run_config = replace(config, model=model, angle=float(angle),
+                                 bed=str(out_dir / "bed.npz"))
             checkpoint = run_dir / "checkpoint.npz"
             if checkpoint.exists():
                 run = FlowRun.resume(checkpoint, run_dir, steps=run_config.steps)

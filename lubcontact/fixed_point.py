@@ -183,9 +183,10 @@ def solve_coulomb(problem, method: str = "clarabel", *, tol: float = 1e-9, tol_f
     branches = _Branches(problem, warm_start, threshold=max(1e3 * tol, 1e-7))
     forces, inner, history = warm_start, 0, []
     joint_iterations = 0
-    if joint > 0 and _joint_applies(branches.problem()):
+    convex = branches.problem()
+    if joint > 0 and _joint_applies(convex):
         forces, current, joint_iterations = _joint_phase(
-            branches.problem(), branches.restrict(current), forces, tol,
+            convex, branches.restrict(current), forces, tol,
             20000 if max_iter is None else max_iter, joint)
         inner += joint_iterations
     shift_change = force_change = np.inf

@@ -18,6 +18,7 @@ from .laws import Law, PairState
 from .problem import StepProblem
 from .scene import Scene
 from .solvers import SolveResult, check_status, solve
+from .solvers import methods as solver_methods
 
 ON_FAILURE = ("raise", "warn", "ignore", "fallback")
 #: options of :func:`~lubcontact.fixed_point.solve_coulomb` itself, not passed to frictionless solves
@@ -155,6 +156,9 @@ class Simulation:
         self.solver_options = dict(solver_options or {})
         checks.require(on_failure in ON_FAILURE, "on_failure", f"must be one of {ON_FAILURE}", None)
         self.on_failure = on_failure
+        checks.require(fallback_solver in solver_methods(), "fallback_solver",
+                       f"must be a registered method ({', '.join(solver_methods())}), "
+                       f"got {fallback_solver!r}")
         self.fallback_solver = fallback_solver
         self.warm_start = warm_start
         self.fixed_point = fixed_point

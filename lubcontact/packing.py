@@ -315,11 +315,13 @@ def _settle(scene: Scene, path: Path | None, label: str, progress, *, dt: float,
     partial = None if path is None else path.with_suffix(".partial.npz")
     steps, elapsed, speed = _resume_settling(scene, partial)
     simulation = Simulation(scene, Inelastic(), dt, solver=solver, on_failure="fallback",
-                            fallback_solver=fallback_solver, solver_options={"max_iter": max_iter},
+                            fallback_solver=fallback_solver,
                             d_max=0.25 * float(scene.grains.radii.min()))
     start = time.perf_counter() - elapsed
     while steps < max_steps and speed >= speed_tol * g * dt:
-        simulation.solver = solver if speed < switch_speed * g * dt else fallback_solver
+        tail = speed < switch_speed * g * dt
+        simulation.solver = solver if tail else fallback_solver
+        simulation.solver_options = {"max_iter": max_iter} if tail else {}
         report = simulation.step()
         steps += 1
         speed = float(np.max(np.linalg.norm(simulation.scene.grains.velocities, axis=1)))

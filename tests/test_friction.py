@@ -3,6 +3,7 @@ import numpy as np
 import pytest
 
 from lubcontact import Grains, Scene, Schedule, Simulation, find_contacts, scenes, solvers
+from lubcontact.bench import velocity_error
 from lubcontact.cones import ConeKind
 from lubcontact.fixed_point import coulomb_error, solve_coulomb
 from lubcontact.laws import Coulomb, GlueyCoulomb
@@ -222,11 +223,6 @@ def settling_step():
     reference = solve_coulomb(problem, "clarabel", tol=1e-10, tol_fp=1e-10, max_outer=500)
     assert reference.success and problem.n_contacts >= 30
     return problem, reference
-
-
-def velocity_error(problem, velocities, reference):
-    scale = np.sqrt(np.sum(problem.mass * problem.free_velocity**2))
-    return np.sqrt(np.sum(problem.mass * (velocities - reference) ** 2)) / scale
 
 
 @pytest.mark.parametrize("joint", [0, 1, 5])

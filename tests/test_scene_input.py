@@ -40,6 +40,12 @@ def test_bad_time_step_names_dt():
             Simulation(scene, Inelastic(), dt)
 
 
+def test_unknown_fallback_solver_is_refused_before_any_step():
+    scene = Scene.create(two_disks())
+    with pytest.raises(ValueError, match=r"^fallback_solver: .*got 'clarabell'"):
+        Simulation(scene, Inelastic(), 1e-2, on_failure="fallback", fallback_solver="clarabell")
+
+
 @pytest.mark.parametrize("kwargs, field", [
     (dict(gravity=[0.0, np.nan]), "gravity"),
     (dict(gravity=[0.0, -1.0, 0.0]), "gravity"),

@@ -551,7 +551,7 @@ def finish_exactly(data: DualData, cones, tracker: _Tracker, status: str,
     if finish.exact is not None:
         residual = data.residual(finish.exact, data.product(finish.exact) + data.offset)
         tracker.history.append(residual)
-        tracker.best, tracker.best_residual = finish.exact, min(residual, tracker.best_residual)
+        tracker.best, tracker.best_residual = finish.exact, residual
     return {"exact_finish": finish.exact is not None, "finish_solves": finish.solves - solves}
 
 
@@ -583,8 +583,8 @@ def _empty(problem) -> MethodOutput | None:
 
 
 def _plain(run, problem, tol, max_iter, warm_start, scaling, operator) -> MethodOutput:
-    """A method without finish: set-up, warm-start test, then ``run(data, z, tol, max_iter)``
-    (returning tracker, status, iterations)."""
+    """A method without finish callback: set-up, warm-start test, then ``run(data, z, tol,
+    max_iter)`` (returning tracker, status, iterations), then :func:`_finalise`."""
     if (out := _empty(problem)) is not None:
         return out
     data, z, setup, start = _common(problem, warm_start, scaling, operator)
@@ -637,6 +637,7 @@ def _apgd(problem, tol, max_iter, warm_start, scaling, operator, active_set) -> 
         info.update(active_set_attempts=finish.attempts, active_set_solves=finish.solves)
         iterations += finish.solves
     return _finalise(problem, data, tracker, status, iterations, setup, start, info, finish)
+
 
 def _is_box(cones) -> bool:
     """True when K is a box (no friction cone): the fused kernel applies."""

@@ -139,8 +139,7 @@ def polish(problem: StepProblem, forces: np.ndarray, threshold: float = 1e-7,
 
 def _components(problem: StepProblem, layout: _Layout, vector: np.ndarray):
     """Normal part (nc,) and tangential part (nc, tangent_dim; zeros where none) of a row vector."""
-    tangential = np.where(layout.t_rows >= 0, vector[np.maximum(layout.t_rows, 0)], 0.0) \
-        if layout.t_rows.size else np.zeros(layout.t_rows.shape)
+    tangential = np.where(layout.t_rows >= 0, vector[np.maximum(layout.t_rows, 0)], 0.0)
     return vector[: problem.n_contacts], tangential
 
 
