@@ -7,7 +7,7 @@ Prints gamma at the inversion, the ungluing time and the error of the free fligh
 import numpy as np
 
 from lubcontact import GlueyLubrication, Simulation, scenes
-from lubcontact.report import format_table
+from lubcontact.bench.tables import format_table
 
 
 def run(dt: float, gamma_min=None) -> dict:

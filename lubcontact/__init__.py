@@ -1,10 +1,10 @@
 """lubcontact: rigid grains in a viscous fluid with the gluey contact model."""
-from .cones import ConeKind, Cones
-from .contacts import Contacts, find_contacts
-from .integrator import Simulation, Trajectory
-from .laws import GlueyLubrication, Inelastic, Law
-from .problem import StepProblem
-from .scene import Grains, Planes, Scene, Schedule
+from .problem.cones import ConeKind, Cones
+from .model.contacts import Contacts, find_contacts
+from .sim.simulation import Simulation, Trajectory
+from .model.laws import GlueyLubrication, Inelastic, Law
+from .problem.step import StepProblem
+from .model.scene import Grains, Planes, Scene, Schedule
 from .solvers import SolveResult, SolverError, methods, solve
 
 __version__ = "0.1.0"

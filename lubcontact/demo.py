@@ -15,9 +15,9 @@ from pathlib import Path
 import numpy as np
 
 from . import scenes
-from .integrator import Simulation
-from .laws import GlueyLubrication
-from .report import compare_methods, format_table
+from .sim.simulation import Simulation
+from .model.laws import GlueyLubrication
+from .bench.tables import compare_methods, format_table
 from .solvers import methods
 
 
@@ -116,7 +116,7 @@ def _plot_pile(path, sim, report):
 def flow_section(out: Path) -> str:
     """The inclined-flow demo when :mod:`lubcontact.experiment` provides one."""
     try:
-        experiment = importlib.import_module("lubcontact.experiment")
+        experiment = importlib.import_module("lubcontact.flow.experiment")
     except ModuleNotFoundError:
         return ""
     if not hasattr(experiment, "demo"):

@@ -2,7 +2,7 @@
 
 Use :func:`solve` with a registered method name; :func:`methods` lists them.
 """
-from .base import (CONVERGED, DIVERGED, FAILED, INACCURATE, MAX_ITER, STATUSES, SolveResult,
+from .registry import (CONVERGED, DIVERGED, FAILED, INACCURATE, MAX_ITER, STATUSES, SolveResult,
                    SolverError, SolverWarning, check_status, methods, register, solve)
 from . import reference  # noqa: F401  (registers the reference methods)
 from . import direct  # noqa: F401  (clarabel-direct, osqp, scs)

@@ -32,8 +32,8 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from ..cones import ConeKind
-from .base import CONVERGED, FAILED, INACCURATE, MAX_ITER, MethodOutput, register
+from ..problem.cones import ConeKind
+from .registry import CONVERGED, FAILED, INACCURATE, MAX_ITER, MethodOutput, register
 from .polish import polish as polish_active_set
 
 

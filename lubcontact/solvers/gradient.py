@@ -70,8 +70,8 @@ from typing import Callable
 import numpy as np
 import scipy.sparse as sp
 
-from ..cones import ConeKind
-from .base import CONVERGED, DIVERGED, MAX_ITER, MethodOutput, register
+from ..problem.cones import ConeKind
+from .registry import CONVERGED, DIVERGED, MAX_ITER, MethodOutput, register
 
 _DIVERGENCE_FACTOR = 1e12
 _REQUEST_FINISH = 3                      # kernel status: the active set has settled

@@ -49,8 +49,8 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from ..cones import ConeKind
-from ..problem import StepProblem
+from ..problem.cones import ConeKind
+from ..problem.step import StepProblem
 
 OPEN, HELD, STICK, SLIDE = 0, 1, 2, 3
 #: relative size of the rounding allowed in the velocity conditions (per row, ``1 + |b|``)

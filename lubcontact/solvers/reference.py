@@ -33,10 +33,10 @@ import time
 import cvxpy as cp
 import numpy as np
 
-from .. import symbolic
-from ..problem import StepProblem
-from ..cones import ConeKind
-from .base import CONVERGED, FAILED, INACCURATE, MAX_ITER, MethodOutput, register
+from ..problem import symbolic
+from ..problem.step import StepProblem
+from ..problem.cones import ConeKind
+from .registry import CONVERGED, FAILED, INACCURATE, MAX_ITER, MethodOutput, register
 from .polish import polish as polish_active_set
 
 _STATUS = {cp.OPTIMAL: CONVERGED, cp.OPTIMAL_INACCURATE: INACCURATE,

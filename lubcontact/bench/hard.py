@@ -1,0 +1,313 @@
+"""The hard-case suite runner: every registered solver on every hard case (``lubcontact check-hard``).
+
+The cases live in ``reference/hard`` (repository root). Each solve is judged
+in the units of the normalised problem (``StepProblem.normalized``: velocities
+by the free-velocity scale ``V``, lengths by ``dt V``, forces by ``m_ref V / dt``):
+
+- **error**: the larger of the velocity error (max norm, each degree of
+  freedom in its scaled unit) and the error of ``g = [D + s, 0] + dt H v``
+  (gaps after the step and tangential displacements, max norm, in ``dt V``),
+  against the exact answer when the case has one, else the Clarabel reference
+  (``clarabel``, tol 1e-10);
+- **properties** (with the final shift s for a fixed-point solve): no gap below ``-PROPERTY_TOL``; forces inside their cones
+  to ``CONE_TOL`` (relative to the largest force, at least 1); per-contact
+  complementarity ``|lam_c . g_c| <= PROPERTY_TOL`` (same relative measure);
+  kinetic energy not above the free velocity's (``ENERGY_TOL`` relative)
+  when zero velocity is admissible (to ``PROPERTY_TOL``): the contacts then
+  do no work, the step is a projection onto a convex set holding 0.
+
+Verdicts: ``ok`` (converged, error and properties within tolerance),
+``flagged`` (a non-converged status: acceptable, the caller is told),
+``wrong`` (converged but outside tolerance: a finding), ``rejected`` (a
+``ValueError`` for a problem the method does not support, e.g. non-convex
+cones for a conic solver), ``crash`` (any other exception, or a non-finite
+result).
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..solvers.coulomb import solve_coulomb
+from ..problem.step import StepProblem
+from ..solvers import CONVERGED, SolveResult, methods, solve
+
+REFERENCE_METHOD = "clarabel"
+REFERENCE_TOL = 1e-10
+ERROR_TOL = 1e-6
+#: against a frictional Clarabel reference that polishing could not refine (3D sliding contacts,
+#: solvers/polish.py): its velocities are only as good as its gap tolerance (docs/hard_cases.md)
+FRICTION_ERROR_TOL = 1e-5
+PROPERTY_TOL = 1e-6
+CONE_TOL = 1e-10
+ENERGY_TOL = 1e-6
+FIXED_POINT_TOL = 1e-10
+
+OK, FLAGGED, WRONG, REJECTED, CRASH = "ok", "flagged", "wrong", "rejected", "crash"
+VERDICTS = (OK, FLAGGED, WRONG, REJECTED, CRASH)
+
+
+def load_cases() -> dict:
+    """The hard cases (:mod:`lubcontact.bench.cases.hard`), by name."""
+    from .cases.hard import CASES
+
+    return CASES
+
+
+@dataclass
+class Cell:
+    """One solver on one case."""
+
+    case: str
+    solver: str
+    verdict: str
+    status: str = ""
+    error: float = float("nan")
+    iterations: int = 0
+    seconds: float = 0.0
+    failed: list[str] = field(default_factory=list)
+    message: str = ""
+    properties: dict = field(default_factory=dict)
+
+
+@dataclass
+class Expected:
+    """What a case's solves are compared with."""
+
+    velocities: np.ndarray | None
+    source: str                  # "exact", "reference" or "none"
+    reference: SolveResult | None
+
+
+def solve_case(problem: StepProblem, method: str, tol: float, max_iter: int | None = None,
+               fixed_point: bool = False) -> SolveResult:
+    """One solve of a case: the convex problem as given, or (``fixed_point``, frictional
+    problems) exact Coulomb friction by the fixed point on s started from ``s = 0``, as the
+    time stepper does (``info["shift"]`` holds the final shift)."""
+    if fixed_point and problem.cones.has_friction:
+        return solve_coulomb(problem.with_shift(np.zeros(problem.n_contacts)), method, tol=tol,
+                             tol_fp=FIXED_POINT_TOL, max_iter=max_iter)
+    return solve(problem, method, tol=tol, max_iter=max_iter)
+
+
+def expected_for(case, problem: StepProblem, fixed_point: bool = False) -> Expected:
+    """The exact velocities when the case has them, else the Clarabel reference's."""
+    if case.reference_fails and case.exact is None:
+        raise ValueError(f"{case.name}: a case whose reference fails needs an exact answer")
+    reference = solve_case(problem, REFERENCE_METHOD, REFERENCE_TOL, fixed_point=fixed_point)
+    if case.exact is not None:
+        return Expected(np.asarray(case.exact(problem), dtype=float), "exact", reference)
+    if reference.status == CONVERGED:
+        return Expected(reference.velocities, "reference", reference)
+    return Expected(None, "none", reference)
+
+
+def error_against(problem: StepProblem, velocities: np.ndarray, expected: np.ndarray) -> float:
+    """Scaled max-norm error of velocities and of ``g = [D + s, 0] + dt H v`` (module docstring)."""
+    scaling = problem.normalized().scaling
+    difference = velocities - expected
+    velocity_error = np.max(np.abs(difference) / scaling.velocity) if difference.size else 0.0
+    constraint = problem.dt * (problem.jacobian @ difference) / scaling.length
+    constraint_error = np.max(np.abs(constraint)) if constraint.size else 0.0
+    return float(max(velocity_error, constraint_error))
+
+
+def properties(problem: StepProblem, result: SolveResult) -> dict[str, float]:
+    """The scaled measures of a solve (module docstring); each must stay below its tolerance.
+
+    Returns
+    -------
+    dict
+        ``penetration`` (``-min gap`` after the step, in ``dt V``, >= 0),
+        ``cone`` (distance of the forces to their cones, relative),
+        ``complementarity`` (max ``|lam_c . g_c|``, relative) and
+        ``energy`` (relative kinetic-energy gain; 0 when zero velocity is not
+        admissible, where contacts may do work).
+    """
+    if "shift" in result.info:                      # a fixed-point solve: its own final shift
+        problem = problem.with_shift(result.info["shift"])
+    scaled = problem.normalized()
+    scaling = scaled.scaling
+    forces = result.forces / scaling.force
+    velocities = result.velocities / scaling.velocity
+    cones = scaled.cones
+    force_size = max(1.0, float(np.max(np.abs(forces)))) if forces.size else 1.0
+    out = dict(penetration=0.0, cone=0.0, complementarity=0.0, energy=0.0)
+    if forces.size:
+        gaps = scaled.gaps_after(velocities)
+        out["penetration"] = float(max(0.0, -gaps.min())) if gaps.size else 0.0
+        out["cone"] = float(np.max(np.abs(forces - cones.project(forces)))) / force_size
+        g = scaled.constraint_values(velocities)
+        out["complementarity"] = float(np.max(np.abs(_per_contact_dot(cones, forces, g)))) / force_size
+    if _zero_admissible(scaled, forces):
+        free = float(scaled.free_velocity @ scaled.free_velocity)
+        gain = float(velocities @ velocities) - free
+        out["energy"] = max(0.0, gain) / max(free, 1e-300)
+    return out
+
+
+def _per_contact_dot(cones, forces: np.ndarray, g: np.ndarray) -> np.ndarray:
+    """``lam_c . g_c`` per contact (normal plus tangential components), shape (nc,)."""
+    normal_f, tangential_f = cones.split(forces)
+    normal_g, tangential_g = cones.split(g)
+    dot = normal_f * normal_g
+    if cones.has_friction:
+        dot[cones.tangential] += np.sum(tangential_f * tangential_g, axis=1)
+    return dot
+
+
+def _zero_admissible(scaled: StepProblem, forces: np.ndarray) -> bool:
+    """Whether ``v = 0`` satisfies every constraint to ``PROPERTY_TOL`` (scaled lengths), UNION
+    contacts on the branch of their force; rounding-level overlaps of touching grains pass."""
+    cones = scaled.cones
+    if cones.count == 0:
+        return True
+    if not cones.is_convex:
+        cones = cones.with_branches(forces[: cones.count] < 0)
+    return bool(np.all(cones.velocity_violation(scaled.constant_rows) <= PROPERTY_TOL))
+
+
+def judge(case, problem: StepProblem, expected: Expected, result: SolveResult, seconds: float) -> Cell:
+    """The verdict of one finished solve."""
+    cell = Cell(case.name, result.method, OK, result.status, iterations=int(result.iterations),
+                seconds=seconds)
+    if not (np.all(np.isfinite(result.forces)) and np.all(np.isfinite(result.velocities))):
+        cell.verdict, cell.message = CRASH, "non-finite forces or velocities"
+        return cell
+    if expected.velocities is not None:
+        cell.error = error_against(problem, result.velocities, expected.velocities)
+    cell.properties = properties(problem, result)
+    tolerance = error_tolerance(problem, expected)
+    limits = dict(penetration=PROPERTY_TOL, cone=CONE_TOL, complementarity=PROPERTY_TOL,
+                  energy=ENERGY_TOL)
+    cell.failed = [name for name, value in cell.properties.items() if not value <= limits[name]]
+    if cell.error > tolerance:
+        cell.failed.insert(0, "error")
+    if case.must_flag:
+        cell.failed.insert(0, "must_flag")
+    if result.status != CONVERGED:
+        cell.verdict = FLAGGED
+    elif cell.failed:
+        cell.verdict = WRONG
+    return cell
+
+
+def error_tolerance(problem: StepProblem, expected: Expected) -> float:
+    """``ERROR_TOL``, or ``FRICTION_ERROR_TOL`` against an unpolished frictional Clarabel reference."""
+    if expected.source == "reference" and problem.cones.has_friction \
+            and not expected.reference.info.get("polished", False):
+        return FRICTION_ERROR_TOL
+    return ERROR_TOL
+
+
+def run_case(case, solvers: list[str], tol: float, max_iter: int | None,
+             fixed_point: bool = False) -> list[Cell]:
+    """Every solver of ``solvers`` on one case (see :func:`solve_case` for ``fixed_point``)."""
+    problem = case.problem
+    expected = expected_for(case, problem, fixed_point)
+    cells = []
+    for name in solvers:
+        start = time.perf_counter()
+        try:
+            result = solve_case(problem, name, tol, max_iter, fixed_point)
+        except ValueError as exc:
+            cells.append(Cell(case.name, name, REJECTED, message=str(exc).splitlines()[0]))
+            continue
+        except Exception as exc:  # noqa: BLE001 -- a crash is a verdict, reported, not hidden
+            cells.append(Cell(case.name, name, CRASH, message=f"{type(exc).__name__}: {exc}"))
+            continue
+        cells.append(judge(case, problem, expected, result, time.perf_counter() - start))
+    return cells
+
+
+def run_suite(case_names: list[str] | None = None, solvers: list[str] | None = None,
+              tol: float = 1e-9, max_iter: int | None = None,
+              fixed_point: bool = False) -> list[Cell]:
+    """Run the suite; ``None`` means every case / every registered method.
+
+    With ``fixed_point`` only the frictional cases run, through the fixed point on s."""
+    cases = load_cases()
+    names = list(cases) if case_names is None else case_names
+    unknown = [n for n in names if n not in cases]
+    if unknown:
+        raise ValueError(f"cases: unknown {unknown}; known: {', '.join(cases)}")
+    solvers = methods() if solvers is None else solvers
+    if fixed_point:
+        names = [n for n in names if cases[n].problem.cones.has_friction]
+    return [cell for name in names
+            for cell in run_case(cases[name], solvers, tol, max_iter, fixed_point)]
+
+
+# -- reporting ---------------------------------------------------------------------------------------
+def cell_text(cell: Cell) -> str:
+    """``verdict error/iterations`` (``status`` shown for flagged cells)."""
+    if cell.verdict in (REJECTED, CRASH):
+        return cell.verdict
+    error = "-" if np.isnan(cell.error) else f"{cell.error:.0e}"
+    label = cell.status if cell.verdict == FLAGGED else cell.verdict
+    extra = "" if cell.verdict != WRONG else "!" + ",".join(cell.failed)
+    return f"{label} {error}/{cell.iterations}{extra}"
+
+
+def matrix(cells: list[Cell], markdown: bool = False) -> str:
+    """The case x solver table."""
+    cases = list(dict.fromkeys(c.case for c in cells))
+    solvers = list(dict.fromkeys(c.solver for c in cells))
+    by_key = {(c.case, c.solver): c for c in cells}
+    marked = {name for name, case in load_cases().items() if case.reference_fails}
+    rows = [["case"] + solvers] + [[case + ("*" if case in marked else "")] +
+                                   [cell_text(by_key[case, s]) for s in solvers] for case in cases]
+    if markdown:
+        lines = ["| " + " | ".join(row) + " |" for row in rows]
+        lines.insert(1, "|" + "---|" * len(rows[0]))
+        return "\n".join(lines)
+    widths = [max(len(row[k]) for row in rows) for k in range(len(rows[0]))]
+    return "\n".join("  ".join(text.ljust(w) for text, w in zip(row, widths)).rstrip() for row in rows)
+
+
+def summary(cells: list[Cell]) -> str:
+    """Counts per verdict and the details of every wrong, rejected or crashed cell."""
+    counts = {v: sum(c.verdict == v for c in cells) for v in VERDICTS}
+    lines = [", ".join(f"{v}: {n}" for v, n in counts.items())]
+    for cell in cells:
+        if cell.verdict == WRONG:
+            measures = ", ".join(f"{k} {v:.1e}" for k, v in cell.properties.items() if v > 0)
+            lines.append(f"  wrong    {cell.case} / {cell.solver}: error {cell.error:.2e} "
+                         f"(failed: {', '.join(cell.failed)}; {measures})")
+        elif cell.verdict in (REJECTED, CRASH):
+            lines.append(f"  {cell.verdict:<8} {cell.case} / {cell.solver}: {cell.message}")
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``lubcontact check-hard``: print the case x solver matrix; exit 1 on a wrong or crashed cell."""
+    parser = argparse.ArgumentParser(prog="lubcontact check-hard", description=__doc__.splitlines()[0])
+    parser.add_argument("--cases", help="comma-separated case names (default: all)")
+    parser.add_argument("--solvers", help="comma-separated method names (default: all registered)")
+    parser.add_argument("--tol", type=float, default=1e-9, help="solver tolerance (default 1e-9)")
+    parser.add_argument("--max-iter", type=int, default=None, help="iteration cap (method default)")
+    parser.add_argument("--fixed-point", action="store_true",
+                        help="frictional cases only, exact Coulomb by the fixed point on s from s = 0")
+    parser.add_argument("--markdown", action="store_true", help="print the matrix as a markdown table")
+    parser.add_argument("--list", action="store_true", help="list the cases and exit")
+    args = parser.parse_args(argv)
+    if args.list:
+        for name, case in load_cases().items():
+            print(f"{name}\n    hard:     {case.hard}\n    expected: {case.expected}")
+        return 0
+    split = (lambda text: None if text is None else [s.strip() for s in text.split(",") if s.strip()])
+    start = time.perf_counter()
+    cells = run_suite(split(args.cases), split(args.solvers), args.tol, args.max_iter,
+                      args.fixed_point)
+    print(matrix(cells, markdown=args.markdown))
+    print()
+    print(summary(cells))
+    print(f"({len(cells)} solves in {time.perf_counter() - start:.1f} s; cell = verdict or status, "
+          "scaled error / iterations; * = reference marked unreliable (reference_fails), "
+          "checked against the exact answer)")
+    return int(any(c.verdict in (WRONG, CRASH) for c in cells))

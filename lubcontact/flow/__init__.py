@@ -1,0 +1,1 @@
+"""The inclined-flow experiment: runs with checkpoints, measurements, plots and sweeps (tooling)."""

@@ -1,0 +1,360 @@
+"""Measurements of a periodic layer flowing along x (MODEL.md section 8).
+
+Profiles are exact area averages over horizontal slabs: a disk of centre
+height ``y_i`` and radius ``r_i`` covers the area ``A_i(k)`` of slab ``k``
+(``z_k <= y < z_{k+1}``), computed in closed form. With the period ``L``:
+
+- packing fraction ``phi(z_k) = sum_i A_i(k) / (L dz)``;
+- velocity ``u(z_k) = sum_i A_i(k) v_x,i / sum_i A_i(k)`` (area-weighted);
+- flow rate (area flux per unit depth, length^2 / time)
+  ``Q = int phi u dz = sum_i pi r_i^2 v_x,i / L``.
+
+Contacts are classified by their gluey state after a step: *unglued*
+(``gamma = 0``), *glued* (``gamma_min < gamma < 0``, lubricated) and
+*frictional* (``gamma = gamma_min``, asperities touch); only contacts that
+carry a force or are glued count (a candidate with an open gap does not).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import optimize
+
+from .. import checks
+from ..model.scene import Scene
+
+STATES = ("unglued", "glued", "frictional")
+
+
+def disk_area_below(height: np.ndarray, radius: np.ndarray) -> np.ndarray:
+    """Area of a disk of radius ``r`` below a line at ``height`` above its centre.
+
+    ``r^2 (asin(u) + u sqrt(1 - u^2) + pi/2)`` with ``u = clip(height / r, -1, 1)``.
+    Broadcasts ``height`` against ``radius``.
+    """
+    u = np.clip(height / radius, -1.0, 1.0)
+    return radius**2 * (np.arcsin(u) + u * np.sqrt(1.0 - u * u) + 0.5 * np.pi)
+
+
+def slab_areas(heights: np.ndarray, radii: np.ndarray, edges: np.ndarray) -> np.ndarray:
+    """Area of each disk inside each slab ``[edges[k], edges[k+1])``, shape (N, K)."""
+    below = disk_area_below(edges[None, :] - heights[:, None], radii[:, None])
+    return np.diff(below, axis=1)
+
+
+@dataclass
+class Profile:
+    """Depth profiles of a layer (heights measured from the plane ``y = 0``).
+
+    Attributes
+    ----------
+    edges : ndarray, shape (K + 1,)
+        Slab boundaries (length).
+    packing : ndarray, shape (K,)
+        Area fraction of grains per slab.
+    velocity : ndarray, shape (K,)
+        Area-weighted mean downhill velocity per slab (length / time; NaN in
+        empty slabs).
+    """
+
+    edges: np.ndarray
+    packing: np.ndarray
+    velocity: np.ndarray
+
+    @property
+    def centres(self) -> np.ndarray:
+        return 0.5 * (self.edges[1:] + self.edges[:-1])
+
+
+@dataclass
+class ProfileAccumulator:
+    """Time average of profiles over samples (sums of areas and area x velocity).
+
+    Parameters
+    ----------
+    edges : ndarray, shape (K + 1,)
+        Slab boundaries (length), increasing.
+    period : float
+        Length of the periodic cell along x.
+    """
+
+    edges: np.ndarray
+    period: float
+    area: np.ndarray = field(default=None)
+    momentum: np.ndarray = field(default=None)
+    samples: int = 0
+
+    def __post_init__(self):
+        self.edges = checks.as_array("edges", self.edges, shape=(None,))
+        checks.require(self.edges.size >= 2 and bool(np.all(np.diff(self.edges) > 0)), "edges",
+                       "must be increasing with at least two entries", self.edges)
+        self.period = checks.positive_scalar("period", self.period)
+        k = self.edges.size - 1
+        self.area = np.zeros(k) if self.area is None else np.asarray(self.area, dtype=float)
+        self.momentum = np.zeros(k) if self.momentum is None else np.asarray(self.momentum, float)
+
+    def add(self, scene: Scene) -> None:
+        """Accumulate the current state of ``scene``.
+
+        The grid grows upwards (slabs as wide as its top one) to cover every
+        grain: a flowing layer dilates above its settled height, and a grid cut
+        below the free surface would hide the dilute surface layer.
+        """
+        grains = scene.grains
+        self._cover(float(np.max(grains.positions[:, 1] + grains.radii, initial=self.edges[-1])))
+        areas = slab_areas(grains.positions[:, 1], grains.radii, self.edges)
+        self.area += areas.sum(axis=0)
+        self.momentum += areas.T @ grains.velocities[:, 0]
+        self.samples += 1
+
+    def profile(self) -> Profile:
+        """The time-averaged profile of the samples so far."""
+        widths = np.diff(self.edges)
+        count = max(self.samples, 1)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            velocity = np.where(self.area > 0, self.momentum / self.area, np.nan)
+        return Profile(edges=self.edges.copy(), packing=self.area / (count * self.period * widths),
+                       velocity=velocity)
+
+    def _cover(self, top: float) -> None:
+        """Append empty slabs, as wide as the top one, until the grid reaches ``top``."""
+        if top <= self.edges[-1]:
+            return
+        width = self.edges[-1] - self.edges[-2]
+        extra = int(np.ceil((top - self.edges[-1]) / width))
+        self.edges = np.concatenate([self.edges, self.edges[-1] + width * np.arange(1, extra + 1)])
+        self.area = np.concatenate([self.area, np.zeros(extra)])
+        self.momentum = np.concatenate([self.momentum, np.zeros(extra)])
+
+    def reset(self) -> None:
+        self.area[:] = 0.0
+        self.momentum[:] = 0.0
+        self.samples = 0
+
+
+def profile(scene: Scene, edges: np.ndarray) -> Profile:
+    """The instantaneous profile of a periodic scene."""
+    accumulator = ProfileAccumulator(edges, _period(scene))
+    accumulator.add(scene)
+    return accumulator.profile()
+
+
+def _period(scene: Scene) -> float:
+    checks.require(scene.period is not None, "scene.period", "measurements need a periodic scene",
+                   None)
+    return float(scene.period)
+
+
+def flow_rate(scene: Scene) -> float:
+    """``Q = sum_i pi r_i^2 v_x,i / L``: grain area crossing a section per unit time."""
+    grains = scene.grains
+    return float(np.pi * grains.radii**2 @ grains.velocities[:, 0] / _period(scene))
+
+
+def kinetic_energy(scene: Scene) -> float:
+    """Translational plus rotational kinetic energy of the free grains."""
+    grains = scene.grains
+    return float(0.5 * grains.masses @ np.sum(grains.velocities**2, axis=1)
+                 + 0.5 * grains.inertias @ np.sum(grains.spins**2, axis=1))
+
+
+def contact_states(gamma: np.ndarray, gamma_min: np.ndarray, active: np.ndarray) -> np.ndarray:
+    """Counts of active contacts per state ``(unglued, glued, frictional)``, shape (3,).
+
+    Parameters
+    ----------
+    gamma, gamma_min : ndarray, shape (nc,)
+        Gluey state after the step and its floor (``-inf`` if none).
+    active : ndarray of bool, shape (nc,)
+        Contacts that carry a force or are glued.
+    """
+    frictional = active & np.isfinite(gamma_min) & (gamma <= gamma_min)
+    glued = active & (gamma < 0) & ~frictional
+    unglued = active & (gamma == 0)
+    return np.array([np.count_nonzero(unglued), np.count_nonzero(glued),
+                     np.count_nonzero(frictional)])
+
+
+def gamma_histogram(gamma: np.ndarray, gamma_min: np.ndarray, bins: int = 20) -> np.ndarray:
+    """Histogram of ``gamma / gamma_min`` in ``[0, 1]`` over glued contacts, shape (bins,).
+
+    0 is lubricated (just glued), 1 is frictional (at the floor).
+    """
+    glued = (gamma < 0) & np.isfinite(gamma_min)
+    ratio = gamma[glued] / gamma_min[glued]
+    return np.histogram(np.clip(ratio, 0.0, 1.0), bins=bins, range=(0.0, 1.0))[0]
+
+
+def layer_height(prof: Profile, fraction: float = 0.5) -> float:
+    """Free-surface height: where the packing falls to ``fraction`` of the bulk packing (length).
+
+    The bulk packing is the median over the occupied slabs; the crossing above
+    the highest slab at or over the threshold is interpolated linearly between
+    slab centres.
+
+    Raises
+    ------
+    ValueError
+        If the top slab of the grid is still at or over the threshold: the
+        surface lies above the grid and cannot be located.
+    """
+    occupied = prof.packing > 0
+    checks.require(bool(np.any(occupied)), "prof", "the profile holds no grain", 0)
+    threshold = fraction * float(np.median(prof.packing[occupied]))
+    last = int(np.flatnonzero(prof.packing >= threshold)[-1])
+    checks.require(last + 1 < prof.packing.size, "prof",
+                   "the top slab is still dense: the free surface lies above the profile grid",
+                   prof.packing[-1])
+    z, phi = prof.centres, prof.packing
+    weight = (phi[last] - threshold) / (phi[last] - phi[last + 1])
+    return float(z[last] + weight * (z[last + 1] - z[last]))
+
+
+@dataclass
+class BagnoldFit:
+    """Least-squares fit of ``u(z) = u_s - A (h - z)^n`` (:func:`fit_bagnold`).
+
+    Attributes
+    ----------
+    exponent : float
+        ``n`` (Bagnold: 3/2).
+    exponent_error : float
+        Standard error of ``n`` from the fit's Jacobian, with slabs taken as
+        independent (they are not quite: a lower bound).
+    surface_velocity : float
+        ``u_s`` (length / time), fitted, not read from a slab.
+    amplitude : float
+        ``A`` (length^(1 - n) / time).
+    surface : float
+        ``h``, the free surface the depth is measured from (length).
+    fit_range : (float, float)
+        Heights of the lowest and highest slab centre used (length).
+    slabs : int
+        Number of slabs fitted.
+    rms_residual : float
+        Root mean square of ``u - fit`` over those slabs (length / time).
+    """
+
+    exponent: float
+    exponent_error: float
+    surface_velocity: float
+    amplitude: float
+    surface: float
+    fit_range: tuple[float, float]
+    slabs: int
+    rms_residual: float
+
+
+EXPONENT_BOUNDS = (0.2, 5.0)
+
+
+def _bagnold_linear_part(depth: np.ndarray, u: np.ndarray, exponent: float):
+    """Best ``(u_s, A)`` for a given exponent (linear least squares) and the residual."""
+    design = np.stack([np.ones_like(depth), -depth**exponent], axis=1)
+    coefficients = np.linalg.lstsq(design, u, rcond=None)[0]
+    return coefficients, u - design @ coefficients
+
+
+def fit_bagnold(prof: Profile, bottom: float, surface: float, diameter: float, *,
+                bed_layers: float = 2.0, surface_layers: float = 1.0) -> BagnoldFit:
+    """Fit ``u(z) = u_s - A (h - z)^n`` on the dense part of a time-averaged profile.
+
+    ``u_s``, ``A`` and ``n`` are free (least squares on ``u`` itself, not on
+    ``log(u_s - u)``, so slabs near the surface where ``u_s - u`` is small and
+    noisy carry no excess weight); the depth is measured from the free surface
+    ``h`` of the packing profile (:func:`layer_height`), not from the top grain.
+    Slabs within ``bed_layers`` diameters of the bed top (the layers that feel
+    the bed) and within ``surface_layers`` diameters of ``h`` (the dilute
+    surface layer) are left out.
+
+    Parameters
+    ----------
+    prof : Profile
+        A time-averaged profile.
+    bottom : float
+        Height of the bed top (length).
+    surface : float
+        Free-surface height ``h`` (length).
+    diameter : float
+        Mean grain diameter (length), the unit of the margins.
+    bed_layers, surface_layers : float
+        Margins left out at the bed and below the surface (grain diameters).
+
+    Returns
+    -------
+    BagnoldFit
+    """
+    checks.require(surface > bottom, "surface", "must be above bottom", surface)
+    diameter = checks.positive_scalar("diameter", diameter)
+    low, high = bottom + bed_layers * diameter, surface - surface_layers * diameter
+    z, u = prof.centres, prof.velocity
+    use = (z > low) & (z < high) & np.isfinite(u)
+    checks.require(np.count_nonzero(use) >= 5, "prof", "fewer than 5 slabs in the dense part",
+                   np.count_nonzero(use))
+    depth, u = surface - z[use], u[use]
+    search = optimize.minimize_scalar(
+        lambda n: float(np.sum(_bagnold_linear_part(depth, u, n)[1]**2)),
+        bounds=EXPONENT_BOUNDS, method="bounded", options={"xatol": 1e-10})
+    exponent = float(search.x)
+    checks.require(EXPONENT_BOUNDS[0] + 1e-3 < exponent < EXPONENT_BOUNDS[1] - 1e-3, "prof",
+                   f"fitted exponent at the search bound {EXPONENT_BOUNDS}", exponent)
+    (u_s, amplitude), residual = _bagnold_linear_part(depth, u, exponent)
+    power = depth**exponent
+    jacobian = np.stack([np.ones_like(depth), -power, -amplitude * power * np.log(depth)], axis=1)
+    variance = np.sum(residual**2) / max(depth.size - 3, 1)
+    covariance = variance * np.linalg.pinv(jacobian.T @ jacobian)
+    return BagnoldFit(exponent=exponent, exponent_error=float(np.sqrt(covariance[2, 2])),
+                      surface_velocity=float(u_s), amplitude=float(amplitude),
+                      surface=float(surface), fit_range=(float(z[use][0]), float(z[use][-1])),
+                      slabs=int(depth.size), rms_residual=float(np.sqrt(np.mean(residual**2))))
+
+
+@dataclass
+class FlowState:
+    """Verdict of :func:`classify_flow`.
+
+    Attributes
+    ----------
+    label : str
+        ``"no_flow"``, ``"steady"``, ``"accelerating"`` or ``"transient"``.
+    energy_ratio : float
+        Last kinetic energy over the largest one.
+    relative_change : float
+        Change of the mean flow rate between the two halves of the window,
+        over the mean flow rate.
+    """
+
+    label: str
+    energy_ratio: float
+    relative_change: float
+
+
+def classify_flow(times: np.ndarray, energy: np.ndarray, rate: np.ndarray, *,
+                  stop_ratio: float = 1e-6, steady_tol: float = 0.05,
+                  window: float = 0.5) -> FlowState:
+    """Classify a run from its kinetic energy and flow-rate series.
+
+    - ``no_flow``: the energy fell below ``stop_ratio`` of its maximum;
+    - otherwise the last ``window`` fraction of the samples is split in two
+      halves: ``steady`` if their mean flow rates differ by less than
+      ``steady_tol`` (relative), ``accelerating`` if the rate grew by more,
+      ``transient`` if it decreased by more (still decaying).
+    """
+    times = checks.as_array("times", times, shape=(None,))
+    energy = checks.as_array("energy", energy, shape=times.shape)
+    rate = checks.as_array("rate", rate, shape=times.shape)
+    checks.require(times.size >= 4, "times", "need at least 4 samples", times.size)
+    ratio = float(energy[-1] / energy.max()) if energy.max() > 0 else 0.0
+    tail = rate[int((1.0 - window) * rate.size):]
+    half = tail.size // 2
+    first, second = tail[:half].mean(), tail[half:].mean()
+    scale = max(abs(first), abs(second), np.finfo(float).tiny)
+    change = float((second - first) / scale)
+    if ratio < stop_ratio:
+        label = "no_flow"
+    elif abs(change) < steady_tol:
+        label = "steady"
+    else:
+        label = "accelerating" if change > 0 else "transient"
+    return FlowState(label=label, energy_ratio=ratio, relative_change=change)

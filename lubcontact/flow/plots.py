@@ -1,0 +1,176 @@
+"""Figures of the flow experiment (matplotlib, Agg backend, files only).
+
+Lengths are shown in mean diameters ``d = 2 r`` and velocities in
+``sqrt(g' d)`` (``g'`` the buoyant gravity), whatever the unit system of the
+run; gamma keeps the run's units (impulse per unit depth).
+"""
+from __future__ import annotations
+
+import pathlib
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+from matplotlib.collections import LineCollection, PatchCollection  # noqa: E402
+from matplotlib.patches import Circle  # noqa: E402
+
+from ..scenes import inclined as flow  # noqa: E402
+from . import measure  # noqa: E402
+from ..sim.simulation import Simulation, StepReport  # noqa: E402
+
+GAMMA_COLORMAP = "plasma"
+
+
+def _save(fig, path: pathlib.Path) -> None:
+    path = pathlib.Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    temporary = path.with_name(path.stem + ".tmp" + path.suffix)
+    fig.savefig(temporary, dpi=130, bbox_inches="tight")
+    plt.close(fig)
+    temporary.replace(path)
+
+
+def _disks(ax, centres: np.ndarray, radii: np.ndarray, scale: float, **style) -> None:
+    patches = [Circle((x / scale, y / scale), r / scale) for (x, y), r in zip(centres, radii)]
+    ax.add_collection(PatchCollection(patches, **style))
+
+
+def contact_segments(sim: Simulation, report: StepReport) -> tuple[np.ndarray, np.ndarray, float]:
+    """Centre-to-centre segments of the active grain-grain contacts and their gamma.
+
+    Across the periodic boundary a segment is drawn from grain ``b`` to the
+    nearest image of ``a``.
+
+    Returns
+    -------
+    segments : ndarray, shape (m, 2, 2)
+    gamma : ndarray, shape (m,)
+    gamma_floor : float
+        The lowest finite gamma_min among the contacts (colour scale bottom).
+    """
+    scene, contacts = sim.scene, report.contacts
+    n, n_fixed = scene.grains.count, len(scene.fixed_radii)
+    centres = np.vstack([scene.grains.positions, scene.fixed_positions])
+    normal = report.result.forces[: contacts.count]
+    active = (report.gamma < 0) | (normal > 0)
+    grain_pair = contacts.body_a < n + n_fixed
+    use = active & grain_pair
+    b = centres[contacts.body_b[use]]
+    delta = b - centres[contacts.body_a[use]]
+    if scene.period is not None:
+        delta[:, 0] -= scene.period * np.round(delta[:, 0] / scene.period)
+    segments = np.stack([b, b - delta], axis=1)
+    floors = sim.law.gamma_min(contacts)
+    finite = floors[np.isfinite(floors)]
+    floor = float(finite.min()) if finite.size else min(float(report.gamma.min(initial=0.0)), -1e-30)
+    return segments, report.gamma[use], floor
+
+
+def snapshot(sim: Simulation, report: StepReport | None, path: pathlib.Path,
+             title: str | None = None) -> None:
+    """Grains, rough bed and contacts coloured by gamma (gamma_min frictional, 0 lubricated)."""
+    scene = sim.scene
+    d = 2.0 * float(np.mean(scene.grains.radii))
+    width = scene.period or float(np.ptp(scene.grains.positions[:, 0]) + d)
+    height = float(scene.grains.positions[:, 1].max() + d)
+    fig, ax = plt.subplots(figsize=(10, max(3.0, 10 * height / width)))
+    _disks(ax, scene.fixed_positions, scene.fixed_radii, d, facecolor="0.35", edgecolor="none")
+    _disks(ax, scene.grains.positions, scene.grains.radii, d, facecolor="0.85", edgecolor="0.6",
+           linewidth=0.3)
+    if report is not None and report.contacts.count:
+        segments, gamma, floor = contact_segments(sim, report)
+        lines = LineCollection(segments / d, cmap=GAMMA_COLORMAP, linewidths=1.8)
+        lines.set_array(gamma)
+        lines.set_clim(floor, 0.0)
+        ax.add_collection(lines)
+        bar = fig.colorbar(lines, ax=ax, fraction=0.03, pad=0.01)
+        bar.set_label("gamma (impulse per unit depth)\n"
+                      "gamma_min: frictional  ...  0: lubricated")
+    ax.set_xlim(0, width / d)
+    ax.set_ylim(0, height / d)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x / d (downhill, periodic)")
+    ax.set_ylabel("y / d (normal to the incline)")
+    angle = scene.metadata.get("angle_deg", 0.0)
+    ax.set_title(title or f"t = {scene.time:.4g}, theta = {angle:g} deg, {scene.grains.count} grains")
+    _save(fig, path)
+
+
+def profiles(curves: list[tuple[str, measure.Profile]], path: pathlib.Path,
+             params: flow.FlowParameters) -> None:
+    """Velocity u(z) and packing fraction phi(z), one line per labelled profile."""
+    d, speed = 2.0 * params.radius, params.velocity_scale
+    fig, (ax_u, ax_phi) = plt.subplots(1, 2, figsize=(9, 4.5), sharey=True)
+    for label, prof in curves:
+        z = prof.centres / d
+        ax_u.plot(prof.velocity / speed, z, label=label)
+        ax_phi.plot(prof.packing, z, label=label)
+    ax_u.set_xlabel("u / sqrt(g' d)  (downhill velocity)")
+    ax_u.set_ylabel("z / d  (height above the plane under the bed)")
+    ax_phi.set_xlabel("packing fraction phi (-)")
+    ax_u.legend(fontsize=8)
+    ax_u.grid(alpha=0.3)
+    ax_phi.grid(alpha=0.3)
+    _save(fig, path)
+
+
+def _by_model(rows: list[dict]) -> dict[str, list[dict]]:
+    models: dict[str, list[dict]] = {}
+    for row in rows:
+        models.setdefault(row["model"], []).append(row)
+    return {m: sorted(r, key=lambda row: float(row["angle"])) for m, r in models.items()}
+
+
+def flow_rate_curve(rows: list[dict], path: pathlib.Path, params: flow.FlowParameters) -> None:
+    """Q(theta) per model, Q in units of ``d sqrt(g' d)``."""
+    unit = 2.0 * params.radius * params.velocity_scale
+    fig, ax = plt.subplots(figsize=(6, 4.5))
+    for model, group in _by_model(rows).items():
+        angles = [float(r["angle"]) for r in group]
+        rates = [float(r["flow_rate"]) / unit for r in group]
+        errors = [float(r["flow_rate_std"]) / unit for r in group]
+        ax.errorbar(angles, rates, yerr=errors, marker="o", capsize=3, label=model)
+    ax.set_xlabel("incline angle theta (degrees)")
+    ax.set_ylabel("flow rate Q / (d sqrt(g' d))")
+    ax.legend()
+    ax.grid(alpha=0.3)
+    _save(fig, path)
+
+
+def state_fractions(rows: list[dict], path: pathlib.Path) -> None:
+    """Fractions of active contacts unglued / glued / frictional against the angle."""
+    fig, ax = plt.subplots(figsize=(6, 4.5))
+    styles = {"dry": "--", "gluey": "-"}
+    for model, group in _by_model(rows).items():
+        angles = [float(r["angle"]) for r in group]
+        states = ("frictional",) if model == "dry" else measure.STATES   # dry: all Coulomb
+        for state in states:
+            colour = {"unglued": "tab:blue", "glued": "tab:orange", "frictional": "tab:red"}[state]
+            ax.plot(angles, [float(r[f"fraction_{state}"]) for r in group], styles.get(model, ":"),
+                    color=colour, marker="o", label=f"{model}: {state}")
+    ax.set_xlabel("incline angle theta (degrees)")
+    ax.set_ylabel("fraction of active contacts (-)")
+    ax.set_ylim(0, 1)
+    ax.legend(fontsize=8)
+    ax.grid(alpha=0.3)
+    _save(fig, path)
+
+
+def sweep_figures(rows: list[dict], out_dir: pathlib.Path, preset: str = "dimensionless") -> None:
+    """Q(theta), contact-state fractions and the profiles of every run of a sweep."""
+    out_dir = pathlib.Path(out_dir)
+    params = flow.PRESETS[preset]()
+    flow_rate_curve(rows, out_dir / "flow_rate.png", params)
+    state_fractions(rows, out_dir / "contact_states.png")
+    for model, group in _by_model(rows).items():
+        curves = []
+        for row in group:
+            path = out_dir / model / f"angle_{float(row['angle']):05.2f}" / "measurements.npz"
+            if path.exists():
+                with np.load(path) as data:
+                    curves.append((f"{float(row['angle']):g} deg", measure.Profile(
+                        data["profile.edges"], data["profile.packing"], data["profile.velocity"])))
+        if curves:
+            profiles(curves, out_dir / f"profiles_{model}.png", params)

@@ -1,0 +1,333 @@
+"""Scene model: grains, obstacles and external forces, for any dimension.
+
+A scene holds the *state* of the free grains (positions, velocities, spins,
+orientations) together with what does not move: planes and fixed grains.
+Everything is stored as arrays; the dimension ``dim`` (2 or 3) is read off the
+shape of the positions and never hard-coded.
+
+Units are whatever the user chooses, as long as they are consistent (SI or
+dimensionless). Forces are per unit depth in 2D.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from typing import Callable, Union
+
+import numpy as np
+
+from .. import checks
+
+ForceLike = Union[None, np.ndarray, "Schedule", Callable[[float], np.ndarray]]
+
+
+def n_rotations(dim: int) -> int:
+    """Number of rotational degrees of freedom of a body in dimension ``dim``."""
+    return 1 if dim == 2 else 3
+
+
+def ball_volume(radii: np.ndarray, dim: int) -> np.ndarray:
+    """Area of a disk (2D, per unit depth) or volume of a sphere (3D)."""
+    return np.pi * radii**2 if dim == 2 else 4.0 / 3.0 * np.pi * radii**3
+
+
+def ball_inertia(masses: np.ndarray, radii: np.ndarray, dim: int) -> np.ndarray:
+    """Moment of inertia of a uniform disk ``m r^2 / 2`` or sphere ``2 m r^2 / 5``."""
+    return (0.5 if dim == 2 else 0.4) * masses * radii**2
+
+
+@dataclass(frozen=True)
+class Schedule:
+    """Piecewise-constant external force in time.
+
+    ``values[k]`` applies for ``times[k] <= t < times[k+1]`` (the last value
+    for ever after). Each value is broadcast to the grains' shape ``(N, dim)``.
+
+    Parameters
+    ----------
+    times : sequence of float, shape (K,)
+        Increasing switching times; ``times[0]`` is usually 0.
+    values : sequence of array_like, length K
+        Force in each interval (force units; per grain or one vector for all).
+    """
+
+    times: tuple
+    values: tuple
+
+    def __post_init__(self):
+        times = checks.as_array("Schedule.times", self.times, shape=(None,))
+        checks.require(len(times) == len(self.values) and len(times) > 0, "Schedule.values",
+                       f"needs one value per switching time ({len(times)})", len(self.values))
+        checks.require(bool(np.all(np.diff(times) > 0)), "Schedule.times", "must increase", times)
+        values = tuple(checks.as_array(f"Schedule.values[{k}]", v) for k, v in enumerate(self.values))
+        object.__setattr__(self, "times", tuple(times))
+        object.__setattr__(self, "values", values)
+
+    def __call__(self, t: float) -> np.ndarray:
+        k = max(0, int(np.searchsorted(self.times, t, side="right")) - 1)
+        return self.values[k]
+
+
+@dataclass
+class Grains:
+    """Free grains (disks in 2D, spheres in 3D), all as arrays.
+
+    Attributes
+    ----------
+    positions : ndarray, shape (N, dim)
+        Centres (length).
+    radii : ndarray, shape (N,)
+        Radii (length), > 0.
+    masses : ndarray, shape (N,)
+        Masses (mass), > 0. Inertia uses the grain density ``rho_p``.
+    inertias : ndarray, shape (N,)
+        Moments of inertia (mass length^2), > 0.
+    velocities : ndarray, shape (N, dim)
+        Translational velocities (length / time).
+    spins : ndarray, shape (N, 1) in 2D or (N, 3) in 3D
+        Angular velocities (1 / time).
+    angles : ndarray, shape (N, 1) in 2D or (N, 3) in 3D
+        Accumulated rotation (rotation vector, radians); used for display.
+    densities : ndarray, shape (N,) or None
+        Grain densities ``rho_p``; needed for buoyancy.
+    """
+
+    positions: np.ndarray
+    radii: np.ndarray
+    masses: np.ndarray
+    inertias: np.ndarray
+    velocities: np.ndarray
+    spins: np.ndarray
+    angles: np.ndarray
+    densities: np.ndarray | None = None
+
+    @classmethod
+    def create(cls, positions, radii, *, masses=None, densities=None, velocities=None,
+               spins=None, inertias=None) -> "Grains":
+        """Build and validate grains; masses come from ``masses`` or ``densities``.
+
+        Raises
+        ------
+        ValueError
+            On wrong shapes, non-finite values, non-positive radius, mass or
+            density, or when neither masses nor densities are given.
+        """
+        positions = checks.as_array("positions", positions, shape=(None, None))
+        n, dim = positions.shape
+        checks.require(dim in (2, 3), "positions", "dimension must be 2 or 3", dim)
+        radii = checks.positive("radii", np.broadcast_to(radii, (n,)) if np.ndim(radii) == 0 else radii,
+                                shape=(n,))
+        if densities is not None:
+            densities = checks.positive("densities", np.broadcast_to(densities, (n,)).copy(), shape=(n,))
+        if masses is None:
+            checks.require(densities is not None, "masses", "give masses or densities", None)
+            masses = densities * ball_volume(radii, dim)
+        masses = checks.positive("masses", np.broadcast_to(masses, (n,)).copy(), shape=(n,))
+        if inertias is None:
+            inertias = ball_inertia(masses, radii, dim)
+        inertias = checks.positive("inertias", np.broadcast_to(inertias, (n,)).copy(), shape=(n,))
+        nrot = n_rotations(dim)
+        velocities = np.zeros((n, dim)) if velocities is None else velocities
+        spins = np.zeros((n, nrot)) if spins is None else np.reshape(spins, (n, nrot))
+        return cls(positions=positions.copy(), radii=radii.copy(), masses=masses,
+                   inertias=inertias,
+                   velocities=checks.as_array("velocities", velocities, shape=(n, dim)).copy(),
+                   spins=checks.as_array("spins", spins, shape=(n, nrot)).copy(),
+                   angles=np.zeros((n, nrot)), densities=densities)
+
+    @property
+    def count(self) -> int:
+        return self.positions.shape[0]
+
+    @property
+    def dim(self) -> int:
+        return self.positions.shape[1]
+
+    def copy(self) -> "Grains":
+        return replace(self, **{k: (None if v is None else v.copy())
+                                for k, v in vars(self).items()})
+
+
+@dataclass
+class Planes:
+    """Fixed half-spaces: grains stay on the side the unit normal points to.
+
+    Attributes
+    ----------
+    points : ndarray, shape (P, dim)
+        A point on each plane (length).
+    normals : ndarray, shape (P, dim)
+        Unit normals, pointing into the region where grains live.
+    """
+
+    points: np.ndarray
+    normals: np.ndarray
+
+    @classmethod
+    def create(cls, points, normals, dim: int) -> "Planes":
+        points = checks.as_array("planes.points", np.reshape(points, (-1, dim)) if np.size(points) else
+                                 np.zeros((0, dim)), shape=(None, dim))
+        normals = checks.as_array("planes.normals", np.reshape(normals, (-1, dim)) if np.size(normals) else
+                                  np.zeros((0, dim)), shape=(points.shape[0], dim))
+        lengths = np.linalg.norm(normals, axis=1)
+        checks.require(bool(np.all(lengths > 0)), "planes.normals", "must be non-zero", normals)
+        return cls(points=points, normals=normals / lengths[:, None])
+
+    @property
+    def count(self) -> int:
+        return self.points.shape[0]
+
+
+def inclined_plane_normal(angle: float, dim: int = 2) -> np.ndarray:
+    """Unit normal of a plane through the origin tilted by ``angle`` (rad) about z.
+
+    The downhill direction is ``+x`` rotated by ``-angle``: with gravity along
+    ``-y``, a grain slides towards increasing x.
+    """
+    normal = np.zeros(dim)
+    normal[0], normal[1] = np.sin(angle), np.cos(angle)
+    return normal
+
+
+@dataclass
+class Scene:
+    """Everything a simulation needs: grains, obstacles, forces, time.
+
+    Attributes
+    ----------
+    grains : Grains
+        The free grains (state is updated in place by the integrator).
+    planes : Planes
+        Fixed half-spaces.
+    fixed_positions, fixed_radii : ndarray, shapes (F, dim), (F,)
+        Fixed grains (for rough beds).
+    gravity : ndarray, shape (dim,)
+        Gravitational acceleration (length / time^2).
+    fluid_density : float
+        ``rho_f``; the weight of a grain is ``(rho_p - rho_f) V g`` when grain
+        densities are known, ``m g`` otherwise.
+    external_force : None, array, Schedule or callable t -> array
+        Extra force on the grains, broadcast to (N, dim).
+    time : float
+        Current time.
+    overlap_tolerance : float
+        Largest initial overlap allowed, as a fraction of the smaller radius
+        of the pair (default 1e-6).
+    period : float or None
+        Length ``L`` of the periodic direction x, or None (not periodic). When
+        set, x lives in ``[0, L)``: contacts see periodic images (a pair keeps
+        its key across the boundary) and :meth:`wrap_positions` folds the
+        centres back after each step.
+    """
+
+    grains: Grains
+    planes: Planes
+    fixed_positions: np.ndarray
+    fixed_radii: np.ndarray
+    gravity: np.ndarray
+    fluid_density: float = 0.0
+    external_force: ForceLike = None
+    time: float = 0.0
+    overlap_tolerance: float = 1e-6
+    metadata: dict = field(default_factory=dict)
+    period: float | None = None
+
+    @classmethod
+    def create(cls, grains: Grains, *, plane_points=(), plane_normals=(), fixed_positions=None,
+               fixed_radii=None, gravity=None, fluid_density: float = 0.0,
+               external_force: ForceLike = None, time: float = 0.0,
+               overlap_tolerance: float = 1e-6, check_overlaps: bool = True,
+               metadata: dict | None = None, period: float | None = None) -> "Scene":
+        """Validate and assemble a scene.
+
+        Raises
+        ------
+        ValueError
+            On wrong shapes or non-finite values, a negative fluid density or
+            overlap tolerance, buoyancy without grain densities, a non-positive
+            period, or an initial overlap deeper than ``overlap_tolerance``.
+        """
+        dim = grains.dim
+        planes = Planes.create(plane_points, plane_normals, dim)
+        if fixed_positions is None:
+            fixed_positions, fixed_radii = np.zeros((0, dim)), np.zeros(0)
+        fixed_positions = checks.as_array("fixed_positions", fixed_positions, shape=(None, dim))
+        fixed_radii = checks.positive("fixed_radii", np.broadcast_to(fixed_radii, (len(fixed_positions),))
+                                      if np.ndim(fixed_radii) == 0 else fixed_radii,
+                                      shape=(len(fixed_positions),))
+        gravity = np.zeros(dim) if gravity is None else gravity
+        gravity = checks.as_array("gravity", gravity, shape=(dim,))
+        fluid_density = float(checks.nonnegative("fluid_density", fluid_density, shape=()))
+        checks.require(fluid_density == 0 or grains.densities is not None, "fluid_density",
+                       "buoyancy needs grain densities", fluid_density)
+        overlap_tolerance = float(checks.nonnegative("overlap_tolerance", overlap_tolerance, shape=()))
+        if isinstance(external_force, (np.ndarray, list, tuple)):
+            external_force = checks.as_array("external_force", external_force)
+        scene = cls(grains=grains, planes=planes, fixed_positions=fixed_positions.copy(),
+                    fixed_radii=np.array(fixed_radii, dtype=float), gravity=gravity,
+                    fluid_density=fluid_density, external_force=external_force,
+                    time=float(checks.as_array("time", time, shape=())),
+                    overlap_tolerance=overlap_tolerance, metadata=dict(metadata or {}),
+                    period=None if period is None else checks.positive_scalar("period", period))
+        if scene.period is not None:
+            scene.fixed_positions[:, 0] = np.mod(scene.fixed_positions[:, 0], scene.period)
+            scene.wrap_positions()
+        scene.external_forces()  # validates the shape of the external force once
+        if check_overlaps:
+            scene.check_overlaps()
+        return scene
+
+    @property
+    def dim(self) -> int:
+        return self.grains.dim
+
+    def weights(self) -> np.ndarray:
+        """Buoyant weight of each grain, shape (N, dim)."""
+        g = self.grains
+        if g.densities is None:
+            effective = g.masses
+        else:
+            effective = g.masses * (1.0 - self.fluid_density / g.densities)
+        return effective[:, None] * self.gravity[None, :]
+
+    def external_forces(self, t: float | None = None) -> np.ndarray:
+        """Total external force on each grain at time ``t`` (default: now), shape (N, dim)."""
+        t = self.time if t is None else t
+        force = self.weights()
+        extra = self.external_force
+        if extra is not None:
+            value = extra(t) if callable(extra) else extra
+            try:
+                value = np.broadcast_to(np.asarray(value, dtype=float), force.shape)
+            except ValueError as exc:
+                raise ValueError(f"external_force: cannot broadcast shape {np.shape(value)} "
+                                 f"to grains shape {force.shape}") from exc
+            if not np.all(np.isfinite(value)):
+                raise ValueError(f"external_force: non-finite value at t={t}")
+            force = force + value
+        return force
+
+    def wrap_positions(self) -> None:
+        """Fold the grains' x coordinates into ``[0, period)`` (no-op when not periodic)."""
+        if self.period is not None:
+            x = self.grains.positions[:, 0]
+            x[:] = np.mod(x, self.period)
+            x[x >= self.period] = 0.0       # mod of a tiny negative number can round up to L
+
+    def check_overlaps(self) -> None:
+        """Raise ``ValueError`` if any initial overlap exceeds the tolerance."""
+        from .contacts import find_contacts  # local import: contacts depends on scene
+
+        contacts = find_contacts(self, d_max=0.0)
+        if contacts.count == 0:
+            return
+        limit = -self.overlap_tolerance * contacts.smaller_radius
+        deep = np.flatnonzero(contacts.gaps < limit)
+        if deep.size:
+            c = deep[np.argmin(contacts.gaps[deep])]
+            raise ValueError(
+                f"positions: initial overlap {-contacts.gaps[c]:.3e} between body "
+                f"{contacts.body_a[c]} and grain {contacts.body_b[c]} exceeds overlap_tolerance "
+                f"{self.overlap_tolerance} x radius {contacts.smaller_radius[c]:.3e}")
+
+    def copy(self) -> "Scene":
+        return replace(self, grains=self.grains.copy(), metadata=dict(self.metadata))

@@ -1,0 +1,13 @@
+"""The solver-facing layer: step problems without geometry.
+
+A problem is a plain record: force sets (:class:`Cones`), the Delassus
+operator ``W`` and the offset ``b``. :class:`StepProblem` comes from a time
+step of a scene, :class:`LocalProblem` from an external file (FCLIB,
+Siconos); both satisfy the :class:`ConicProblem` protocol that every solver
+accepts.
+"""
+from .cones import ConeKind, Cones
+from .local import LocalProblem
+from .step import Scaling, StepProblem
+
+__all__ = ["ConeKind", "Cones", "LocalProblem", "Scaling", "StepProblem"]

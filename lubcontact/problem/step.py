@@ -1,0 +1,212 @@
+"""The per-step contact problem (MODEL.md section 4), independent of geometry.
+
+Primal, over generalised velocities ``v`` (n_dof,)::
+
+    min_v 1/2 (v - U)^T M (v - U)   s.t.  g_c(v) = (D_c + s_c + dt u_n,c, dt u_T,c) in K_c*
+
+Dual, over contact forces ``lam`` (n_rows,)::
+
+    min_lam 1/2 lam^T W lam + lam^T b   s.t. lam_c in K_c
+    W = dt^2 H M^-1 H^T,  b = [D + s, 0] + dt H U,  v = U + dt M^-1 H^T lam
+
+``H`` stacks the normal rows ``B`` (one per contact) and the tangential rows
+``T`` (``tangent_dim`` per contact listed in ``cones.tangential``).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from functools import cached_property
+from typing import TYPE_CHECKING
+
+import numpy as np
+import scipy.sparse as sp
+
+from .. import checks
+from .cones import Cones
+
+if TYPE_CHECKING:                       # typing.Self exists from Python 3.11
+    from typing import Self
+
+
+@dataclass
+class Scaling:
+    """Map between a step problem and its normalised form.
+
+    Physical velocity ``v = velocity * v_scaled`` (per degree of freedom),
+    force ``lam = force * lam_scaled``, length ``D = length * D_scaled``.
+    """
+
+    velocity: np.ndarray
+    force: float
+    length: float
+
+
+class ConicProblemMixin:
+    """Members shared by :class:`StepProblem` and :class:`lubcontact.local.LocalProblem`.
+
+    Both are dataclasses with fields ``cones`` (:class:`Cones`) and ``shift``
+    (ndarray, shape (nc,)) and a method ``gradient(forces)`` (``W lam + b``);
+    the members below derive from them only.
+    """
+
+    @property
+    def n_contacts(self) -> int:
+        return self.cones.count
+
+    @property
+    def n_rows(self) -> int:
+        return self.cones.n_rows
+
+    def natural_residual(self, forces: np.ndarray) -> float:
+        """``|lam - P_K(lam - (W lam + b))|`` in this problem's units."""
+        return self.cones.natural_residual(forces, self.gradient(forces))
+
+    def with_shift(self, shift: np.ndarray) -> Self:
+        """A copy with another shift ``s`` (same matrices)."""
+        return replace(self, shift=np.asarray(shift, dtype=float).copy())
+
+    def with_cones(self, cones: Cones) -> Self:
+        """A copy with other force sets of the same layout."""
+        checks.require(cones.n_rows == self.n_rows, "cones", "must keep the row layout",
+                       cones.n_rows)
+        return replace(self, cones=cones)
+
+
+@dataclass
+class StepProblem(ConicProblemMixin):
+    """One time step's contact problem.
+
+    Attributes
+    ----------
+    mass : ndarray, shape (n_dof,)
+        Diagonal of ``M`` (masses, then inertias when rotations are modelled).
+    free_velocity : ndarray, shape (n_dof,)
+        ``U = v^k + dt M^-1 F_ext``.
+    jacobian : scipy.sparse.csr_matrix, shape (n_rows, n_dof)
+        ``H``: normal rows then tangential rows.
+    gaps : ndarray, shape (nc,)
+        ``D`` (length).
+    cones : Cones
+        Force set of each contact.
+    dt : float
+        Time step.
+    shift : ndarray, shape (nc,)
+        ``s`` of the fixed point on s (zeros for the convex relaxation).
+    keys : ndarray of int64, shape (nc,) or None
+        Pair identities, used only to match warm starts between steps.
+    """
+
+    mass: np.ndarray
+    free_velocity: np.ndarray
+    jacobian: sp.csr_matrix
+    gaps: np.ndarray
+    cones: Cones
+    dt: float
+    shift: np.ndarray | None = None
+    keys: np.ndarray | None = None
+    scaling: Scaling | None = field(default=None, repr=False)
+
+    def __post_init__(self):
+        self.dt = checks.positive_scalar("dt", self.dt)
+        n_dof = self.mass.shape[0]
+        checks.positive("mass", self.mass, shape=(n_dof,))
+        checks.as_array("free_velocity", self.free_velocity, shape=(n_dof,))
+        checks.as_array("gaps", self.gaps, shape=(self.cones.count,))
+        checks.require(self.jacobian.shape == (self.cones.n_rows, n_dof), "jacobian",
+                       f"expected shape {(self.cones.n_rows, n_dof)}", self.jacobian.shape)
+        if self.shift is None:
+            self.shift = np.zeros(self.cones.count)
+        checks.as_array("shift", self.shift, shape=(self.cones.count,))
+        self.jacobian = sp.csr_matrix(self.jacobian)
+
+    @property
+    def n_dof(self) -> int:
+        return self.mass.shape[0]
+
+    @cached_property
+    def delassus_factor(self) -> sp.csr_matrix:
+        """``L = dt M^-1/2 H^T`` (n_dof x n_rows), so that ``W = L^T L``."""
+        return sp.csr_matrix(sp.diags(self.dt / np.sqrt(self.mass)) @ self.jacobian.T)
+
+    @cached_property
+    def delassus(self) -> sp.csr_matrix:
+        """``W = dt^2 H M^-1 H^T`` (sparse, n_rows x n_rows)."""
+        factor = self.delassus_factor
+        return sp.csr_matrix(factor.T @ factor)
+
+    @property
+    def constant_rows(self) -> np.ndarray:
+        """``[D + s, 0]``: the part of ``g`` that does not depend on ``v``."""
+        out = np.zeros(self.n_rows)
+        out[: self.n_contacts] = self.gaps + self.shift
+        return out
+
+    @cached_property
+    def offset(self) -> np.ndarray:
+        """``b = [D + s, 0] + dt H U``."""
+        return self.constant_rows + self.dt * (self.jacobian @ self.free_velocity)
+
+    def velocity(self, forces: np.ndarray) -> np.ndarray:
+        """``v = U + dt M^-1 H^T lam``."""
+        return self.free_velocity + self.dt * (self.jacobian.T @ forces) / self.mass
+
+    def constraint_values(self, velocity: np.ndarray) -> np.ndarray:
+        """``g = [D + s, 0] + dt H v``, laid out like a force vector."""
+        return self.constant_rows + self.dt * (self.jacobian @ velocity)
+
+    def gradient(self, forces: np.ndarray) -> np.ndarray:
+        """Gradient of the dual objective, ``W lam + b`` (equal to ``g(v(lam))``)."""
+        return self.constraint_values(self.velocity(forces))
+
+    def dual_objective(self, forces: np.ndarray) -> float:
+        return float(0.5 * forces @ (self.gradient(forces) - self.offset) + forces @ self.offset)
+
+    def gaps_after(self, velocity: np.ndarray) -> np.ndarray:
+        """Gaps after the step, ``D + dt u_n`` (without the shift), shape (nc,)."""
+        return self.gaps + self.dt * (self.jacobian[: self.n_contacts] @ velocity)
+
+    def normalized(self) -> "StepProblem":
+        """The same problem in scaled units: ``M = I``, ``dt = 1``, velocities O(1).
+
+        With a velocity scale ``V`` (the mass-weighted rms of ``U``), each
+        velocity component is divided by ``S_i = V sqrt(m_ref / M_i)``, lengths
+        by ``dt V`` and forces by ``m_ref V / dt`` (``m_ref`` = mean of ``M``).
+        The returned problem carries the :class:`Scaling` that maps back.
+        """
+        m_ref = float(np.mean(self.mass)) if self.n_dof else 1.0
+        speed = float(np.sqrt(np.mean(self.mass * self.free_velocity**2) / m_ref)) if self.n_dof else 0.0
+        if not speed > 0:
+            positive = np.abs(self.gaps[self.gaps != 0])
+            speed = float(np.median(positive)) / self.dt if positive.size else 1.0
+        velocity_scale = speed * np.sqrt(m_ref / self.mass)
+        length = self.dt * speed
+        scaling = Scaling(velocity=velocity_scale, force=m_ref * speed / self.dt, length=length)
+        jacobian = sp.csr_matrix(self.jacobian @ sp.diags(velocity_scale / speed))
+        return StepProblem(mass=np.ones(self.n_dof), free_velocity=self.free_velocity / velocity_scale,
+                           jacobian=jacobian, gaps=self.gaps / length, cones=self.cones, dt=1.0,
+                           shift=self.shift / length, keys=self.keys, scaling=scaling)
+
+    def to_arrays(self) -> dict[str, np.ndarray]:
+        """Plain arrays describing the problem (for ``np.savez``); see :meth:`from_arrays`."""
+        h = self.jacobian
+        arrays = dict(mass=self.mass, free_velocity=self.free_velocity, gaps=self.gaps,
+                      shift=self.shift, dt=np.array(self.dt), h_data=h.data, h_indices=h.indices,
+                      h_indptr=h.indptr, h_shape=np.array(h.shape), cone_kinds=self.cones.kinds,
+                      cone_mu=self.cones.mu, cone_tangential=self.cones.tangential,
+                      tangent_dim=np.array(self.cones.tangent_dim))
+        if self.keys is not None:
+            arrays["keys"] = self.keys
+        return arrays
+
+    @classmethod
+    def from_arrays(cls, arrays) -> "StepProblem":
+        """Rebuild a problem written by :meth:`to_arrays` (a dict or an ``NpzFile``)."""
+        jacobian = sp.csr_matrix((arrays["h_data"], arrays["h_indices"], arrays["h_indptr"]),
+                                 shape=tuple(arrays["h_shape"]))
+        cones = Cones(kinds=np.asarray(arrays["cone_kinds"], dtype=np.int8), mu=arrays["cone_mu"],
+                      tangential=np.asarray(arrays["cone_tangential"], dtype=int),
+                      tangent_dim=int(arrays["tangent_dim"]))
+        keys = arrays["keys"] if "keys" in arrays else None
+        return cls(mass=arrays["mass"], free_velocity=arrays["free_velocity"], jacobian=jacobian,
+                   gaps=arrays["gaps"], cones=cones, dt=float(arrays["dt"]), shift=arrays["shift"],
+                   keys=keys)

@@ -1,0 +1,345 @@
+"""Exact Coulomb friction: the fixed point on the shift ``s`` (MODEL.md section 5).
+
+The convex relaxation of Coulomb's law (a second-order cone on the forces, its
+dual cone on ``g = W lam + b``) makes a sliding contact separate at the rate
+``mu |u_T|`` (dilatancy). Shifting the normal rows by ``s_c = mu_c |g_T,c|``
+(De Saxce's change of variable) removes it: at a fixed point
+``s = mu |g_T(s)|`` the relaxed optimality conditions are exactly Coulomb's
+law. This module iterates
+
+    solve the convex problem with s frozen  ->  s <- mu |g_T(s)|
+
+around any registered solver (through :func:`lubcontact.solvers.solve`), each
+inner solve warm-started from the previous one.
+
+Which contacts get a shift: every COULOMB contact; a UNION contact (gluey +
+friction at gamma_min) only on its pushed piece (``lam_n >= 0``): on the
+pulled piece it is frictionless and bilateral, and a shift would move it.
+
+UNION contacts and the shift. The shift enters the linear term of the
+problem, ``lam_n s``, on both pieces of a union, while the exact law wants it
+on the pushed piece only (``s max(lam_n, 0)``). Projecting onto the union
+with a shift therefore has spurious minimisers (a contact pulled *into* its
+neighbour by ``s``). The fixed point thus fixes each UNION contact on one
+piece during an inner solve (a convex problem, for every solver), shift on
+the pushed piece only, and updates the pieces with the shift, by the branch
+rule of docs/friction.md: a pushed contact whose normal force vanishes while
+its unshifted normal gap rate is opening (``D + dt u_n > 0``) is flipped to
+pulled; a pulled contact whose force vanishes while closing is flipped to
+pushed. Initial pieces: the sign of the warm start's normal force (pushed
+without one). The fixed point has converged when the shift has and no
+contact flipped in the last round.
+
+Stopping rule, with ``L`` the length unit of the normalised problem
+(``problem.normalized().scaling.length``, i.e. ``dt V``) and the rms norm
+over the ``nc`` contacts, ``|x|_rms = |x|_2 / sqrt(nc)``::
+
+    change = |s_new - s_old|_rms / L / (1 + |s_new|_rms / L)  <  tol_fp
+
+The rms norm matches the fast solvers' stopping measure (an rms residual): a
+max norm would compare the worst contact's inner-solve noise with ``tol_fp``
+and stall on large piles. Keep ``tol_fp`` above the inner accuracy ``tol``.
+
+The tangential rows of ``g`` are ``dt u_T`` for a step problem and ``u_T`` for
+a local (FCLIB) problem, so the same formula covers both.
+"""
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from .. import checks
+from ..problem.cones import ConeKind
+from . import CONVERGED, MAX_ITER, SolveResult, solve
+
+
+def coulomb_shift(problem, forces: np.ndarray) -> np.ndarray:
+    """``s_c = mu_c |g_T,c(forces)|`` on frictional contacts, 0 elsewhere.
+
+    Parameters
+    ----------
+    problem : StepProblem or LocalProblem
+        Anything with ``cones`` and ``gradient(forces)`` (``g = W lam + b``).
+    forces : ndarray, shape (n_rows,)
+
+    Returns
+    -------
+    ndarray, shape (nc,)
+        In the problem's length unit (``mu dt |u_T|`` for a step problem).
+    """
+    cones = problem.cones
+    shift = np.zeros(cones.count)
+    if not cones.has_friction:
+        return shift
+    _, g_tangential = cones.split(problem.gradient(forces))
+    idx = cones.tangential
+    slip = cones.mu[idx] * np.linalg.norm(g_tangential, axis=1)
+    kinds = cones.kinds[idx]
+    frictional = (kinds == ConeKind.COULOMB) | ((kinds == ConeKind.UNION) & (forces[idx] >= 0))
+    shift[idx] = np.where(frictional, slip, 0.0)
+    return shift
+
+
+def coulomb_error(problem, forces: np.ndarray) -> float:
+    """The FCLIB/Siconos error of a Coulomb problem (MODEL.md section 6).
+
+    ``sqrt(sum_c |lam_c - P_Kc(lam_c - (w_c + mu_c |w_T,c| e_n))|^2) / (1 + |q|)``
+    with ``w = W lam + q`` and ``q`` the offset ``b`` without the shift ``s``.
+    Computed in the units of the problem given (pass ``problem.normalized()``
+    and scaled forces for a unit-free figure on a step problem).
+
+    Parameters
+    ----------
+    problem : StepProblem or LocalProblem
+    forces : ndarray, shape (n_rows,)
+    """
+    nc = problem.cones.count
+    unshifted = problem.gradient(forces)
+    unshifted[:nc] -= problem.shift
+    corrected = unshifted.copy()
+    corrected[:nc] += coulomb_shift(problem, forces)
+    q = problem.offset.copy()
+    q[:nc] -= problem.shift
+    residual = problem.cones.natural_residual(forces, corrected)
+    return float(residual / (1.0 + np.linalg.norm(q)))
+
+
+def solve_coulomb(problem, method: str = "clarabel", *, tol: float = 1e-9, tol_fp: float = 1e-8,
+                  max_outer: int = 50, warm_start: np.ndarray | None = None,
+                  shift: np.ndarray | None = None, max_iter: int | None = None,
+                  anderson: int = 5, forcing: float = 0.0, joint: int = 0,
+                  **options) -> SolveResult:
+    """Solve a frictional problem exactly by the fixed point on ``s``.
+
+    Parameters
+    ----------
+    problem : StepProblem or LocalProblem
+        In physical units; its own ``shift`` is ignored (replaced by ``shift``).
+    method : str
+        Any registered solver (see :func:`lubcontact.solvers.methods`).
+    tol : float
+        Tolerance of each inner solve.
+    tol_fp : float
+        Tolerance on the relative change of ``s`` (see the module docstring).
+    max_outer : int
+        Cap on the outer iterations (inner solves).
+    warm_start : ndarray, shape (n_rows,), optional
+        Initial forces (physical units) for the first inner solve.
+    shift : ndarray, shape (nc,), optional
+        Initial shift (e.g. the previous step's, matched by pair); default 0
+        (the first inner solve is then the convex relaxation).
+    max_iter : int, optional
+        Iteration cap of each inner solve.
+    anderson : int
+        Memory of the Anderson acceleration of the map ``s -> mu |g_T(s)|``
+        (0: plain fixed point). Accelerated shifts are clipped at 0; the
+        stopping test is always on the plain map's change.
+    forcing : float
+        Inexact inner solves: the inner tolerance is
+        ``max(tol, forcing x previous change)`` (0: always ``tol``).
+    joint : int
+        If > 0 and the problem is 2D with friction cones: before the outer
+        loop, solve Coulomb's problem jointly inside one Jacobi-scaled APGD run
+        that updates the shift from its iterate every ``joint`` iterations
+        (:func:`lubcontact.solvers.kernels.apgd_cone2d`), to ``tol`` on the
+        modified natural map and at most ``max_iter`` iterations (default
+        20000); its forces and shift then start the outer loop, whose tests are
+        unchanged (the inner solves check the joint result with the shift
+        frozen). 1 to 5 worked best on the 1000-grain settling pile (2 outer
+        iterations and 760 APGD iterations to ``tol = 1e-6`` instead of 27 and
+        5400). 0: no joint phase.
+    **options
+        Passed to the inner solver.
+
+    Returns
+    -------
+    SolveResult
+        The last inner solve (solved with the shift stored in
+        ``info["shift"]``), with ``iterations`` the total inner iterations and
+        ``status`` ``converged`` only if the fixed point and the last inner
+        solve converged (``max_iter`` when the outer loop ran out, the inner
+        status when an inner solve failed). ``info`` adds ``joint_iterations``
+        (APGD iterations of the joint phase, included in ``iterations``),
+        ``outer_iterations``,
+        ``shift_change`` (the last relative change of s), ``force_change``
+        (last relative change of the forces, rms norm), ``inner_status``,
+        ``fp_converged`` and ``shift_history``.
+    """
+    tol_fp = checks.positive_scalar("tol_fp", tol_fp)
+    max_outer = int(checks.positive("max_outer", max_outer, shape=()))
+    nc = problem.cones.count
+    current = np.zeros(nc) if shift is None else checks.as_array("shift", shift, shape=(nc,)).copy()
+    if not problem.cones.has_friction:
+        result = solve(problem.with_shift(current), method, tol=tol, max_iter=max_iter,
+                       warm_start=warm_start, **options)
+        info = dict(result.info, outer_iterations=1, shift_change=0.0, force_change=np.inf,
+                    inner_status=result.status, fp_converged=True, shift=current,
+                    shift_history=np.zeros(0))
+        return replace(result, info=info)
+    scaling = problem.normalized().scaling
+    length, force_unit = scaling.length, scaling.force
+    accelerator = _Anderson(anderson)
+    branches = _Branches(problem, warm_start, threshold=max(1e3 * tol, 1e-7))
+    forces, inner, history = warm_start, 0, []
+    joint_iterations = 0
+    convex = branches.problem()
+    if joint > 0 and _joint_applies(convex):
+        forces, current, joint_iterations = _joint_phase(
+            convex, branches.restrict(current), forces, tol,
+            20000 if max_iter is None else max_iter, joint)
+        inner += joint_iterations
+    shift_change = force_change = np.inf
+    converged = False
+    for outer in range(1, max_outer + 1):
+        convex = branches.problem()
+        used = branches.restrict(current)
+        inner_tol = tol if forcing == 0 else max(tol, forcing * min(shift_change, 1.0))
+        result = solve(convex.with_shift(used), method, tol=inner_tol, max_iter=max_iter,
+                       warm_start=forces, **options)
+        inner += result.iterations
+        if forces is not None:
+            force_change = _relative_change(result.forces / force_unit, forces / force_unit)
+        forces = result.forces
+        if not result.success:
+            break
+        mapped = coulomb_shift(convex, forces)
+        shift_change = _relative_change(mapped / length, used / length)
+        history.append(shift_change)
+        flipped = branches.update(convex.with_shift(used), forces, length, force_unit)
+        if shift_change < tol_fp and inner_tol <= tol and not flipped:
+            converged = True
+            break
+        current = length * accelerator.step(used / length, mapped / length)
+        if flipped:
+            accelerator.restart()
+    status = CONVERGED if converged else (result.status if not result.success else MAX_ITER)
+    info = dict(result.info, joint_iterations=joint_iterations, outer_iterations=outer,
+                shift_change=shift_change,
+                force_change=force_change, inner_status=result.status, fp_converged=converged,
+                shift=used, shift_history=np.asarray(history), pulled=branches.pulled_contacts,
+                branch_flips=branches.flips)
+    return replace(result, status=status, iterations=inner, info=info)
+
+
+def _joint_phase(convex, shift: np.ndarray, warm_start: np.ndarray | None, tol: float,
+                 max_iter: int, every: int) -> tuple[np.ndarray, np.ndarray, int]:
+    """Coulomb's problem by APGD with the shift updated inside (``joint`` of :func:`solve_coulomb`).
+
+    Returns the forces and the shift ``mu |g_T|`` they map to (physical units)
+    and the iterations done; the outer loop checks them.
+    """
+    from .gradient import _initial, prepare, run_apgd_cones
+
+    scaled = convex.with_shift(shift).normalized()
+    data = prepare(scaled, scaling=True, operator="matrix")
+    z = _initial(data, None if warm_start is None else warm_start / scaled.scaling.force,
+                 scaled.n_rows)
+    base = scaled.offset.copy()
+    base[: scaled.n_contacts] -= scaled.shift
+    tracker, _, iterations, _ = run_apgd_cones(data, scaled.cones, z, tol, max_iter,
+                                               base=data.scale * base, every=every)
+    forces = tracker.best * data.scale * scaled.scaling.force
+    return forces, coulomb_shift(convex, forces), iterations
+
+
+def _joint_applies(convex) -> bool:
+    """The joint phase runs in the compiled 2D cone loop: 2D friction cones and numba."""
+    from .gradient import _cone_kernel, _is_cone_2d
+
+    return _is_cone_2d(convex.cones) and _cone_kernel() is not None
+
+
+def _relative_change(new: np.ndarray, old: np.ndarray) -> float:
+    """``|new - old|_rms / (1 + |new|_rms)`` (0 for empty vectors)."""
+    if new.size == 0:
+        return 0.0
+    root = np.sqrt(new.size)
+    return float(np.linalg.norm(new - old) / root / (1.0 + np.linalg.norm(new) / root))
+
+
+class _Anderson:
+    """Anderson acceleration (type II) of a fixed point ``x = F(x)``, kept in ``x >= 0``.
+
+    With the last ``memory + 1`` pairs ``(x_i, F(x_i))`` and residuals
+    ``f_i = F(x_i) - x_i``, the next iterate is ``F(x_k) - dF gamma`` with
+    ``gamma`` the least-squares solution of ``df gamma = f_k`` (differences of
+    consecutive pairs). The history restarts when the residual grows past
+    ten times the smallest seen, a safeguard against a poor extrapolation.
+    """
+
+    def __init__(self, memory: int):
+        self.memory = int(checks.nonnegative("anderson", memory, shape=()))
+        self.points: list[np.ndarray] = []
+        self.images: list[np.ndarray] = []
+        self.best = np.inf
+
+    def restart(self) -> None:
+        self.points, self.images, self.best = [], [], np.inf
+
+    def step(self, point: np.ndarray, image: np.ndarray) -> np.ndarray:
+        if self.memory == 0:
+            return image
+        size = float(np.linalg.norm(image - point))
+        if size > 10.0 * self.best:
+            self.restart()
+        self.best = min(self.best, size)
+        self.points = (self.points + [point])[-(self.memory + 1):]
+        self.images = (self.images + [image])[-(self.memory + 1):]
+        if len(self.points) < 2:
+            return image
+        images = np.array(self.images).T
+        residuals = images - np.array(self.points).T
+        gamma = np.linalg.lstsq(np.diff(residuals, axis=1), residuals[:, -1], rcond=1e-12)[0]
+        return np.maximum(image - np.diff(images, axis=1) @ gamma, 0.0)
+
+
+class _Branches:
+    """The piece (pushed or pulled) on which each UNION contact is fixed (module docstring).
+
+    Parameters
+    ----------
+    problem : StepProblem or LocalProblem
+    warm_start : ndarray or None
+        Initial forces: a negative normal force starts a UNION contact pulled.
+    threshold : float
+        Normalised level below which a normal force counts as zero and above
+        which a gap rate counts as opening or closing.
+    """
+
+    def __init__(self, problem, warm_start: np.ndarray | None, threshold: float):
+        self.base = problem
+        self.union = problem.cones.kinds == ConeKind.UNION
+        self.pulled = np.zeros(problem.cones.count, dtype=bool)
+        if warm_start is not None:
+            self.pulled = problem.cones.pulled(warm_start)
+        self.threshold = threshold
+        self.flips: list[int] = []
+
+    @property
+    def pulled_contacts(self) -> np.ndarray:
+        return np.flatnonzero(self.pulled)
+
+    def problem(self):
+        """The convex problem with every UNION contact on its current piece."""
+        if not self.union.any():
+            return self.base
+        return self.base.with_cones(self.base.cones.with_branches(self.pulled))
+
+    def restrict(self, shift: np.ndarray) -> np.ndarray:
+        """No shift on pulled contacts."""
+        return np.where(self.pulled, 0.0, shift)
+
+    def update(self, convex, forces: np.ndarray, length: float, force_unit: float) -> bool:
+        """Flip the contacts inconsistent with the union; returns whether any flipped."""
+        if not self.union.any():
+            return False
+        nc = convex.cones.count
+        normal = forces[:nc] / force_unit
+        opening = (convex.gradient(forces)[:nc] - convex.shift) / length      # (D + dt u_n) / L
+        idle = np.abs(normal) <= self.threshold
+        flip = self.union & idle & np.where(self.pulled, opening < -self.threshold,
+                                            opening > self.threshold)
+        self.flips.append(int(np.count_nonzero(flip)))
+        self.pulled ^= flip
+        return bool(flip.any())

@@ -1,7 +1,0 @@
-"""Make the repository root importable so tests can load ``reference.cases``."""
-import sys
-from pathlib import Path
-
-ROOT = Path(__file__).resolve().parents[1]
-if str(ROOT) not in sys.path:
-    sys.path.insert(0, str(ROOT))

@@ -1,0 +1,123 @@
+"""Contact detection and Jacobians against brute force and finite differences."""
+import numpy as np
+import pytest
+
+from lubcontact import GlueyLubrication, Grains, Inelastic, Scene, Simulation, find_contacts
+from lubcontact.model.contacts import normal_jacobian, tangential_jacobian
+from lubcontact.model.laws import PairState
+
+
+def random_scene(dim, seed, n=60):
+    rng = np.random.default_rng(seed)
+    positions = rng.uniform(0.0, 8.0, (n, dim))
+    radii = rng.uniform(0.3, 0.6, n)
+    grains = Grains.create(positions, radii, masses=1.0, velocities=rng.normal(size=(n, dim)),
+                           spins=rng.normal(size=(n, 1 if dim == 2 else 3)))
+    normal = np.zeros(dim)
+    normal[-1] = 1.0
+    fixed = rng.uniform(0.0, 8.0, (10, dim))
+    return Scene.create(grains, plane_points=np.zeros(dim), plane_normals=normal,
+                        fixed_positions=fixed, fixed_radii=0.5, check_overlaps=False)
+
+
+def brute_force_gaps(scene, d_max):
+    g = scene.grains
+    centres = np.vstack([g.positions, scene.fixed_positions])
+    radii = np.concatenate([g.radii, scene.fixed_radii])
+    found = {}
+    n_total = len(radii)
+    for b in range(g.count):
+        for a in range(n_total):
+            if a == b or (a < g.count and a > b):
+                continue
+            gap = np.linalg.norm(centres[b] - centres[a]) - radii[a] - radii[b]
+            if gap < d_max:
+                found[(a if a < g.count else a, b)] = gap
+        gap = g.positions[b, -1] - g.radii[b]
+        if gap < d_max:
+            found[(n_total, b)] = gap
+    return found
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_kd_tree_search_finds_exactly_the_brute_force_pairs(dim):
+    scene = random_scene(dim, seed=dim)
+    d_max = 0.2
+    contacts = find_contacts(scene, d_max)
+    expected = brute_force_gaps(scene, d_max)
+    found = {(int(a), int(b)): gap for a, b, gap in zip(contacts.body_a, contacts.body_b, contacts.gaps)}
+    assert found.keys() == expected.keys()
+    for pair, gap in expected.items():
+        assert found[pair] == pytest.approx(gap, abs=1e-12)
+    assert np.all(np.diff(contacts.keys) > 0)
+    np.testing.assert_allclose(np.linalg.norm(contacts.normals, axis=1), 1.0, rtol=1e-14)
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_normal_rows_are_the_time_derivative_of_the_gaps(dim):
+    scene = random_scene(dim, seed=10 + dim)
+    contacts = find_contacts(scene, 0.3)
+    velocity = scene.grains.velocities.ravel()
+    rate = normal_jacobian(contacts, rotations=False) @ velocity
+    h = 1e-7
+    moved = scene.copy()
+    moved.grains.positions += h * scene.grains.velocities
+    after = find_contacts(moved, 0.3)
+    common, i, j = np.intersect1d(contacts.keys, after.keys, return_indices=True)
+    assert common.size > 20
+    np.testing.assert_allclose((after.gaps[j] - contacts.gaps[i]) / h, rate[i], atol=1e-5)
+
+
+def test_tangential_rows_give_the_sliding_velocity_at_the_contact_point_2d():
+    grains = Grains.create([[0.0, 0.0], [1.5, 0.0]], [0.5, 1.0], masses=1.0,
+                           velocities=[[0.3, -0.2], [0.1, 0.7]], spins=[[2.0], [-1.0]])
+    scene = Scene.create(grains, plane_points=[0.0, -1.0], plane_normals=[0.0, 1.0])
+    contacts = find_contacts(scene, 0.1)
+    assert contacts.count == 2                      # the plane-disk and the disk-disk contact
+    v = np.concatenate([grains.velocities.ravel(), grains.spins.ravel()])
+    rows = tangential_jacobian(contacts, np.arange(contacts.count))
+    assert rows.shape == (2, 6)
+
+    def point_velocity(i, point):
+        lever = point - grains.positions[i]
+        return grains.velocities[i] + grains.spins[i, 0] * np.array([-lever[1], lever[0]])
+
+    for c in range(contacts.count):
+        n = contacts.normals[c]
+        t = np.array([-n[1], n[0]])
+        b = contacts.body_b[c]
+        u = point_velocity(b, contacts.points[c])
+        if contacts.body_a[c] < 2:
+            u = u - point_velocity(contacts.body_a[c], contacts.points[c])
+        assert rows[c] @ v == pytest.approx(u @ t, abs=1e-12)
+
+
+def test_rolling_without_slipping_has_zero_tangential_velocity_in_3d():
+    grains = Grains.create([[0.0, 0.0, 1.0]], 1.0, masses=1.0, velocities=[[2.0, -1.0, 0.0]],
+                           spins=[[1.0, 2.0, 0.0]])      # v = omega x (r e_z)
+    scene = Scene.create(grains, plane_points=[0.0, 0.0, 0.0], plane_normals=[0.0, 0.0, 1.0])
+    contacts = find_contacts(scene, 0.1)
+    v = np.concatenate([grains.velocities.ravel(), grains.spins.ravel()])
+    np.testing.assert_allclose(tangential_jacobian(contacts, np.arange(1)) @ v, 0.0, atol=1e-14)
+
+
+def test_frictionless_problems_have_no_rotational_unknowns():
+    grains = Grains.create([[0.0, 0.5]], 0.5, masses=1.0)
+    scene = Scene.create(grains, plane_points=[0.0, 0.0], plane_normals=[0.0, 1.0], gravity=[0, -1])
+    report = Simulation(scene, Inelastic(), 0.01).step()
+    assert report.problem.n_dof == 2 and report.problem.n_rows == 1
+
+
+def test_gamma_is_kept_by_pair_identity_and_forgotten_when_the_pair_leaves():
+    state = PairState.from_contacts(np.array([7, 3, 11]), np.array([-1.0, 0.0, -2.0]))
+    np.testing.assert_array_equal(state.keys, [7, 11])
+    np.testing.assert_array_equal(state.lookup(np.array([11, 3, 7, 99])), [-2.0, 0.0, -1.0, 0.0])
+    # in a simulation: two grains glued, then the pair is pulled out of the candidate list
+    grains = Grains.create([[0.0, 0.0], [1.0, 0.0]], 0.5, masses=1.0, velocities=[[1, 0], [-1, 0]])
+    scene = Scene.create(grains, external_force=lambda t: np.array([[-5.0, 0], [5.0, 0]]) * (t > 0.05))
+    sim = Simulation(scene, GlueyLubrication(), dt=0.01, d_max=0.05)
+    key = sim.step().contacts.keys[0]
+    assert sim.gamma_of([key])[0] == pytest.approx(-0.01 * 100.0)   # impulse of the impact (m v / dt)
+    sim.run(60)
+    assert find_contacts(sim.scene, 0.05).count == 0
+    assert sim.gamma_of([key])[0] == 0.0

@@ -1,0 +1,63 @@
+"""Non-convergence policies of the time stepper: raise (state untouched), warn, fallback."""
+import numpy as np
+import pytest
+
+from lubcontact import GlueyLubrication, Simulation, SolverError, scenes
+from lubcontact.solvers import SolverWarning
+
+
+def starved(on_failure, **kwargs):
+    """A settling pile whose fast solver gets a single iteration: it cannot converge."""
+    sim = Simulation(scenes.settling_pile(60, seed=2), GlueyLubrication(), dt=0.05, solver="apgd",
+                     tol=1e-9, solver_options={"max_iter": 1}, on_failure=on_failure, **kwargs)
+    return sim
+
+
+def run_until(sim, condition, steps=60):
+    for _ in range(steps):
+        report = sim.step()
+        if condition(report):
+            return report
+    raise AssertionError("condition never met")
+
+
+def test_raise_stops_before_the_state_changes():
+    sim = starved("raise")
+    with pytest.raises(SolverError, match="max_iter"):
+        for _ in range(60):
+            before = (sim.scene.grains.positions.copy(), sim.scene.time, sim.steps_done)
+            sim.step()
+    np.testing.assert_array_equal(sim.scene.grains.positions, before[0])
+    assert (sim.scene.time, sim.steps_done) == before[1:]
+
+
+def test_warn_applies_the_best_iterate_and_warns():
+    sim = starved("warn")
+    with pytest.warns(SolverWarning, match="max_iter"):
+        report = run_until(sim, lambda r: r.result.status != "converged")
+    assert report.result.status == "max_iter"
+    assert np.all(np.isfinite(sim.scene.grains.positions))
+
+
+def test_fallback_resolves_the_step_with_the_reference():
+    sim = starved("fallback")
+    report = run_until(sim, lambda r: "fallback_from" in r.result.info)
+    assert report.result.status == "converged" and report.result.method == "clarabel"
+    assert report.result.info["fallback_from"][:2] == ("apgd", "max_iter")
+    assert report.gaps_after.min() >= -1e-9
+
+
+def test_fixed_point_options_reach_only_frictional_steps():
+    """``joint`` is an option of the fixed point on s: frictionless steps must not receive it,
+    and frictionless and frictional runs with it match the runs without it."""
+    from lubcontact.model.laws import Coulomb, Inelastic
+
+    for law in (Inelastic(), Coulomb(0.3)):
+        runs = []
+        for options in ({}, {"joint": 5}):
+            sim = Simulation(scenes.settling_pile(30, seed=2), law, 0.05, solver="apgd-jacobi",
+                             tol=1e-9, solver_options=options)
+            sim.run(20)
+            runs.append(sim.scene.grains.velocities.copy())
+        speed = np.abs(runs[0]).max()
+        np.testing.assert_allclose(runs[1], runs[0], rtol=0, atol=1e-6 * speed)

@@ -1,0 +1,395 @@
+"""Fast methods against the Clarabel reference (tol 1e-10): velocities, gaps, statuses, trajectories."""
+import numpy as np
+import pytest
+
+from lubcontact import GlueyLubrication, Inelastic, Simulation, scenes
+from lubcontact.bench.piles import (active_condition, matched_forces, next_step_problem, pile_cases,
+                              velocity_error)
+from lubcontact.problem.cones import ConeKind, Cones
+from lubcontact.model.contacts import find_contacts
+from lubcontact.bench.hard import error_against, expected_for, load_cases
+from lubcontact.model.laws import Law
+from lubcontact.scenes.packing import deposit_pile, settle_pile
+from lubcontact.solvers import methods, solve
+from lubcontact.solvers.direct import conic_form
+from lubcontact.bench.cases.reference import CASES as REFERENCE_CASES
+from lubcontact.bench.cases.reference import load as load_reference
+
+FAST = ["pgd", "apgd", "bb", "apgd-jacobi", "apgd-as"]
+DIRECT = ["clarabel-direct", "osqp", "scs"]
+ACCURACY = 1e-6          # relative velocity error |v - v_ref|_M / |U|_M
+
+
+@pytest.fixture(scope="module")
+def piles():
+    """Dry and glued step problems of a 150-grain deposited pile, with reference solves."""
+    cases = pile_cases(150, glued_fraction=0.3, dt=0.01, seed=3, pile="deposited")
+    return [(case, solve(case.problem, "clarabel", tol=1e-10)) for case in cases]
+
+
+# Iterations the plain projected gradient needs on the 200-grain gluey reference pile at tol 1e-9:
+# 199 180 (measured; its rate is 1 - 1/cond(W_AA), docs/benchmarks.md), above the default cap.
+PGD_REFERENCE_CAP = 250000
+
+
+@pytest.mark.parametrize("method", FAST)
+@pytest.mark.parametrize("name", sorted(REFERENCE_CASES))
+def test_every_fast_method_converges_on_every_reference_case(name, method):
+    problem, solution = load_reference(name)
+    result = solve(problem, method, tol=1e-9,
+                   max_iter=PGD_REFERENCE_CAP if method == "pgd" else None)
+    assert result.status == "converged"
+    assert velocity_error(problem, result.velocities, solution["velocities"]) <= ACCURACY
+    gap_scale = max(1.0, np.abs(problem.gaps).max())
+    assert problem.gaps_after(result.velocities).min() >= -1e-9 * gap_scale
+
+
+def test_registry_has_every_method():
+    assert set(FAST + DIRECT) <= set(methods())
+
+
+@pytest.mark.parametrize("method", FAST + DIRECT)
+def test_pile_velocities_match_clarabel(piles, method):
+    for case, reference in piles:
+        tol = 1e-10 if method in DIRECT else 1e-9
+        result = solve(case.problem, method, tol=tol, max_iter=100000 if method == "pgd" else None)
+        assert result.status == "converged", (case.label, result.status)
+        assert velocity_error(case.problem, result.velocities, reference.velocities) <= ACCURACY
+        radius = case.scene.grains.radii.min()
+        assert case.problem.gaps_after(result.velocities).min() >= -ACCURACY * radius
+
+
+def test_pile_problem_is_at_rest_and_not_trivial(piles):
+    """Zero velocities, closed contacts, and a solution in which some contacts open."""
+    case, reference = piles[0]
+    assert np.all(case.scene.grains.velocities == 0)
+    closed = np.abs(case.problem.gaps) <= 1e-9
+    assert closed.sum() >= 1.9 * case.n_grains
+    opened = reference.forces[: case.problem.n_contacts] <= 1e-9 * reference.force_scale
+    assert 0 < np.count_nonzero(opened & closed) < closed.sum()
+
+
+def test_glued_contacts_pull(piles):
+    case, reference = piles[1]
+    free = case.problem.cones.kinds == ConeKind.FREE
+    assert free.sum() > 0 and np.any(reference.forces[: case.problem.n_contacts][free] < 0)
+
+
+def next_step_with_guess(case, reference):
+    """The following step's problem and the previous forces matched to it by pair key."""
+    following = next_step_problem(case, reference.velocities)
+    return following, matched_forces(case.problem.keys, reference.forces[: case.problem.n_contacts],
+                                     following)
+
+
+def test_warm_start_finishes_the_next_step_in_one_active_set_solve(piles):
+    """The dry pile opens many contacts in its first step; the second step starts from them."""
+    case, reference = piles[0]
+    following, guess = next_step_with_guess(case, reference)
+    next_reference = solve(following, "clarabel", tol=1e-10)
+    warm = solve(following, "apgd-as", tol=1e-9, warm_start=guess)
+    assert warm.status == "converged" and warm.iterations == 1
+    assert velocity_error(following, warm.velocities, next_reference.velocities) <= 1e-12
+
+
+@pytest.mark.parametrize("method", ["apgd", "apgd-jacobi", "bb"])
+def test_warm_start_helps_gradient_methods(piles, method):
+    """Glued pile: forces change by about 0.2 % between steps; the warm start saves iterations."""
+    case, reference = piles[1]
+    following, guess = next_step_with_guess(case, reference)
+    cold = solve(following, method, tol=1e-9)
+    warm = solve(following, method, tol=1e-9, warm_start=guess)
+    assert cold.status == warm.status == "converged"
+    assert warm.iterations < 0.9 * cold.iterations
+
+
+def test_a_warm_start_that_already_meets_tol_costs_no_gradient_iteration(piles):
+    """Only the exact finish runs: one LDL^T solve, counted as the single iteration."""
+    case, reference = piles[0]
+    result = solve(case.problem, "apgd-jacobi", tol=1e-9, warm_start=reference.forces)
+    assert result.status == "converged" and result.iterations == 1
+    assert result.info["exact_finish"] and result.info["finish_solves"] == 1
+    assert velocity_error(case.problem, result.velocities, reference.velocities) <= 1e-12
+
+
+def test_best_iterate_and_max_iter_status(piles):
+    case, _ = piles[0]
+    result = solve(case.problem, "apgd", tol=1e-14, max_iter=30)
+    assert result.status == "max_iter" and result.iterations == 30
+    assert result.info["best_residual"] == pytest.approx(np.min(result.residual_history))
+
+
+@pytest.mark.parametrize("method", ["bb", "apgd", "apgd-as"])
+@pytest.mark.parametrize("operator", ["matrix", "factor"])
+def test_matrix_and_matrix_free_operators_agree(piles, method, operator):
+    """``factor`` also takes APGD off the compiled kernel (the numpy loop and its callback)."""
+    case, reference = piles[1]
+    result = solve(case.problem, method, tol=1e-9, operator=operator)
+    assert result.status == "converged"
+    assert result.info.get("fused_kernel", False) == (method != "bb" and operator == "matrix")
+    assert velocity_error(case.problem, result.velocities, reference.velocities) <= ACCURACY
+
+
+# -- friction (numpy path: projections onto 2D friction cones) ------------------------------------
+class _DryFriction(Law):
+    """Every contact with a Coulomb cone of coefficient ``mu`` (test-only law)."""
+
+    needs_rotation = True
+
+    def __init__(self, mu):
+        self.mu = mu
+
+    def cones(self, contacts, gamma):
+        return Cones(kinds=np.full(contacts.count, ConeKind.COULOMB, dtype=np.int8),
+                     mu=np.full(contacts.count, self.mu), tangential=np.arange(contacts.count),
+                     tangent_dim=contacts.dim - 1)
+
+
+@pytest.fixture(scope="module")
+def frictional():
+    """A 60-grain pile on a slope-free floor with mu = 0.3, one step after release."""
+    scene = deposit_pile(60, seed=5)
+    simulation = Simulation(scene, _DryFriction(0.3), 0.01)
+    contacts = find_contacts(simulation.scene, simulation.d_max)
+    problem = simulation.build_problem(contacts, simulation.law.cones(contacts, np.zeros(contacts.count)))
+    return problem, solve(problem, "clarabel", tol=1e-10)
+
+
+@pytest.mark.parametrize("method", ["apgd", "apgd-jacobi", "apgd-as", "bb", "clarabel-direct", "scs"])
+def test_frictional_pile_velocities_match_clarabel(frictional, method):
+    problem, reference = frictional
+    result = solve(problem, method, tol=1e-10 if method in DIRECT else 1e-10)
+    assert result.status == "converged"
+    assert velocity_error(problem, result.velocities, reference.velocities) <= ACCURACY
+    assert problem.cones.velocity_violation(problem.gradient(result.forces)).max() <= 1e-6
+
+
+@pytest.mark.parametrize("method", ["apgd", "apgd-jacobi"])
+def test_compiled_and_numpy_frictional_apgd_agree(frictional, method):
+    """2D friction cones run in the compiled kernel (``matrix``); ``factor`` keeps the numpy loop."""
+    problem, reference = frictional
+    compiled = solve(problem, method, tol=1e-10)
+    plain = solve(problem, method, tol=1e-10, operator="factor")
+    assert compiled.info["fused_kernel"] and not plain.info["fused_kernel"]
+    assert compiled.status == plain.status == "converged"
+    for result in (compiled, plain):
+        assert velocity_error(problem, result.velocities, reference.velocities) <= ACCURACY
+    assert abs(compiled.iterations - plain.iterations) <= 0.05 * plain.iterations
+
+
+def test_second_order_and_polyhedral_forms_agree(frictional):
+    problem, _ = frictional
+    scaled = problem.normalized()
+    assert conic_form(scaled, polyhedral=False).soc_count == problem.n_contacts
+    assert conic_form(scaled, polyhedral=True).soc_count == 0
+    soc = solve(problem, "clarabel-direct", tol=1e-10, polyhedral=False)
+    qp = solve(problem, "clarabel-direct", tol=1e-10, polyhedral=True)
+    assert velocity_error(problem, soc.velocities, qp.velocities) <= ACCURACY
+
+
+def test_direct_methods_reject_union_cones(frictional):
+    problem, _ = frictional
+    union = problem.cones.with_branches(np.zeros(problem.n_contacts, dtype=bool))
+    union.kinds[:] = ConeKind.UNION
+    with pytest.raises(ValueError, match="UNION"):
+        solve(problem.with_cones(union), "clarabel-direct")
+
+
+# -- inside Simulation -------------------------------------------------------------------------------
+def trajectories(scene, law, dt, steps, solver, d_max=None, tol=1e-10):
+    sim = Simulation(scene, law, dt, solver=solver, tol=tol, d_max=d_max)
+    sim.run(steps)
+    record = sim.trajectory.arrays()
+    return record["positions"], record["velocities"], record["glued_count"], record["contact_count"]
+
+
+@pytest.mark.parametrize("scene, law, dt, steps, d_max", [
+    (scenes.push_pull(), GlueyLubrication(), 0.05, 100, 0.02),
+    (scenes.disk_on_incline(np.radians(30), t_inversion=1.5), GlueyLubrication(gamma_min=-0.5), 0.02,
+     150, 0.02),
+    (scenes.settling_pile(500, seed=1), Inelastic(), 0.1, 30, None),
+], ids=["push-pull", "gluey-incline", "pile-500"])
+@pytest.mark.parametrize("solver", ["apgd-as"])
+def test_simulation_reproduces_clarabel_trajectories(scene, law, dt, steps, d_max, solver):
+    ref_x, ref_v, ref_glued, ref_count = trajectories(scene, law, dt, steps, "clarabel", d_max)
+    x, v, glued, count = trajectories(scene, law, dt, steps, solver, d_max)
+    assert ref_count.max() >= (300 if scene.grains.count > 1 else 1)      # contacts did happen
+    if isinstance(law, GlueyLubrication):
+        assert ref_glued.max() == 1 and ref_glued[-1] == 0                 # glued, then unglued
+    np.testing.assert_array_equal(glued, ref_glued)
+    np.testing.assert_array_equal(count, ref_count)
+    speed = max(np.abs(ref_v).max(), 1e-12)
+    assert np.abs(v - ref_v).max() <= 1e-6 * speed
+    assert np.abs(x - ref_x).max() <= 1e-6 * scene.grains.radii.min()
+
+
+@pytest.fixture(scope="module")
+def settled():
+    """One step of a 100-grain pile settled by the dynamics, with its reference solve."""
+    scene, info = settle_pile(100, seed=1, cache=None, progress=None)
+    simulation = Simulation(scene, Inelastic(), 0.01)
+    contacts = find_contacts(simulation.scene, simulation.d_max)
+    problem = simulation.build_problem(contacts, Cones.frictionless(
+        np.full(contacts.count, ConeKind.NONNEG), contacts.dim - 1))
+    return scene, info, problem, solve(problem, "clarabel", tol=1e-10)
+
+
+def test_settled_pile_is_at_rest_and_apgd_as_solves_it_in_one_factorisation(settled):
+    """A 100-grain pile settled by the dynamics: its closed contacts carry load and stay closed."""
+    scene, info, problem, reference = settled
+    assert info["at_rest"]
+    radius = scene.grains.radii.min()
+    closed = np.abs(problem.gaps) <= 1e-9 * radius
+    opening = closed & (problem.gaps_after(reference.velocities) > 1e-9 * radius)
+    assert closed.sum() >= scene.grains.count and opening.sum() <= 0.02 * closed.sum()
+    result = solve(problem, "apgd-as", tol=1e-9)
+    assert result.status == "converged" and result.iterations <= 3
+    assert velocity_error(problem, result.velocities, reference.velocities) <= 1e-9
+
+
+def test_active_condition_matches_dense_eigenvalues(settled):
+    """Lanczos with shift-invert against numpy's dense eigenvalues of the same W_AA."""
+    _, _, problem, reference = settled
+    value, count = active_condition(problem, reference.x)
+    loaded = np.abs(reference.x) > 1e-12 * np.abs(reference.x).max()
+    eigenvalues = np.linalg.eigvalsh(problem.delassus.toarray()[np.ix_(loaded, loaded)])
+    assert count == np.count_nonzero(loaded) > 100
+    assert value == pytest.approx(eigenvalues[-1] / eigenvalues[0], rel=1e-8)
+    assert value > 1e4          # 2.0e4, jammed: PGD needs 204 333 iterations to tol 1e-8 here
+
+
+# -- "converged" means accurate (docs/hard_cases.md finding 5) -------------------------------------
+@pytest.mark.parametrize("method", ["apgd", "apgd-jacobi", "bb"])
+def test_converged_means_accurate_on_a_settled_pile(settled, method):
+    """On the settled pile the residual test alone stopped 2.5e-6 to 7.7e-6 away from the
+    solution at tol 1e-7 (W is badly conditioned: every contact closed and loaded); the exact
+    finish on the active set of the converged iterate makes any ``converged`` result exact."""
+    _, _, problem, reference = settled
+    result = solve(problem, method, tol=1e-7)
+    assert result.status == "converged" and result.info["exact_finish"]
+    assert velocity_error(problem, result.velocities, reference.velocities) <= 1e-10
+
+
+@pytest.mark.parametrize("name, method", [
+    ("mass_ratio_1e6_sandwich", "apgd"),
+    ("mass_ratio_1e6_sandwich", "apgd-jacobi"),
+    ("heavy_on_light_stack", "bb"),
+])
+def test_converged_means_accurate_on_ill_conditioned_hard_cases(name, method):
+    """Condition 1e6 (mass ratio) and forces from 1 to 1e4: converged at tol 1e-9 with scaled
+    velocity errors 1.9e-6, 2.0e-6 and 1.1e-6 before the exact finish."""
+    case = load_cases()[name]
+    expected = expected_for(case, case.problem)
+    result = solve(case.problem, method, tol=1e-9)
+    assert result.status == "converged" and result.info["exact_finish"]
+    assert error_against(case.problem, result.velocities, expected.velocities) <= 1e-9
+
+
+def test_the_exact_finish_leaves_frictional_and_unconverged_results_alone(frictional, settled):
+    problem, _ = frictional
+    assert "exact_finish" not in solve(problem, "apgd", tol=1e-9).info
+    _, _, problem, _ = settled
+    result = solve(problem, "apgd", tol=1e-14, max_iter=50)
+    assert result.status == "max_iter" and "exact_finish" not in result.info
+    assert result.iterations == 50
+
+
+# -- gluey + friction (UNION cones) in the compiled loop ------------------------------------------
+def compiled_projection(cones, forces):
+    """``P_K(forces)`` by :func:`lubcontact.solvers.kernels.project_cones` (2D cones)."""
+    from lubcontact.solvers.kernels import project_cones
+
+    projector = cones.projector
+    (cone_n, cone_t, cone_mu), (union_n, union_t, union_mu) = projector.pieces
+    out = np.empty_like(forces)
+    project_cones(forces, projector.lower, projector.upper, np.concatenate([cone_n, union_n]),
+                  np.concatenate([cone_t[:, 0], union_t[:, 0]]),
+                  np.concatenate([cone_mu, union_mu]),
+                  np.repeat([False, True], [cone_n.size, union_n.size]), out)
+    return out
+
+
+def test_compiled_projection_equals_cones_project_on_mixed_2d_cones():
+    """Random box/Coulomb/UNION mixes, plus the apex, cone edges and a tie (mu = 3/4 at
+    ``(n, t) = (-1, +-3)``: both pieces at distance 3, the friction cone wins)."""
+    rng = np.random.default_rng(7)
+    kinds = rng.choice(list(ConeKind), 600).astype(np.int8)
+    kinds[:6] = ConeKind.UNION
+    friction = np.flatnonzero((kinds == ConeKind.COULOMB) | (kinds == ConeKind.UNION))
+    mu = rng.choice([0.0, 0.3, 0.75, 1.0], kinds.size)
+    mu[:6] = 0.75
+    cones = Cones(kinds=kinds, mu=mu, tangential=friction, tangent_dim=1)
+    forces = rng.normal(size=cones.n_rows) * rng.choice([1e-3, 1.0, 1e3], cones.n_rows)
+    normal, tangential = cones.split(forces)
+    normal[:6] = [-1.0, -1.0, 0.0, 0.0, 4.0, -0.75]
+    # tie, tie, apex, n = 0, cone edge, polar edge
+    tangential[:6, 0] = [3.0, -3.0, 0.0, 1.0, 3.0, 1.0]
+    expected = cones.project(forces)
+    np.testing.assert_array_equal(compiled_projection(cones, forces), expected)
+    assert expected[0] > 0 and expected[1] > 0                         # ties go to the cone
+    union = cones.tangential[kinds[cones.tangential] == ConeKind.UNION]
+    pulled = expected[union] < 0
+    assert 0 < pulled.sum() < union.size                               # both pieces taken
+
+
+@pytest.fixture(scope="module")
+def gluey_problems():
+    """UNION problems: the hard case ``gamma_states_gluey_coulomb`` and a step of a 60-grain
+    settling pile with every contact at gamma_min (GlueyCoulomb, mu = 0.3), with references."""
+    from lubcontact.model.laws import GlueyCoulomb
+
+    law = GlueyCoulomb(0.3, gamma_min=-0.05)
+    simulation = Simulation(scenes.settling_pile(60, seed=3), law, 0.05, solver="apgd-jacobi",
+                            tol=1e-8, on_failure="ignore")
+    simulation.run(30)
+    contacts = find_contacts(simulation.scene, simulation.d_max)
+    pile = simulation.build_problem(contacts, law.cones(contacts, law.gamma_min(contacts)))
+    problems = [load_cases()["gamma_states_gluey_coulomb"].problem, pile]
+    return [(problem, solve(problem, "clarabel", tol=1e-10)) for problem in problems]
+
+
+@pytest.mark.parametrize("scaling", [False, True])
+def test_compiled_and_numpy_union_apgd_loops_agree(gluey_problems, scaling):
+    """The compiled loop and the numpy loop on the same data: same iterations, same forces
+    to rounding, both pushed and pulled contacts in the solution."""
+    from lubcontact.solvers.gradient import prepare, run_apgd, run_apgd_cones
+
+    for problem, _ in gluey_problems:
+        scaled = problem.normalized()
+        assert np.count_nonzero(scaled.cones.kinds == ConeKind.UNION) >= 3
+        data = prepare(scaled, scaling, "matrix")
+        z = np.zeros(scaled.n_rows)
+        plain, plain_status, plain_iterations, _ = run_apgd(data, z, 1e-10, 20000)
+        compiled, status, iterations, _ = run_apgd_cones(data, scaled.cones, z, 1e-10, 20000)
+        assert status == plain_status == "converged" and iterations == plain_iterations
+        scale = np.abs(plain.best).max()
+        assert np.abs(compiled.best - plain.best).max() <= 1e-10 * scale
+        normal = plain.best[: scaled.n_contacts]
+        assert np.any(normal < -1e-6 * scale) and np.any(normal > 1e-6 * scale)
+
+
+@pytest.mark.parametrize("method", ["apgd", "apgd-jacobi"])
+def test_union_apgd_runs_compiled_and_matches_clarabel(gluey_problems, method):
+    """``solve`` takes the compiled loop on 2D UNION problems (``factor``: the numpy loop);
+    both reach Clarabel's branch-rule solution."""
+    for problem, reference in gluey_problems:
+        compiled = solve(problem, method, tol=1e-10)
+        plain = solve(problem, method, tol=1e-10, operator="factor")
+        assert compiled.info["fused_kernel"] and not plain.info["fused_kernel"]
+        assert compiled.status == plain.status == reference.status == "converged"
+        for result in (compiled, plain):
+            assert velocity_error(problem, result.velocities, reference.velocities) <= ACCURACY
+
+
+def test_bench_solvers_prints_the_condition_and_a_converged_row(capsys):
+    """``lubcontact bench solvers --condition`` on a small deposited pile (CLI path, no timing)."""
+    from lubcontact.bench.piles import solvers_main
+
+    assert solvers_main(["--sizes", "40", "--pile", "deposited", "--methods", "apgd-as",
+                         "--no-warm", "--condition", "--glued-fraction", "0"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    condition = [line for line in lines if "cond(W_AA)" in line]
+    assert len(condition) == 1
+    assert 1e2 < float(condition[0].split("= ")[1].split()[0]) < 1e4        # 9.27e+02 measured
+    row = next(line for line in lines if " apgd-as " in line)
+    assert row.split()[8] == "converged" and float(row.split()[9]) <= ACCURACY
