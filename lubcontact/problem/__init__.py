@@ -7,7 +7,8 @@ Siconos); both satisfy the :class:`ConicProblem` protocol that every solver
 accepts.
 """
 from .cones import ConeKind, Cones
+from .conic import ConicProblem, Scaling
 from .local import LocalProblem
-from .step import Scaling, StepProblem
+from .step import StepProblem
 
-__all__ = ["ConeKind", "Cones", "LocalProblem", "Scaling", "StepProblem"]
+__all__ = ["ConeKind", "Cones", "ConicProblem", "LocalProblem", "Scaling", "StepProblem"]

@@ -29,7 +29,7 @@ import scipy.sparse as sp
 
 from .. import checks
 from .cones import ConeKind, Cones
-from .step import ConicProblemMixin, Scaling
+from .conic import ConicProblemMixin, Scaling
 
 
 def contact_major_permutation(n_contacts: int, dim: int) -> np.ndarray:
@@ -115,6 +115,11 @@ class LocalProblem(ConicProblemMixin):
                    name=name)
 
     # -- protocol shared with StepProblem (the common members: ConicProblemMixin) ---------------
+    @property
+    def delassus_factor(self) -> None:
+        """No factor ``W = L^T L`` is known for a problem given by ``W``."""
+        return None
+
     @property
     def dim(self) -> int:
         return self.cones.tangent_dim + 1

@@ -14,63 +14,15 @@ Dual, over contact forces ``lam`` (n_rows,)::
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from functools import cached_property
-from typing import TYPE_CHECKING
 
 import numpy as np
 import scipy.sparse as sp
 
 from .. import checks
+from .conic import ConicProblemMixin, Scaling
 from .cones import Cones
-
-if TYPE_CHECKING:                       # typing.Self exists from Python 3.11
-    from typing import Self
-
-
-@dataclass
-class Scaling:
-    """Map between a step problem and its normalised form.
-
-    Physical velocity ``v = velocity * v_scaled`` (per degree of freedom),
-    force ``lam = force * lam_scaled``, length ``D = length * D_scaled``.
-    """
-
-    velocity: np.ndarray
-    force: float
-    length: float
-
-
-class ConicProblemMixin:
-    """Members shared by :class:`StepProblem` and :class:`lubcontact.local.LocalProblem`.
-
-    Both are dataclasses with fields ``cones`` (:class:`Cones`) and ``shift``
-    (ndarray, shape (nc,)) and a method ``gradient(forces)`` (``W lam + b``);
-    the members below derive from them only.
-    """
-
-    @property
-    def n_contacts(self) -> int:
-        return self.cones.count
-
-    @property
-    def n_rows(self) -> int:
-        return self.cones.n_rows
-
-    def natural_residual(self, forces: np.ndarray) -> float:
-        """``|lam - P_K(lam - (W lam + b))|`` in this problem's units."""
-        return self.cones.natural_residual(forces, self.gradient(forces))
-
-    def with_shift(self, shift: np.ndarray) -> Self:
-        """A copy with another shift ``s`` (same matrices)."""
-        return replace(self, shift=np.asarray(shift, dtype=float).copy())
-
-    def with_cones(self, cones: Cones) -> Self:
-        """A copy with other force sets of the same layout."""
-        checks.require(cones.n_rows == self.n_rows, "cones", "must keep the row layout",
-                       cones.n_rows)
-        return replace(self, cones=cones)
-
 
 @dataclass
 class StepProblem(ConicProblemMixin):

@@ -39,7 +39,7 @@ class SymbolicForm:
 def _half_quadratic(step, forces: cp.Variable):
     """``1/2 lam^T W lam``: through the factor ``W = L^T L`` when the problem has one,
     else with ``W`` itself (its symmetric part; a local problem read from a file)."""
-    factor = getattr(step, "delassus_factor", None)
+    factor = step.delassus_factor
     if factor is not None:
         return 0.5 * cp.sum_squares(factor @ forces)
     symmetric = 0.5 * (step.delassus + step.delassus.T)

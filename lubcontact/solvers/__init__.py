@@ -1,12 +1,20 @@
-"""Solvers for step problems: reference (cvxpy + Clarabel) and fast methods.
+"""Solvers for conic problems: the registry, the reference (cvxpy + Clarabel) and fast methods.
 
-Use :func:`solve` with a registered method name; :func:`methods` lists them.
+Use :func:`solve` with a registered method name; :func:`methods` lists them
+(``methods(kind="first-order")`` one family); :func:`register` adds one;
+:func:`solve_coulomb` solves exact Coulomb friction by the fixed point on s
+around any of them. This layer sees problems only (:mod:`lubcontact.problem`),
+never grains.
 """
-from .registry import (CONVERGED, DIVERGED, FAILED, INACCURATE, MAX_ITER, STATUSES, SolveResult,
-                   SolverError, SolverWarning, check_status, methods, register, solve)
-from . import reference  # noqa: F401  (registers the reference methods)
 from . import direct  # noqa: F401  (clarabel-direct, osqp, scs)
 from . import gradient  # noqa: F401  (pgd, apgd, bb, apgd-jacobi, apgd-as)
+from . import reference  # noqa: F401  (registers the reference methods)
+from .registry import (FIRST_ORDER, INTERIOR_POINT, KINDS, QP, SolverInfo, capable_methods,
+                       methods, register, solve, solver_info, unregister)
+from .result import (CONVERGED, DIVERGED, FAILED, INACCURATE, MAX_ITER, STATUSES, MethodOutput,
+                     SolverError, SolverWarning, SolveResult, check_status)
 
-__all__ = ["solve", "methods", "register", "check_status", "SolveResult", "SolverError",
-           "SolverWarning", "CONVERGED", "DIVERGED", "FAILED", "INACCURATE", "MAX_ITER", "STATUSES"]
+__all__ = ["solve", "methods", "register", "unregister", "solver_info", "capable_methods",
+           "SolverInfo", "FIRST_ORDER", "INTERIOR_POINT", "QP", "KINDS", "check_status",
+           "MethodOutput", "SolveResult", "SolverError", "SolverWarning", "CONVERGED", "DIVERGED",
+           "FAILED", "INACCURATE", "MAX_ITER", "STATUSES"]

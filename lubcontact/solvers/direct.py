@@ -33,7 +33,8 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..problem.cones import ConeKind
-from .registry import CONVERGED, FAILED, INACCURATE, MAX_ITER, MethodOutput, register
+from .registry import CONVEX_CONES, FIRST_ORDER, INTERIOR_POINT, QP, register
+from .result import CONVERGED, FAILED, INACCURATE, MAX_ITER, MethodOutput
 from .polish import polish as polish_active_set
 
 
@@ -128,7 +129,8 @@ def _empty(problem) -> MethodOutput | None:
     return None
 
 
-@register("clarabel-direct")
+@register("clarabel-direct", kind=INTERIOR_POINT, cones=CONVEX_CONES, warm_start=False,
+          polishing=True)
 def clarabel_direct(problem, *, tol: float = 1e-10, max_iter: int = 200, warm_start=None,
                     polyhedral: bool | None = None, polish: bool = True) -> MethodOutput:
     """Clarabel on :func:`conic_form` (``warm_start`` is ignored: interior point).
@@ -202,7 +204,7 @@ def _flush_c_streams() -> None:
         pass
 
 
-@register("osqp")
+@register("osqp", kind=QP, cones=CONVEX_CONES, second_order=False)
 def osqp_method(problem, *, tol: float = 1e-10, max_iter: int = 100000, warm_start=None,
                 polish: bool = True) -> MethodOutput:
     """OSQP on the polyhedral :func:`conic_form` (raises ValueError for 3D friction)."""
@@ -230,7 +232,7 @@ def osqp_method(problem, *, tol: float = 1e-10, max_iter: int = 100000, warm_sta
                         setup_time=built - start, solve_time=done - built, info={"raw_status": raw})
 
 
-@register("scs")
+@register("scs", kind=FIRST_ORDER, cones=CONVEX_CONES)
 def scs_method(problem, *, tol: float = 1e-10, max_iter: int = 100000, warm_start=None,
                polyhedral: bool | None = None) -> MethodOutput:
     """SCS on :func:`conic_form` (``warm_start`` seeds the primal variable).

@@ -71,7 +71,8 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..problem.cones import ConeKind
-from .registry import CONVERGED, DIVERGED, MAX_ITER, MethodOutput, register
+from .registry import FIRST_ORDER, register
+from .result import CONVERGED, DIVERGED, MAX_ITER, MethodOutput
 
 _DIVERGENCE_FACTOR = 1e12
 _REQUEST_FINISH = 3                      # kernel status: the active set has settled
@@ -160,7 +161,7 @@ class DualData:
 def jacobi_scale(problem) -> np.ndarray:
     """Per-row scale ``s``, constant over each contact's rows (see module docstring)."""
     cones = problem.cones
-    factor = getattr(problem, "delassus_factor", None)
+    factor = problem.delassus_factor
     diagonal = np.asarray(problem.delassus.diagonal()) if factor is None \
         else np.asarray(factor.multiply(factor).sum(axis=0)).ravel()
     nc = cones.count
@@ -191,7 +192,7 @@ def prepare(problem, scaling: bool, operator: str = "auto") -> DualData:
     """
     if operator not in ("auto", "matrix", "factor"):
         raise ValueError(f"operator: must be 'auto', 'matrix' or 'factor', got {operator!r}")
-    has_factor = getattr(problem, "delassus_factor", None) is not None
+    has_factor = problem.delassus_factor is not None
     if operator == "factor" and not has_factor:
         raise ValueError("operator: 'factor' needs a problem with delassus_factor")
     use_factor = has_factor and operator != "matrix"
@@ -594,7 +595,7 @@ def _plain(run, problem, tol, max_iter, warm_start, scaling, operator) -> Method
     return _finalise(problem, data, tracker, status, iterations, setup, start)
 
 
-@register("pgd")
+@register("pgd", kind=FIRST_ORDER)
 def pgd(problem, *, tol: float = 1e-8, max_iter: int = 20000, warm_start=None,
         scaling: bool = False, operator: str = "auto") -> MethodOutput:
     """Projected gradient descent, step ``1/L`` (see module docstring)."""
@@ -722,21 +723,21 @@ def _run_apgd_fused(data: DualData, z: np.ndarray, tol: float, max_iter: int,
             return tracker, MAX_ITER, done
 
 
-@register("apgd")
+@register("apgd", kind=FIRST_ORDER)
 def apgd(problem, *, tol: float = 1e-8, max_iter: int = 20000, warm_start=None,
          scaling: bool = False, operator: str = "auto") -> MethodOutput:
     """Accelerated projected gradient with restart and backtracking (Mazhar et al. 2015)."""
     return _apgd(problem, tol, max_iter, warm_start, scaling, operator, active_set=False)
 
 
-@register("apgd-jacobi")
+@register("apgd-jacobi", kind=FIRST_ORDER)
 def apgd_jacobi(problem, *, tol: float = 1e-8, max_iter: int = 20000, warm_start=None,
                 operator: str = "auto") -> MethodOutput:
     """``apgd`` on the Jacobi-scaled problem."""
     return _apgd(problem, tol, max_iter, warm_start, True, operator, active_set=False)
 
 
-@register("apgd-as")
+@register("apgd-as", kind=FIRST_ORDER, polishing=True)
 def apgd_active_set(problem, *, tol: float = 1e-8, max_iter: int = 20000, warm_start=None,
                     operator: str = "auto") -> MethodOutput:
     """Jacobi-scaled APGD with an exact active-set finish (:class:`ActiveSetFinish`).
@@ -747,7 +748,7 @@ def apgd_active_set(problem, *, tol: float = 1e-8, max_iter: int = 20000, warm_s
     return _apgd(problem, tol, max_iter, warm_start, True, operator, active_set=True)
 
 
-@register("bb")
+@register("bb", kind=FIRST_ORDER)
 def bb(problem, *, tol: float = 1e-8, max_iter: int = 20000, warm_start=None,
        scaling: bool = False, operator: str = "auto") -> MethodOutput:
     """Spectral (Barzilai-Borwein) projected gradient with a non-monotone line search."""

@@ -36,7 +36,8 @@ import numpy as np
 from ..problem import symbolic
 from ..problem.step import StepProblem
 from ..problem.cones import ConeKind
-from .registry import CONVERGED, FAILED, INACCURATE, MAX_ITER, MethodOutput, register
+from .registry import INTERIOR_POINT, register
+from .result import CONVERGED, FAILED, INACCURATE, MAX_ITER, MethodOutput
 from .polish import polish as polish_active_set
 
 _STATUS = {cp.OPTIMAL: CONVERGED, cp.OPTIMAL_INACCURATE: INACCURATE,
@@ -145,7 +146,7 @@ def _solve(step: StepProblem, form: str, tol: float, max_iter: int, polyhedral: 
     return solve_branches(step, form, tol, max_iter, polyhedral, warm_start, max_branch_rounds)
 
 
-@register("clarabel-dual")
+@register("clarabel-dual", kind=INTERIOR_POINT, warm_start=False, polishing=True)
 def clarabel_dual(step: StepProblem, *, tol: float = 1e-10, max_iter: int = 200,
                   warm_start=None, polyhedral: bool = False,
                   max_branch_rounds: int = 8) -> MethodOutput:
@@ -156,7 +157,7 @@ def clarabel_dual(step: StepProblem, *, tol: float = 1e-10, max_iter: int = 200,
     return _solve(step, "dual", tol, max_iter, polyhedral, warm_start, max_branch_rounds)
 
 
-@register("clarabel")
+@register("clarabel", kind=INTERIOR_POINT, warm_start=False, polishing=True)
 def clarabel_primal(step: StepProblem, *, tol: float = 1e-10, max_iter: int = 200,
                     warm_start=None, polyhedral: bool = False,
                     max_branch_rounds: int = 8) -> MethodOutput:

@@ -1,156 +1,190 @@
-"""Solver interface shared by every method: a registry, ``solve`` and ``SolveResult``.
+"""The solver registry: :func:`register`, :func:`methods`, :func:`solver_info` and :func:`solve`.
 
-Every method receives the *normalised* problem (``StepProblem.normalized``:
-``M = I``, ``dt = 1``, velocities O(1)) and returns scaled forces; ``solve``
-maps them back to physical units. Residuals in results are in scaled units
-and therefore comparable across scenes.
+Each method is registered with what it can do (its :class:`SolverInfo`), in the
+style of qpsolvers and cvxpy: ``solve`` dispatches by name, rejects a problem
+the method does not accept with one message before any work, normalises the
+problem (``problem.normalized()``: ``M = I``, ``dt = 1``, velocities O(1)),
+calls the method, re-checks what it returns (finite forces, natural residual)
+and maps the forces back to physical units. Residuals in results are in scaled
+units and therefore comparable across scenes.
+
+Adding a solver (see ``docs/guide/adding-a-solver.md``)::
+
+    from lubcontact.solvers import CONVERGED, MethodOutput, register
+
+    @register("my-pgd", kind="first-order")
+    def my_pgd(problem, *, tol, max_iter=10000, warm_start=None):
+        ...                               # problem: a normalised ConicProblem
+        return MethodOutput(forces, CONVERGED, iterations)
 """
 from __future__ import annotations
 
 import time
-import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Callable
 
 import numpy as np
 
-from ..problem.step import StepProblem
+from ..problem.cones import ConeKind
+from ..problem.conic import ConicProblem
+from .result import (CONVERGED, DIVERGED, FAILED, INACCURATE, SUSPICIOUS_RESIDUAL, MethodOutput,
+                     SolveResult)
 
-CONVERGED = "converged"
-MAX_ITER = "max_iter"
-DIVERGED = "diverged"
-INACCURATE = "inaccurate"
-FAILED = "failed"
-STATUSES = (CONVERGED, MAX_ITER, DIVERGED, INACCURATE, FAILED)
+FIRST_ORDER = "first-order"
+INTERIOR_POINT = "interior-point"
+QP = "qp"
+KINDS = (FIRST_ORDER, INTERIOR_POINT, QP)
+"""Solver families: first-order (projected gradient, ADMM), interior point, QP-only."""
 
+ALL_CONES = frozenset(ConeKind)
+CONVEX_CONES = frozenset(ConeKind) - {ConeKind.UNION}
 
-SUSPICIOUS_RESIDUAL = 1e-3
-"""A ``converged`` claim whose natural residual (normalised units, per sqrt(row))
-exceeds this is downgraded to ``inaccurate``: solutions this far from optimal
-are wrong, whatever the method says (e.g. an interior point drifting along an
-unbounded optimal face of the dual)."""
-
-
-class SolverError(RuntimeError):
-    """Raised when a solve fails and the policy says to stop."""
+Method = Callable[..., MethodOutput]
 
 
-class SolverWarning(RuntimeWarning):
-    """Issued when a solve did not converge and the policy says to go on."""
-
-
-@dataclass
-class SolveResult:
-    """Outcome of one solve, in physical units.
+@dataclass(frozen=True)
+class SolverInfo:
+    """A registered method and what it can do.
 
     Attributes
     ----------
-    x : ndarray, shape (n_rows,)
-        Contact forces ``lam`` (also available as ``forces``).
-    velocities : ndarray, shape (n_dof,)
-        ``v = U + dt M^-1 H^T lam``.
-    status : str
-        One of ``converged``, ``max_iter``, ``diverged``, ``inaccurate``, ``failed``.
-    iterations : int
-        Iterations of the method (interior-point or gradient steps).
-    residual : float
-        Natural-map residual of the returned forces on the normalised problem.
-    residual_history : ndarray
-        Residual per iteration where the method records it (may be empty).
-    setup_time, solve_time : float
-        Seconds spent building the method's data, and iterating.
-    method : str
-        Registered name of the method.
-    force_scale : float
-        The force unit of the normalised problem (``m_ref V / dt``): forces
-        below ``tol x force_scale`` are numerically zero.
-    info : dict
-        Method-specific extras (e.g. the raw solver status).
+    name : str
+        Registered name.
+    function : callable
+        ``function(problem, *, tol, max_iter, warm_start, **options) -> MethodOutput``,
+        called on the normalised problem.
+    kind : str
+        One of :data:`KINDS`.
+    cones : frozenset of ConeKind
+        Force sets it accepts (``UNION``: the non-convex gluey + friction set).
+    second_order : bool
+        Whether it accepts genuine second-order friction cones (3D contacts).
+    warm_start : bool
+        Whether it uses a warm start (others ignore it).
+    polishing : bool
+        Whether its result is polished on its active set.
+    description : str
+        One line for tables and ``--help``.
     """
 
-    x: np.ndarray
-    velocities: np.ndarray
-    status: str
-    iterations: int
-    residual: float
-    method: str
-    force_scale: float = 1.0
-    setup_time: float = 0.0
-    solve_time: float = 0.0
-    residual_history: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    info: dict = field(default_factory=dict)
+    name: str
+    function: Method
+    kind: str
+    cones: frozenset
+    second_order: bool
+    warm_start: bool
+    polishing: bool
+    description: str
 
-    @property
-    def forces(self) -> np.ndarray:
-        return self.x
+    def rejection(self, problem: ConicProblem) -> str | None:
+        """Why this method cannot solve ``problem``, or None when it can."""
+        cones = problem.cones
+        unsupported = sorted({ConeKind(k).name for k in np.unique(cones.kinds)}
+                             - {k.name for k in self.cones})
+        if unsupported:
+            return f"{' and '.join(unsupported)} contacts are not supported"
+        if cones.has_friction and cones.tangent_dim > 1 and not self.second_order:
+            return "second-order (3D) friction cones are not supported"
+        return None
 
-    @property
-    def success(self) -> bool:
-        return self.status == CONVERGED
+
+_REGISTRY: dict[str, SolverInfo] = {}
 
 
-@dataclass
-class MethodOutput:
-    """What a registered method returns, in the normalised problem's units.
+def register(name: str, *, kind: str = FIRST_ORDER, cones=ALL_CONES, second_order: bool = True,
+             warm_start: bool = True, polishing: bool = False,
+             description: str = "") -> Callable[[Method], Method]:
+    """Decorator registering a method under ``name`` with its capabilities.
 
-    ``velocities`` is optional: a method that computes them directly (a primal
-    form) returns them; otherwise they are derived from the forces.
+    Parameters
+    ----------
+    name : str
+        The name :func:`solve` and the command line use; must be new.
+    kind : str
+        One of :data:`KINDS`.
+    cones : iterable of ConeKind
+        Force sets the method accepts (default: all, the non-convex union included).
+    second_order, warm_start, polishing, description
+        See :class:`SolverInfo`.
+
+    Raises
+    ------
+    ValueError
+        For a name already registered or an unknown kind.
     """
+    if name in _REGISTRY:
+        raise ValueError(f"name: solver {name!r} is already registered")
+    if kind not in KINDS:
+        raise ValueError(f"kind: must be one of {KINDS}, got {kind!r}")
 
-    forces: np.ndarray
-    status: str
-    iterations: int
-    setup_time: float
-    solve_time: float
-    residual_history: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    info: dict = field(default_factory=dict)
-    velocities: np.ndarray | None = None
-
-
-Method = Callable[..., MethodOutput]
-_METHODS: dict[str, Method] = {}
-
-
-def register(name: str):
-    """Decorator registering ``fn(problem, *, tol, max_iter, warm_start, **options)``."""
-
-    def wrap(fn: Method) -> Method:
-        _METHODS[name] = fn
-        return fn
+    def wrap(function: Method) -> Method:
+        doc = (function.__doc__ or "").strip().splitlines()
+        _REGISTRY[name] = SolverInfo(name=name, function=function, kind=kind,
+                                     cones=frozenset(ConeKind(k) for k in cones),
+                                     second_order=second_order, warm_start=warm_start,
+                                     polishing=polishing,
+                                     description=description or (doc[0] if doc else ""))
+        return function
 
     return wrap
 
 
-def methods() -> list[str]:
-    """Names of the registered methods."""
-    return sorted(_METHODS)
+def unregister(name: str) -> None:
+    """Remove a registered method (for tests and interactive sessions)."""
+    _REGISTRY.pop(name)
 
 
-def solve(problem: StepProblem, method: str = "clarabel", *, tol: float = 1e-9,
+def methods(kind: str | None = None) -> list[str]:
+    """Names of the registered methods, all or those of one ``kind`` (see :data:`KINDS`)."""
+    if kind is not None and kind not in KINDS:
+        raise ValueError(f"kind: must be one of {KINDS}, got {kind!r}")
+    return sorted(name for name, info in _REGISTRY.items() if kind in (None, info.kind))
+
+
+def solver_info(name: str) -> SolverInfo:
+    """The :class:`SolverInfo` of a registered method."""
+    if name not in _REGISTRY:
+        raise ValueError(f"method: unknown solver {name!r}; registered: {', '.join(methods())}")
+    return _REGISTRY[name]
+
+
+def solve(problem: ConicProblem, method: str = "clarabel", *, tol: float = 1e-9,
           max_iter: int | None = None, warm_start: np.ndarray | None = None,
           **options) -> SolveResult:
-    """Solve a step problem with a registered method.
+    """Solve a step (or local) problem with a registered method.
 
     Parameters
     ----------
-    problem : StepProblem
-        In physical units; it is normalised here.
+    problem : ConicProblem
+        A :class:`~lubcontact.problem.StepProblem` or
+        :class:`~lubcontact.problem.LocalProblem`, in physical units; it is
+        normalised here.
     method : str
         A name from :func:`methods`.
     tol : float
         Stopping tolerance (scaled natural-map residual for iterative methods,
         gap and feasibility tolerance for interior-point methods).
     max_iter : int, optional
-        Iteration cap (method default when None).
+        Iteration cap, > 0 (method default when None).
     warm_start : ndarray, shape (n_rows,), optional
         Initial forces in physical units.
     **options
         Passed to the method.
+
+    Raises
+    ------
+    ValueError
+        For an unknown method, a problem it does not accept, or bad ``tol``,
+        ``max_iter`` or ``warm_start``.
     """
-    if method not in _METHODS:
-        raise ValueError(f"method: unknown solver {method!r}; registered: {', '.join(methods())}")
+    info = solver_info(method)
+    if (reason := info.rejection(problem)) is not None:
+        raise ValueError(f"method: {method!r} cannot solve this problem: {reason}; "
+                         f"methods that can: {', '.join(capable_methods(problem))}")
     if not tol > 0:
         raise ValueError(f"tol: must be > 0, got {tol}")
+    if max_iter is not None and not (float(max_iter) == int(max_iter) and int(max_iter) > 0):
+        raise ValueError(f"max_iter: must be a positive integer, got {max_iter}")
     start = time.perf_counter()
     scaled = problem.normalized()
     scale = scaled.scaling
@@ -164,7 +198,9 @@ def solve(problem: StepProblem, method: str = "clarabel", *, tol: float = 1e-9,
     kwargs = dict(tol=tol, warm_start=warm_start, **options)
     if max_iter is not None:
         kwargs["max_iter"] = int(max_iter)
-    out = _METHODS[method](scaled, **kwargs)
+    called = time.perf_counter()
+    out = info.function(scaled, **kwargs)
+    call_time = time.perf_counter() - called
     status = out.status
     forces = out.forces
     if not np.all(np.isfinite(forces)):
@@ -179,25 +215,16 @@ def solve(problem: StepProblem, method: str = "clarabel", *, tol: float = 1e-9,
         velocities = out.velocities * scale.velocity
     else:
         velocities = problem.velocity(physical)
+    timed = out.setup_time is not None or out.solve_time is not None
+    setup_time = (out.setup_time or 0.0) if timed else 0.0
+    solve_time = (out.solve_time or 0.0) if timed else call_time
     return SolveResult(x=physical, velocities=velocities, status=status,
                        iterations=out.iterations, residual=residual, method=method,
-                       force_scale=scale.force,
-                       setup_time=out.setup_time + normalise_time, solve_time=out.solve_time,
-                       residual_history=out.residual_history, info=out.info)
+                       force_scale=scale.force, setup_time=setup_time + normalise_time,
+                       solve_time=solve_time, residual_history=out.residual_history,
+                       info=out.info)
 
 
-def check_status(result: SolveResult, policy: str) -> None:
-    """Apply a non-convergence policy: ``"raise"``, ``"warn"`` or ``"ignore"``.
-
-    Raises
-    ------
-    SolverError
-        When the status is not ``converged`` and ``policy == "raise"``.
-    """
-    if result.success or policy == "ignore":
-        return
-    message = (f"{result.method}: status {result.status} after {result.iterations} iterations, "
-               f"residual {result.residual:.3e}")
-    if policy == "raise":
-        raise SolverError(message)
-    warnings.warn(message, SolverWarning, stacklevel=3)
+def capable_methods(problem: ConicProblem, kind: str | None = None) -> list[str]:
+    """Registered methods (of one ``kind``) that accept ``problem``."""
+    return [name for name in methods(kind) if _REGISTRY[name].rejection(problem) is None]

@@ -23,8 +23,7 @@ from lubcontact import (GlueyLubrication, Grains, Inelastic, Scene, Simulation, 
 from lubcontact.bench.hard import (CRASH, FLAGGED, OK, REJECTED, WRONG, Cell, error_against, expected_for,
                              judge, load_cases, main, matrix, run_case, solve_case)
 from lubcontact.solvers import CONVERGED, SolverError, SolverWarning
-from lubcontact.solvers.registry import STATUSES
-from lubcontact.solvers.registry import _METHODS, MethodOutput, register
+from lubcontact.solvers import STATUSES, MethodOutput, register, unregister
 from lubcontact.model.laws import Coulomb, GlueyCoulomb, PairState
 from lubcontact.bench.cases.builders import floor_scene, hexagonal_box
 from lubcontact.bench.cases.hard import GAMMA_MIN, GAMMA_NEAR, GAMMA_STATES
@@ -216,7 +215,7 @@ def nan_method():
         return MethodOutput(np.full(problem.n_rows, np.nan), CONVERGED, 1, 0.0, 0.0)
 
     yield "test-nan"
-    del _METHODS["test-nan"]
+    unregister("test-nan")
 
 
 def test_non_finite_forces_become_zero_and_diverged(nan_method):

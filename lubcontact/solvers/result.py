@@ -1,0 +1,135 @@
+"""What a solve returns: statuses, :class:`SolveResult`, and the non-convergence policy.
+
+Every method returns a :class:`MethodOutput` in the normalised problem's
+units; :func:`lubcontact.solvers.solve` checks it (finite forces, natural
+residual) and maps it back to a :class:`SolveResult` in physical units.
+"""
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass, field
+
+import numpy as np
+
+CONVERGED = "converged"
+MAX_ITER = "max_iter"
+DIVERGED = "diverged"
+INACCURATE = "inaccurate"
+FAILED = "failed"
+STATUSES = (CONVERGED, MAX_ITER, DIVERGED, INACCURATE, FAILED)
+
+SUSPICIOUS_RESIDUAL = 1e-3
+"""A ``converged`` claim whose natural residual (normalised units, per sqrt(row))
+exceeds this is downgraded to ``inaccurate``: solutions this far from optimal
+are wrong, whatever the method says (e.g. an interior point drifting along an
+unbounded optimal face of the dual)."""
+
+
+class SolverError(RuntimeError):
+    """Raised when a solve fails and the policy says to stop."""
+
+
+class SolverWarning(RuntimeWarning):
+    """Issued when a solve did not converge and the policy says to go on."""
+
+
+@dataclass
+class MethodOutput:
+    """What a registered method returns, in the normalised problem's units.
+
+    Attributes
+    ----------
+    forces : ndarray, shape (n_rows,)
+        Scaled contact forces.
+    status : str
+        One of :data:`STATUSES`.
+    iterations : int
+        Iterations of the method.
+    setup_time, solve_time : float, optional
+        Seconds spent building the method's data and iterating; when both
+        are left at None, :func:`~lubcontact.solvers.solve` times the whole
+        call as ``solve_time``.
+    residual_history : ndarray
+        Residual per iteration where the method records it (may be empty).
+    info : dict
+        Method-specific extras.
+    velocities : ndarray, shape (n_dof,), optional
+        Scaled velocities, for a method that computes them directly (a
+        primal form); otherwise they are derived from the forces.
+    """
+
+    forces: np.ndarray
+    status: str
+    iterations: int
+    setup_time: float | None = None
+    solve_time: float | None = None
+    residual_history: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    info: dict = field(default_factory=dict)
+    velocities: np.ndarray | None = None
+
+
+@dataclass
+class SolveResult:
+    """Outcome of one solve, in physical units.
+
+    Attributes
+    ----------
+    x : ndarray, shape (n_rows,)
+        Contact forces ``lam`` (also available as ``forces``).
+    velocities : ndarray, shape (n_dof,)
+        ``v = U + dt M^-1 H^T lam`` (local velocities ``W r + q`` for a local problem).
+    status : str
+        One of ``converged``, ``max_iter``, ``diverged``, ``inaccurate``, ``failed``.
+    iterations : int
+        Iterations of the method (interior-point or gradient steps).
+    residual : float
+        Natural-map residual of the returned forces on the normalised problem.
+    method : str
+        Registered name of the method.
+    force_scale : float
+        The force unit of the normalised problem (``m_ref V / dt``): forces
+        below ``tol x force_scale`` are numerically zero.
+    setup_time, solve_time : float
+        Seconds spent normalising and building the method's data, and iterating.
+    residual_history : ndarray
+        Residual per iteration where the method records it (may be empty).
+    info : dict
+        Method-specific extras (e.g. the raw solver status).
+    """
+
+    x: np.ndarray
+    velocities: np.ndarray
+    status: str
+    iterations: int
+    residual: float
+    method: str
+    force_scale: float = 1.0
+    setup_time: float = 0.0
+    solve_time: float = 0.0
+    residual_history: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    info: dict = field(default_factory=dict)
+
+    @property
+    def forces(self) -> np.ndarray:
+        return self.x
+
+    @property
+    def success(self) -> bool:
+        return self.status == CONVERGED
+
+
+def check_status(result: SolveResult, policy: str) -> None:
+    """Apply a non-convergence policy: ``"raise"``, ``"warn"`` or ``"ignore"``.
+
+    Raises
+    ------
+    SolverError
+        When the status is not ``converged`` and ``policy == "raise"``.
+    """
+    if result.success or policy == "ignore":
+        return
+    message = (f"{result.method}: status {result.status} after {result.iterations} iterations, "
+               f"residual {result.residual:.3e}")
+    if policy == "raise":
+        raise SolverError(message)
+    warnings.warn(message, SolverWarning, stacklevel=3)
