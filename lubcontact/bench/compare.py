@@ -47,7 +47,8 @@ import numpy as np
 
 from . import problem_sets
 from .problem_sets import COULOMB, Instance, ProblemSet, SetUnavailable
-from .tables import format_table, relative_error
+from ..problem.metrics import most_negative_gap, relative_error, scaled_coulomb_error
+from .tables import format_table
 
 # the first of these that accepts the problem (the primal form needs a StepProblem)
 REFERENCE_METHODS = ("clarabel", "clarabel-dual")
@@ -80,39 +81,18 @@ class Variant:
 # -- solving -------------------------------------------------------------------------------------
 def run_once(instance: Instance, method: str, tol: float, warm: bool = False,
              max_iter: int | None = None):
-    """One solve of ``instance`` as its mode says; returns ``(SolveResult, wall seconds)``."""
-    from ..solvers.coulomb import solve_coulomb
-    from ..solvers import solve
+    """One solve of ``instance`` as its mode says; returns ``(CoulombResult, wall seconds)``."""
+    from ..solvers import SolveSettings
 
-    guess = instance.warm_start if warm else None
+    settings = SolveSettings(method=method, tol=tol, max_iter=max_iter,
+                             exact_coulomb=instance.mode == COULOMB, tol_fp=tol,
+                             max_outer=MAX_OUTER)
     start = time.perf_counter()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        if instance.mode == COULOMB:
-            result = solve_coulomb(instance.problem, method, tol=tol, tol_fp=tol,
-                                   max_outer=MAX_OUTER, max_iter=max_iter, warm_start=guess,
-                                   shift=instance.warm_shift if warm else None)
-        else:
-            result = solve(instance.problem, method, tol=tol, max_iter=max_iter, warm_start=guess)
+        result = settings.solve(instance.problem, instance.warm_start if warm else None,
+                                instance.warm_shift if warm else None)
     return result, time.perf_counter() - start
-
-
-def fclib_error(problem, forces: np.ndarray) -> float:
-    """The FCLIB/Siconos error (MODEL.md section 6) of ``forces`` on the normalised problem."""
-    from ..solvers.coulomb import coulomb_error
-
-    scaled = problem.normalized()
-    return coulomb_error(scaled, forces / scaled.scaling.force)
-
-
-def most_negative_gap(problem, velocities: np.ndarray) -> float:
-    """Most negative gap after the step in units of ``dt V`` (for local problems: of ``u_n / V``)."""
-    if problem.n_contacts == 0:
-        return 0.0
-    scaling = problem.normalized().scaling
-    if hasattr(problem, "gaps_after"):
-        return float(problem.gaps_after(velocities).min() / scaling.length)
-    return float(velocities[: problem.n_contacts].min() / scaling.length)
 
 
 def measure(instance: Instance, variant: Variant, tol: float, reference, repeats: int,
@@ -139,7 +119,7 @@ def measure(instance: Instance, variant: Variant, tol: float, reference, repeats
     if first is None:
         return {**row, **_failed_metrics(), "status": "error", "message": message}
     row.update(status=first.status, iterations=int(first.iterations),
-               outer_iterations=int(first.info.get("outer_iterations", 1)),
+               outer_iterations=int(first.outer_iterations),
                time_s=float(np.median(walls)), time_min_s=float(np.min(walls)),
                time_max_s=float(np.max(walls)), setup_s=float(np.median(setups)),
                solve_s=float(np.median(solves)), residual=float(first.residual),
@@ -187,7 +167,7 @@ def _errors(instance: Instance, result, reference) -> dict:
     nan = float("nan")
     return dict(velocity_error=relative_error(result.velocities, target)
                 if finite and target is not None else nan,
-                fclib_error=fclib_error(problem, result.x) if finite else nan,
+                fclib_error=scaled_coulomb_error(problem, result.x) if finite else nan,
                 min_gap=most_negative_gap(problem, result.velocities) if finite else nan)
 
 
@@ -210,7 +190,7 @@ def reference_solve(instance: Instance, max_iter: int | None) -> tuple[object, d
         if instance.exact is not None and np.all(np.isfinite(result.velocities)) else nan
     return result, {**row, "reference_status": result.status, "reference_time_s": wall,
                     "reference_iterations": int(result.iterations),
-                    "reference_fclib_error": fclib_error(instance.problem, result.x)
+                    "reference_fclib_error": scaled_coulomb_error(instance.problem, result.x)
                     if np.all(np.isfinite(result.x)) else nan,
                     "reference_exact_error": exact_error}
 

@@ -153,12 +153,10 @@ def outcome(result, wall: float, message: str) -> dict:
     if result is None:
         return {"outer it": "-", "inner it": "-", "time s": f"{wall:.3f}", "status": "error",
                 "note": message}
-    info = result.info
     note = ""
     if not result.success:
-        note = (f"inner {info.get('inner_status', result.status)}, "
-                f"last change of s {info.get('shift_change', np.nan):.1e}")
-    return {"outer it": info.get("outer_iterations", 1), "inner it": result.iterations,
+        note = f"inner {result.inner_status}, last change of s {result.shift_change:.1e}"
+    return {"outer it": result.outer_iterations, "inner it": result.iterations,
             "time s": f"{wall:.3f}", "status": result.status, "note": note}
 
 
@@ -185,8 +183,7 @@ def external_rows(problems: list[ExternalProblem], folder: Path, methods: list[s
     ``tol`` is the inner tolerance and, unless ``tol_fp`` is given, the fixed point's.
     """
     tol_fp = tol if tol_fp is None else tol_fp
-    from .compare import fclib_error
-    from ..solvers.coulomb import coulomb_error
+    from ..problem.metrics import coulomb_error, scaled_coulomb_error
     from ..io.readers import read_problem
 
     rows, loaded = [], False
@@ -207,7 +204,7 @@ def external_rows(problems: list[ExternalProblem], folder: Path, methods: list[s
                        method=method, **outcome(result, wall, message))
             if result is not None:
                 row["FCLIB error"] = _error(coulomb_error(problem, result.forces))
-                row["scaled err"] = _error(fclib_error(problem, result.forces))
+                row["scaled err"] = _error(scaled_coulomb_error(problem, result.forces))
             out(f"# {entry.name} {method}: {row['status']}, error {row.get('FCLIB error', '-')}, "
                 f"{row['time s']} s")
             rows.append(row)
@@ -280,8 +277,7 @@ def pile_rows(step: PileStep, methods: list[str], tol: float, max_outer: int, fo
               anderson: int, max_iter: int | None = None, joint: int = 0,
               out=print) -> list[dict]:
     """The reference row and one row per method and start (cold, warm)."""
-    from .piles import velocity_error
-    from .compare import fclib_error
+    from ..problem.metrics import scaled_coulomb_error, velocity_error
 
     problem = step.problem
     out(f"# {step.label} N={step.n_grains}: {problem.n_contacts} contacts, {step.note}")
@@ -291,7 +287,7 @@ def pile_rows(step: PileStep, methods: list[str], tol: float, max_outer: int, fo
     base = dict(pile=step.label, N=step.n_grains, contacts=problem.n_contacts)
     rows = [dict(base, method=f"{REFERENCE['method']} (ref)", start="cold",
                  **outcome(reference, wall, message))]
-    rows[0]["scaled err"] = _error(fclib_error(problem, reference.forces)
+    rows[0]["scaled err"] = _error(scaled_coulomb_error(problem, reference.forces)
                                     if reference is not None else np.nan)
     starts = [("cold", None, None)]
     if step.warm_start is not None:
@@ -303,7 +299,7 @@ def pile_rows(step: PileStep, methods: list[str], tol: float, max_outer: int, fo
                                                   warm_start=forces, shift=shift, **options)
             row = dict(base, method=method, start=start, **outcome(result, wall, message))
             if result is not None:
-                row["scaled err"] = _error(fclib_error(problem, result.forces))
+                row["scaled err"] = _error(scaled_coulomb_error(problem, result.forces))
                 if reference is not None:
                     row["rel v err"] = _error(velocity_error(problem, result.velocities,
                                                              reference.velocities))

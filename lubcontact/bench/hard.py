@@ -33,9 +33,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..solvers.coulomb import solve_coulomb
+from ..problem.metrics import PROPERTY_TOL, scaled_velocity_error, solution_properties
 from ..problem.step import StepProblem
-from ..solvers import CONVERGED, SolveResult, methods, solve
+from ..solvers import CONVERGED, CoulombResult, SolveResult, SolveSettings, methods
 
 REFERENCE_METHOD = "clarabel"
 REFERENCE_TOL = 1e-10
@@ -43,7 +43,6 @@ ERROR_TOL = 1e-6
 #: against a frictional Clarabel reference that polishing could not refine (3D sliding contacts,
 #: solvers/polish.py): its velocities are only as good as its gap tolerance (docs/hard_cases.md)
 FRICTION_ERROR_TOL = 1e-5
-PROPERTY_TOL = 1e-6
 CONE_TOL = 1e-10
 ENERGY_TOL = 1e-6
 FIXED_POINT_TOL = 1e-10
@@ -81,18 +80,17 @@ class Expected:
 
     velocities: np.ndarray | None
     source: str                  # "exact", "reference" or "none"
-    reference: SolveResult | None
+    reference: CoulombResult | None
 
 
 def solve_case(problem: StepProblem, method: str, tol: float, max_iter: int | None = None,
-               fixed_point: bool = False) -> SolveResult:
+               fixed_point: bool = False) -> CoulombResult:
     """One solve of a case: the convex problem as given, or (``fixed_point``, frictional
     problems) exact Coulomb friction by the fixed point on s started from ``s = 0``, as the
-    time stepper does (``info["shift"]`` holds the final shift)."""
-    if fixed_point and problem.cones.has_friction:
-        return solve_coulomb(problem.with_shift(np.zeros(problem.n_contacts)), method, tol=tol,
-                             tol_fp=FIXED_POINT_TOL, max_iter=max_iter)
-    return solve(problem, method, tol=tol, max_iter=max_iter)
+    time stepper does (``result.shift`` holds the final shift)."""
+    settings = SolveSettings(method=method, tol=tol, max_iter=max_iter, exact_coulomb=fixed_point,
+                             tol_fp=FIXED_POINT_TOL)
+    return settings.solve(problem)
 
 
 def expected_for(case, problem: StepProblem, fixed_point: bool = False) -> Expected:
@@ -107,72 +105,13 @@ def expected_for(case, problem: StepProblem, fixed_point: bool = False) -> Expec
     return Expected(None, "none", reference)
 
 
-def error_against(problem: StepProblem, velocities: np.ndarray, expected: np.ndarray) -> float:
-    """Scaled max-norm error of velocities and of ``g = [D + s, 0] + dt H v`` (module docstring)."""
-    scaling = problem.normalized().scaling
-    difference = velocities - expected
-    velocity_error = np.max(np.abs(difference) / scaling.velocity) if difference.size else 0.0
-    constraint = problem.dt * (problem.jacobian @ difference) / scaling.length
-    constraint_error = np.max(np.abs(constraint)) if constraint.size else 0.0
-    return float(max(velocity_error, constraint_error))
-
-
 def properties(problem: StepProblem, result: SolveResult) -> dict[str, float]:
-    """The scaled measures of a solve (module docstring); each must stay below its tolerance.
-
-    Returns
-    -------
-    dict
-        ``penetration`` (``-min gap`` after the step, in ``dt V``, >= 0),
-        ``cone`` (distance of the forces to their cones, relative),
-        ``complementarity`` (max ``|lam_c . g_c|``, relative) and
-        ``energy`` (relative kinetic-energy gain; 0 when zero velocity is not
-        admissible, where contacts may do work).
-    """
-    if "shift" in result.info:                      # a fixed-point solve: its own final shift
-        problem = problem.with_shift(result.info["shift"])
-    scaled = problem.normalized()
-    scaling = scaled.scaling
-    forces = result.forces / scaling.force
-    velocities = result.velocities / scaling.velocity
-    cones = scaled.cones
-    force_size = max(1.0, float(np.max(np.abs(forces)))) if forces.size else 1.0
-    out = dict(penetration=0.0, cone=0.0, complementarity=0.0, energy=0.0)
-    if forces.size:
-        gaps = scaled.gaps_after(velocities)
-        out["penetration"] = float(max(0.0, -gaps.min())) if gaps.size else 0.0
-        out["cone"] = float(np.max(np.abs(forces - cones.project(forces)))) / force_size
-        g = scaled.constraint_values(velocities)
-        out["complementarity"] = float(np.max(np.abs(_per_contact_dot(cones, forces, g)))) / force_size
-    if _zero_admissible(scaled, forces):
-        free = float(scaled.free_velocity @ scaled.free_velocity)
-        gain = float(velocities @ velocities) - free
-        out["energy"] = max(0.0, gain) / max(free, 1e-300)
-    return out
+    """:func:`~lubcontact.problem.metrics.solution_properties` of a solve, measured with the
+    shift it was solved with; each must stay below its tolerance (module docstring)."""
+    return solution_properties(problem.with_shift(result.shift), result.forces, result.velocities)
 
 
-def _per_contact_dot(cones, forces: np.ndarray, g: np.ndarray) -> np.ndarray:
-    """``lam_c . g_c`` per contact (normal plus tangential components), shape (nc,)."""
-    normal_f, tangential_f = cones.split(forces)
-    normal_g, tangential_g = cones.split(g)
-    dot = normal_f * normal_g
-    if cones.has_friction:
-        dot[cones.tangential] += np.sum(tangential_f * tangential_g, axis=1)
-    return dot
-
-
-def _zero_admissible(scaled: StepProblem, forces: np.ndarray) -> bool:
-    """Whether ``v = 0`` satisfies every constraint to ``PROPERTY_TOL`` (scaled lengths), UNION
-    contacts on the branch of their force; rounding-level overlaps of touching grains pass."""
-    cones = scaled.cones
-    if cones.count == 0:
-        return True
-    if not cones.is_convex:
-        cones = cones.with_branches(forces[: cones.count] < 0)
-    return bool(np.all(cones.velocity_violation(scaled.constant_rows) <= PROPERTY_TOL))
-
-
-def judge(case, problem: StepProblem, expected: Expected, result: SolveResult, seconds: float) -> Cell:
+def judge(case, problem: StepProblem, expected: Expected, result: CoulombResult, seconds: float) -> Cell:
     """The verdict of one finished solve."""
     cell = Cell(case.name, result.method, OK, result.status, iterations=int(result.iterations),
                 seconds=seconds)
@@ -180,7 +119,7 @@ def judge(case, problem: StepProblem, expected: Expected, result: SolveResult, s
         cell.verdict, cell.message = CRASH, "non-finite forces or velocities"
         return cell
     if expected.velocities is not None:
-        cell.error = error_against(problem, result.velocities, expected.velocities)
+        cell.error = scaled_velocity_error(problem, result.velocities, expected.velocities)
     cell.properties = properties(problem, result)
     tolerance = error_tolerance(problem, expected)
     limits = dict(penetration=PROPERTY_TOL, cone=CONE_TOL, complementarity=PROPERTY_TOL,

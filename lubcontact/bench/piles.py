@@ -37,6 +37,8 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
+from ..model.assemble import assemble
+from ..problem.metrics import active_condition, velocity_error
 
 BENCHMARKS = {
     "solvers": ("lubcontact.bench.piles", "solvers_main", "every solver on 2D piles at rest"),
@@ -115,7 +117,8 @@ def pile_cases(n_grains: int, glued_fraction: float, dt: float, seed: int,
     for label, keys in (("dry", np.zeros(0, dtype=np.int64)), ("glued", contacts.keys[glued])):
         if label == "glued" and glued_fraction <= 0:
             continue
-        problem = simulation.build_problem(contacts, _cones(contacts, keys))
+        problem = assemble(simulation.scene, contacts, _cones(contacts, keys), simulation.dt,
+                           rotations=simulation.law.needs_rotation)
         cases.append(PileCase(label, n_grains, scene, simulation, problem, keys))
     return cases
 
@@ -136,13 +139,9 @@ def next_step_problem(case: PileCase, velocities: np.ndarray):
     scene.grains.velocities[:] = velocities[: n * dim].reshape(n, dim)
     scene.grains.positions += case.simulation.dt * scene.grains.velocities
     scene.time += case.simulation.dt
-    saved = case.simulation.scene
-    case.simulation.scene = scene
-    try:
-        contacts = find_contacts(scene, case.simulation.d_max)
-        return case.simulation.build_problem(contacts, _cones(contacts, case.glued_keys))
-    finally:
-        case.simulation.scene = saved
+    contacts = find_contacts(scene, case.simulation.d_max)
+    return assemble(scene, contacts, _cones(contacts, case.glued_keys), case.simulation.dt,
+                    rotations=case.simulation.law.needs_rotation)
 
 
 def matched_forces(previous_keys, previous_forces, problem) -> np.ndarray:
@@ -155,53 +154,6 @@ def matched_forces(previous_keys, previous_forces, problem) -> np.ndarray:
 
 
 # -- measurements --------------------------------------------------------------------------------
-def velocity_error(problem, velocities, reference) -> float:
-    """``|v - v_ref|_M / |U|_M``."""
-    mass = problem.mass
-    scale = np.sqrt(np.sum(mass * problem.free_velocity**2))
-    return float(np.sqrt(np.sum(mass * (velocities - reference) ** 2)) / scale)
-
-
-def active_condition(problem, forces: np.ndarray) -> tuple[float, int]:
-    """Condition number of ``W_AA``, the Delassus matrix on the rows that carry force.
-
-    Near the solution of a pile at rest the dual problem is the linear system
-    ``W_AA x_A = -b_A`` on these rows, and a gradient method converges at a
-    rate set by ``cond(W_AA)``: about ``1 - 1/cond`` per iteration for PGD,
-    ``1 - 1/sqrt(cond)`` for APGD. The extreme eigenvalues come from Lanczos
-    (``scipy.sparse.linalg.eigsh``), the smallest in shift-invert mode at 0
-    (a sparse LU of ``W_AA``).
-
-    Parameters
-    ----------
-    problem : StepProblem
-    forces : ndarray, shape (n_rows,)
-        A solution; rows with ``|x_i| > 1e-12 max |x|`` are the loaded ones.
-
-    Returns
-    -------
-    (float, int)
-        ``cond(W_AA)`` (inf when ``W_AA`` is singular) and the number of loaded rows.
-    """
-    import scipy.sparse as sp
-    from scipy.sparse.linalg import eigsh
-
-    loaded = np.abs(forces) > 1e-12 * float(np.max(np.abs(forces), initial=0.0))
-    count = int(np.count_nonzero(loaded))
-    if count == 0:
-        return np.nan, 0
-    matrix = sp.csc_matrix(sp.csr_matrix(problem.delassus)[loaded][:, loaded])
-    if count <= 2:
-        eigenvalues = np.linalg.eigvalsh(matrix.toarray())
-        return float(eigenvalues[-1] / eigenvalues[0]) if eigenvalues[0] > 0 else np.inf, count
-    largest = eigsh(matrix, k=1, which="LA", return_eigenvectors=False)[0]
-    try:
-        smallest = eigsh(matrix, k=1, sigma=0.0, which="LM", return_eigenvectors=False)[0]
-    except RuntimeError:                                    # exactly singular
-        return np.inf, count
-    return float(largest / smallest) if smallest > 0 else np.inf, count
-
-
 def timed_solve(problem, method: str, tol: float, max_iter: int | None, warm_start=None):
     from ..solvers import solve
 

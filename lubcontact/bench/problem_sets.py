@@ -8,6 +8,11 @@ files read by :mod:`lubcontact.io`) are imported lazily: a set whose sources
 are missing raises :class:`SetUnavailable` with the reason, and the
 comparison skips it.
 
+The external Siconos and FCLIB problems ship with the package
+(``lubcontact/bench/data/``, provenance in its ``README.md``); :func:`data_dir`
+says which folder is read: an explicit override, else the environment
+variable ``LUBCONTACT_DATA_DIR``, else the package data.
+
 Two solve modes:
 
 - ``convex``: one call of :func:`lubcontact.solvers.solve` (frictionless and
@@ -22,7 +27,7 @@ warm start a simulation would give a solver.
 from __future__ import annotations
 
 import importlib
-import sys
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
@@ -32,9 +37,11 @@ import numpy as np
 from ..model.laws import Coulomb, GlueyLubrication, Inelastic, Law
 from ..problem.step import StepProblem
 from ..model.scene import Scene
+from ..model.assemble import assemble
 
-ROOT = Path(__file__).resolve().parents[1]
-BENCHMARKS = Path("/work/shared/benchmarks")
+ROOT = Path(__file__).resolve().parents[1]   # the package folder (compare.environment: git state)
+PACKAGE_DATA = Path(__file__).resolve().parent / "data"
+DATA_DIR_ENV = "LUBCONTACT_DATA_DIR"
 CONVEX, COULOMB = "convex", "coulomb"
 PILE_DT = 0.05          # time step of the settling piles (units r = 0.5, g = 1)
 PILE_STEPS = 80         # steps before the snapshot (the pile has landed and is settling)
@@ -44,6 +51,66 @@ FLOW_SETTLE_STEPS = 250  # frictionless sedimentation steps before tilting
 
 class SetUnavailable(RuntimeError):
     """A problem set's sources are missing (not written yet, or files absent)."""
+
+
+def data_dir(override: str | Path | None = None) -> Path:
+    """The folder of the external benchmark problems.
+
+    It holds ``siconos-fc2d/``, ``fclib-local/`` and ``siconos-testdata/``.
+
+    Parameters
+    ----------
+    override : str or Path, optional
+        Folder to use (a ``--data-dir`` option). When None, the environment
+        variable ``LUBCONTACT_DATA_DIR`` if set and not empty, else the
+        package data ``lubcontact/bench/data``.
+
+    Returns
+    -------
+    Path
+
+    Raises
+    ------
+    ValueError
+        ``override`` (or the environment variable) is not a directory.
+    """
+    if override is not None:
+        path, origin = Path(override).expanduser(), ""
+    elif os.environ.get(DATA_DIR_ENV):
+        path, origin = Path(os.environ[DATA_DIR_ENV]).expanduser(), f" (from {DATA_DIR_ENV})"
+    else:
+        return PACKAGE_DATA
+    if not path.is_dir():
+        raise ValueError(f"data_dir: not a directory: {path}{origin}")
+    return path
+
+
+def __getattr__(name: str):
+    """``BENCHMARKS``: legacy name of :func:`data_dir` ``()``, read when asked for.
+
+    Kept only for modules that still import it (``bench/friction.py``); new code calls
+    :func:`data_dir`.
+    """
+    if name == "BENCHMARKS":
+        return data_dir()
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def benchmark_file(folder: str, name: str, root: str | Path | None = None) -> Path:
+    """The file ``name`` of the benchmark ``folder`` under :func:`data_dir` (``root``).
+
+    Raises
+    ------
+    SetUnavailable
+        The file is absent (the message names the folder and the file).
+    ValueError
+        ``root`` (or ``LUBCONTACT_DATA_DIR``) is not a directory.
+    """
+    path = data_dir(root) / folder / name
+    if not path.is_file():
+        raise SetUnavailable(f"benchmark folder {folder!r} has no file {name!r} "
+                             f"(looked for {path})")
+    return path
 
 
 @dataclass
@@ -105,15 +172,23 @@ class ProblemSet:
         source is missing.
     seeds : dict
         Every random seed the set uses (reported in the header).
+    reads_data : bool
+        ``build`` reads files under :func:`data_dir` and is called as
+        ``build(data)`` with the folder override (None: the default).
     """
 
     name: str
     description: str
-    build: Callable[[], list[Instance]]
+    build: Callable[..., list[Instance]]
     seeds: dict = field(default_factory=dict)
+    reads_data: bool = False
 
-    def instances(self) -> list[Instance]:
-        instances = self.build()
+    def instances(self, data: str | Path | None = None) -> list[Instance]:
+        """Build the instances; ``data`` overrides the benchmark folder (:func:`data_dir`).
+
+        ``data`` is ignored by sets that read no file.
+        """
+        instances = self.build(data) if self.reads_data else self.build()
         if not instances:
             raise SetUnavailable(f"set {self.name!r}: no instance could be built")
         return instances
@@ -128,11 +203,13 @@ def _import(module: str, what: str):
         raise SetUnavailable(f"{what} needs {module!r}, which is not available ({exc})") from exc
 
 
-def _benchmark_files(folder: str, patterns: tuple[str, ...]) -> list[Path]:
-    directory = BENCHMARKS / folder
+def _benchmark_files(folder: str, patterns: tuple[str, ...],
+                     root: str | Path | None = None) -> list[Path]:
+    directory = data_dir(root) / folder
     files = sorted({path for pattern in patterns for path in directory.glob(pattern)})
     if not files:
-        raise SetUnavailable(f"no problem files ({', '.join(patterns)}) under {directory}")
+        raise SetUnavailable(f"no problem files ({', '.join(patterns)}) in benchmark folder "
+                             f"{folder!r} under {directory.parent}")
     return files
 
 
@@ -144,7 +221,8 @@ def snapshot(scene: Scene, law: Law, dt: float, gamma: float = 0.0) -> StepProbl
 
     sim = Simulation(scene, law, dt)
     contacts = find_contacts(sim.scene, sim.d_max)
-    return sim.build_problem(contacts, law.cones(contacts, np.full(contacts.count, gamma)))
+    return assemble(sim.scene, contacts, law.cones(contacts, np.full(contacts.count, gamma)), sim.dt,
+                    rotations=law.needs_rotation)
 
 
 def simulated_steps(scene: Scene, law: Law, dt: float, first: int, count: int,
@@ -163,31 +241,24 @@ def simulated_steps(scene: Scene, law: Law, dt: float, first: int, count: int,
     steps = []
     for _ in range(count):
         report = sim.step()
-        shift = report.result.info.get("shift", np.zeros(report.problem.n_contacts))
+        shift = report.result.shift
         steps.append((report.problem, report.result.forces.copy(), np.asarray(shift, dtype=float)))
     return steps
 
 
 def matched_warm_start(previous: StepProblem, forces: np.ndarray, shift: np.ndarray,
                        problem: StepProblem) -> tuple[np.ndarray, np.ndarray]:
-    """The previous step's forces and shift carried over to ``problem`` by pair key.
-
-    Pairs new to ``problem`` start at 0 (as in :class:`~lubcontact.integrator.Simulation`).
+    """The previous step's forces and shift carried over to ``problem`` by pair key,
+    as :class:`~lubcontact.sim.Simulation` does (pairs new to ``problem`` start at 0).
 
     Returns
     -------
     forces : ndarray, shape (problem.n_rows,)
     shift : ndarray, shape (problem.n_contacts,)
     """
-    from ..sim.simulation import lookup_by_key
+    from ..sim.state import PreviousStep
 
-    old, new = previous.cones, problem.cones
-    normal, tangential = old.split(forces)
-    keys = previous.keys
-    matched_normal = lookup_by_key(keys, normal, problem.keys)
-    matched_tangential = lookup_by_key(keys[old.tangential], tangential, problem.keys[new.tangential],
-                                       width=new.tangent_dim)
-    return new.join(matched_normal, matched_tangential), lookup_by_key(keys, shift, problem.keys)
+    return PreviousStep.of(previous, forces, shift).warm_start(problem)
 
 
 def sequence(name: str, steps: list[tuple[StepProblem, np.ndarray, np.ndarray]], mode: str,
@@ -291,23 +362,24 @@ def build_hard() -> list[Instance]:
     return instances
 
 
-def _files(folder: str, patterns: tuple[str, ...], group: str) -> list[Instance]:
+def _files(folder: str, patterns: tuple[str, ...], group: str,
+           root: str | Path | None = None) -> list[Instance]:
     io = _import("lubcontact.io.readers", "external benchmark problems")
     instances = []
-    for path in _benchmark_files(folder, patterns):
+    for path in _benchmark_files(folder, patterns, root):
         problem = io.read_problem(path)
         instances.append(Instance(path.stem, problem, COULOMB, group=group))
     return sorted(instances, key=lambda instance: instance.n_contacts)
 
 
-def build_siconos() -> list[Instance]:
-    """Siconos 2D frictional problems (``benchmarks/siconos-fc2d/*.dat``), read in place."""
-    return _files("siconos-fc2d", ("*.dat",), "siconos-fc2d")
+def build_siconos(data: str | Path | None = None) -> list[Instance]:
+    """Siconos 2D frictional problems (``siconos-fc2d/*.dat`` under :func:`data_dir`)."""
+    return _files("siconos-fc2d", ("*.dat",), "siconos-fc2d", data)
 
 
-def build_fclib() -> list[Instance]:
-    """FCLIB 3D local problems (``benchmarks/fclib-local/*.hdf5``), read in place."""
-    return _files("fclib-local", ("*.hdf5", "*.h5"), "fclib")
+def build_fclib(data: str | Path | None = None) -> list[Instance]:
+    """FCLIB 3D local problems (``fclib-local/*.hdf5`` under :func:`data_dir`)."""
+    return _files("fclib-local", ("*.hdf5", "*.h5"), "fclib", data)
 
 
 SETS: dict[str, ProblemSet] = {s.name: s for s in [
@@ -328,6 +400,7 @@ SETS: dict[str, ProblemSet] = {s.name: s for s in [
     ProblemSet("hard", "the hard-case suite (reference/hard, docs/hard_cases.md): one solve "
                "each, errors against the exact velocities where known", build_hard),
     ProblemSet("siconos-fc2d", "Siconos 2D granular flow on a wall (667, 2020, 7002 contacts)",
-               build_siconos),
-    ProblemSet("fclib", "FCLIB 3D local problems (48 to 286 contacts)", build_fclib),
+               build_siconos, reads_data=True),
+    ProblemSet("fclib", "FCLIB 3D local problems (48 to 286 contacts)", build_fclib,
+               reads_data=True),
 ]}

@@ -6,6 +6,7 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
+from ..problem.metrics import relative_error
 from ..problem.step import StepProblem
 from ..solvers import solve
 
@@ -24,12 +25,6 @@ def format_table(rows: Iterable[dict], columns: Sequence[str], floats: str = ".3
     line = "  ".join(col.rjust(w) for col, w in zip(columns, widths))
     body = ["  ".join(c.rjust(w) for c, w in zip(r, widths)) for r in cells]
     return "\n".join([line, "  ".join("-" * w for w in widths)] + body)
-
-
-def relative_error(value: np.ndarray, reference: np.ndarray) -> float:
-    """``|value - reference| / |reference|`` (absolute when the reference is zero)."""
-    norm = float(np.linalg.norm(reference))
-    return float(np.linalg.norm(value - reference)) / (norm if norm > 0 else 1.0)
 
 
 def compare_methods(problem: StepProblem, methods: Sequence[str], tol: float = 1e-6,

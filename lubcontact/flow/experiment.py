@@ -34,11 +34,10 @@ from dataclasses import asdict, dataclass, field, fields, replace
 import numpy as np
 
 from ..scenes import inclined as flow
-from ..sim import simulation as integrator
 from . import measure
-from ..sim.simulation import Simulation, StepReport
+from ..sim import Simulation, SimulationState, StepReport
 from ..io.files import save_npz
-from ..model.laws import PairState
+from ..io.scene_arrays import scene_arrays, scene_from_arrays
 from ..model.scene import Grains, Scene
 from ..solvers import CONVERGED, methods, solve
 
@@ -179,62 +178,7 @@ def save_text(path: pathlib.Path, text: str) -> None:
     os.replace(temporary, path)
 
 
-# -- scene and simulation state as arrays --------------------------------------------------------
-_GRAIN_FIELDS = ("positions", "radii", "masses", "inertias", "velocities", "spins", "angles")
-
-
-def scene_arrays(scene: Scene) -> dict[str, np.ndarray]:
-    """The arrays that rebuild ``scene`` with :func:`scene_from_arrays` (no external force)."""
-    grains = scene.grains
-    out = {f"grains.{name}": getattr(grains, name) for name in _GRAIN_FIELDS}
-    out["grains.densities"] = grains.densities if grains.densities is not None else np.zeros(0)
-    out.update({"plane_points": scene.planes.points, "plane_normals": scene.planes.normals,
-                "fixed_positions": scene.fixed_positions, "fixed_radii": scene.fixed_radii,
-                "gravity": scene.gravity, "fluid_density": np.float64(scene.fluid_density),
-                "time": np.float64(scene.time), "period": np.float64(scene.period or 0.0),
-                "metadata": np.array(json.dumps(scene.metadata, default=float))})
-    return out
-
-
-def scene_from_arrays(data) -> Scene:
-    """Inverse of :func:`scene_arrays` (values restored bit for bit)."""
-    densities = data["grains.densities"]
-    grains = Grains.create(data["grains.positions"], data["grains.radii"],
-                           masses=data["grains.masses"], inertias=data["grains.inertias"],
-                           densities=densities if densities.size else None,
-                           velocities=data["grains.velocities"], spins=data["grains.spins"])
-    grains.angles[:] = data["grains.angles"]
-    period = float(data["period"])
-    return Scene.create(grains, plane_points=data["plane_points"], plane_normals=data["plane_normals"],
-                        fixed_positions=data["fixed_positions"], fixed_radii=data["fixed_radii"],
-                        gravity=data["gravity"], fluid_density=float(data["fluid_density"]),
-                        time=float(data["time"]), check_overlaps=False,
-                        metadata=json.loads(str(data["metadata"])), period=period or None)
-
-
-def simulation_state(sim: Simulation) -> dict[str, np.ndarray]:
-    """What a :class:`Simulation` carries between steps besides its scene.
-
-    The gluey state and the warm start (by pair key) are part of it: a
-    warm-started iterative solver stops at a different iterate without them.
-    """
-    out = {"sim.pair_keys": sim.state.keys, "sim.pair_gamma": sim.state.gamma,
-           "sim.steps_done": np.int64(sim.steps_done), "sim.start_time": np.float64(sim.start_time)}
-    if sim.previous is not None:
-        out.update({f"sim.previous.{k}": np.asarray(v) for k, v in vars(sim.previous).items()})
-    return out
-
-
-def restore_simulation_state(sim: Simulation, data) -> None:
-    """Inverse of :func:`simulation_state` on a simulation built from the same scene."""
-    sim.state = PairState(keys=data["sim.pair_keys"].astype(np.int64), gamma=data["sim.pair_gamma"])
-    sim.steps_done = int(data["sim.steps_done"])
-    sim.start_time = float(data["sim.start_time"])
-    previous = {k[len("sim.previous."):]: data[k] for k in data.keys()
-                if k.startswith("sim.previous.")}
-    sim.previous = integrator.PreviousStep(**previous) if previous else None
-
-
+# -- simulation state as arrays --------------------------------------------------------------------
 # -- one run ------------------------------------------------------------------------------------
 SERIES = ("step", "time", "kinetic_energy", "flow_rate", "contacts", "unglued", "glued",
           "frictional", "residual", "iterations", "converged")
@@ -260,7 +204,8 @@ class FlowRun:
                               flow.time_step(self.params, config.dt_fraction), solver=config.solver,
                               tol=config.tol, on_failure="ignore", fixed_point=config.fixed_point,
                               tol_fp=config.tol_fp, max_outer=config.max_outer,
-                              solver_options={"joint": config.joint} if config.joint else None)
+                              solver_options={"joint": config.joint} if config.joint else None,
+                              keep_trajectory=False)
         r = self.params.radius
         top = float(scene.grains.positions[:, 1].max() + 2 * r)
         self.profiles = measure.ProfileAccumulator(
@@ -290,7 +235,6 @@ class FlowRun:
         while self.steps_done < end:
             start, start_cpu = time.perf_counter(), time.process_time()
             report = self.sim.step()
-            self.sim.trajectory = integrator.Trajectory()      # keep memory flat on long runs
             self.wall_time += time.perf_counter() - start
             self.cpu_time += time.process_time() - start_cpu
             if self.statuses is not None:
@@ -354,8 +298,7 @@ class FlowRun:
         """Write ``checkpoint.npz`` and ``measurements.npz`` (atomically)."""
         measurements = self.measurements()
         save_npz(self.out_dir / "measurements.npz", **measurements)
-        save_npz(self.out_dir / "checkpoint.npz", **scene_arrays(self.sim.scene),
-                 **simulation_state(self.sim), **measurements)
+        save_npz(self.out_dir / "checkpoint.npz", **self.sim.state.to_arrays(), **measurements)
 
     def save_frame(self) -> None:
         """Write the current state and contacts to ``frames/frame_<step>.npz``."""
@@ -382,8 +325,9 @@ class FlowRun:
         if steps is not None:
             changes = {**changes, "steps": int(steps)}
         config = replace(config, **changes)
-        run = cls(config, scene_from_arrays(data), path.parent if out_dir is None else out_dir)
-        restore_simulation_state(run.sim, data)
+        state = SimulationState.from_arrays(data)
+        run = cls(config, state.scene, path.parent if out_dir is None else out_dir)
+        run.sim.restore(state)
         run.series = {name: list(data[f"series.{name}"]) for name in SERIES}
         run.profiles.edges = data["profile.edges"]
         run.profiles.area, run.profiles.momentum = data["profile.area"], data["profile.momentum"]
@@ -461,9 +405,7 @@ def cross_check(report: StepReport) -> float:
         return 0.0
     normal = result.forces[: problem.n_contacts]
     convex = problem.with_cones(problem.cones.with_branches(normal < 0))
-    shift = result.info.get("shift")
-    if shift is not None:
-        convex = convex.with_shift(shift)
+    convex = convex.with_shift(result.shift)
     reference = solve(convex, "clarabel", tol=1e-9)
     scale = np.max(np.abs(reference.velocities)) + np.max(np.abs(problem.free_velocity))
     return float(np.max(np.abs(result.velocities - reference.velocities)) / scale)

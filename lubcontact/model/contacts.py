@@ -228,3 +228,20 @@ def tangential_jacobian(contacts: Contacts, which: np.ndarray) -> sp.csr_matrix:
     vals = np.concatenate([v.ravel() for _, _, v in blocks])
     shape = (len(which) * nt, dof_count(n, dim, True))
     return sp.csr_matrix((vals, (rows, cols)), shape=shape)
+
+
+def lookup_by_key(stored_keys: np.ndarray, values: np.ndarray, wanted: np.ndarray,
+                  width: int | None = None) -> np.ndarray:
+    """Values of the wanted keys in ``stored_keys`` (sorted), 0 for keys not stored.
+
+    ``values`` has one entry (``width`` is None) or one row of ``width``
+    entries per stored key.
+    """
+    shape = (wanted.size,) if width is None else (wanted.size, width)
+    out = np.zeros(shape)
+    if stored_keys.size == 0 or wanted.size == 0:
+        return out
+    pos = np.clip(np.searchsorted(stored_keys, wanted), 0, stored_keys.size - 1)
+    found = stored_keys[pos] == wanted
+    out[found] = values[pos[found]]
+    return out

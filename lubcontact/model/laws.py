@@ -26,7 +26,7 @@ import numpy as np
 
 from .. import checks
 from ..problem.cones import ConeKind, Cones
-from .contacts import Contacts
+from .contacts import Contacts, lookup_by_key
 
 
 @dataclass
@@ -38,10 +38,7 @@ class PairState:
 
     def lookup(self, keys: np.ndarray) -> np.ndarray:
         """Gamma of each given pair (0 for pairs not stored)."""
-        if self.keys.size == 0:
-            return np.zeros(len(keys))
-        pos = np.clip(np.searchsorted(self.keys, keys), 0, self.keys.size - 1)
-        return np.where(self.keys[pos] == keys, self.gamma[pos], 0.0)
+        return lookup_by_key(self.keys, self.gamma, np.asarray(keys))
 
     @classmethod
     def from_contacts(cls, keys: np.ndarray, gamma: np.ndarray) -> "PairState":

@@ -304,7 +304,8 @@ def _settle(scene: Scene, path: Path | None, label: str, progress, *, dt: float,
             speed_tol: float, max_steps: int, solver: str, max_iter: int,
             fallback_solver: str, switch_speed: float) -> tuple[Scene, dict]:
     """Step ``scene`` until at rest (see :func:`settle_pile`), cached at ``path``."""
-    from ..sim.simulation import Simulation, Trajectory
+    from ..sim.simulation import Simulation
+    from ..solvers import SolveSettings
     from ..model.laws import Inelastic
 
     if path is not None and path.exists():
@@ -316,16 +317,14 @@ def _settle(scene: Scene, path: Path | None, label: str, progress, *, dt: float,
     steps, elapsed, speed = _resume_settling(scene, partial)
     simulation = Simulation(scene, Inelastic(), dt, solver=solver, on_failure="fallback",
                             fallback_solver=fallback_solver,
-                            d_max=0.25 * float(scene.grains.radii.min()))
+                            d_max=0.25 * float(scene.grains.radii.min()), keep_trajectory=False)
+    collapse = SolveSettings(method=fallback_solver)
+    tail = SolveSettings(method=solver, max_iter=max_iter)
     start = time.perf_counter() - elapsed
     while steps < max_steps and speed >= speed_tol * g * dt:
-        tail = speed < switch_speed * g * dt
-        simulation.solver = solver if tail else fallback_solver
-        simulation.solver_options = {"max_iter": max_iter} if tail else {}
-        report = simulation.step()
+        report = simulation.step(tail if speed < switch_speed * g * dt else collapse)
         steps += 1
         speed = float(np.max(np.linalg.norm(simulation.scene.grains.velocities, axis=1)))
-        simulation.trajectory = Trajectory()            # keep no history
         if steps % 100 == 0:
             _save_settling(partial, simulation.scene, steps, time.perf_counter() - start, speed)
             if progress is not None:

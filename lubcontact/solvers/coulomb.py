@@ -1,4 +1,4 @@
-"""Exact Coulomb friction: the fixed point on the shift ``s`` (MODEL.md section 5).
+"""Exact Coulomb friction: the fixed point on the shift ``s`` (docs/guide/model.md section 5).
 
 The convex relaxation of Coulomb's law (a second-order cone on the forces, its
 dual cone on ``g = W lam + b``) makes a sliding contact separate at the rate
@@ -45,76 +45,26 @@ a local (FCLIB) problem, so the same formula covers both.
 """
 from __future__ import annotations
 
-from dataclasses import replace
-
 import numpy as np
 
 from .. import checks
 from ..problem.cones import ConeKind
-from . import CONVERGED, MAX_ITER, SolveResult, solve
+from ..problem.conic import ConicProblem
+from ..problem.metrics import coulomb_shift
+from .registry import solve
+from .result import CONVERGED, MAX_ITER, CoulombResult
 
 
-def coulomb_shift(problem, forces: np.ndarray) -> np.ndarray:
-    """``s_c = mu_c |g_T,c(forces)|`` on frictional contacts, 0 elsewhere.
-
-    Parameters
-    ----------
-    problem : StepProblem or LocalProblem
-        Anything with ``cones`` and ``gradient(forces)`` (``g = W lam + b``).
-    forces : ndarray, shape (n_rows,)
-
-    Returns
-    -------
-    ndarray, shape (nc,)
-        In the problem's length unit (``mu dt |u_T|`` for a step problem).
-    """
-    cones = problem.cones
-    shift = np.zeros(cones.count)
-    if not cones.has_friction:
-        return shift
-    _, g_tangential = cones.split(problem.gradient(forces))
-    idx = cones.tangential
-    slip = cones.mu[idx] * np.linalg.norm(g_tangential, axis=1)
-    kinds = cones.kinds[idx]
-    frictional = (kinds == ConeKind.COULOMB) | ((kinds == ConeKind.UNION) & (forces[idx] >= 0))
-    shift[idx] = np.where(frictional, slip, 0.0)
-    return shift
-
-
-def coulomb_error(problem, forces: np.ndarray) -> float:
-    """The FCLIB/Siconos error of a Coulomb problem (MODEL.md section 6).
-
-    ``sqrt(sum_c |lam_c - P_Kc(lam_c - (w_c + mu_c |w_T,c| e_n))|^2) / (1 + |q|)``
-    with ``w = W lam + q`` and ``q`` the offset ``b`` without the shift ``s``.
-    Computed in the units of the problem given (pass ``problem.normalized()``
-    and scaled forces for a unit-free figure on a step problem).
-
-    Parameters
-    ----------
-    problem : StepProblem or LocalProblem
-    forces : ndarray, shape (n_rows,)
-    """
-    nc = problem.cones.count
-    unshifted = problem.gradient(forces)
-    unshifted[:nc] -= problem.shift
-    corrected = unshifted.copy()
-    corrected[:nc] += coulomb_shift(problem, forces)
-    q = problem.offset.copy()
-    q[:nc] -= problem.shift
-    residual = problem.cones.natural_residual(forces, corrected)
-    return float(residual / (1.0 + np.linalg.norm(q)))
-
-
-def solve_coulomb(problem, method: str = "clarabel", *, tol: float = 1e-9, tol_fp: float = 1e-8,
+def solve_coulomb(problem: ConicProblem, method: str = "clarabel", *, tol: float = 1e-9, tol_fp: float = 1e-8,
                   max_outer: int = 50, warm_start: np.ndarray | None = None,
                   shift: np.ndarray | None = None, max_iter: int | None = None,
                   anderson: int = 5, forcing: float = 0.0, joint: int = 0,
-                  **options) -> SolveResult:
+                  **options) -> CoulombResult:
     """Solve a frictional problem exactly by the fixed point on ``s``.
 
     Parameters
     ----------
-    problem : StepProblem or LocalProblem
+    problem : ConicProblem
         In physical units; its own ``shift`` is ignored (replaced by ``shift``).
     method : str
         Any registered solver (see :func:`lubcontact.solvers.methods`).
@@ -154,17 +104,13 @@ def solve_coulomb(problem, method: str = "clarabel", *, tol: float = 1e-9, tol_f
 
     Returns
     -------
-    SolveResult
-        The last inner solve (solved with the shift stored in
-        ``info["shift"]``), with ``iterations`` the total inner iterations and
-        ``status`` ``converged`` only if the fixed point and the last inner
-        solve converged (``max_iter`` when the outer loop ran out, the inner
-        status when an inner solve failed). ``info`` adds ``joint_iterations``
-        (APGD iterations of the joint phase, included in ``iterations``),
-        ``outer_iterations``,
-        ``shift_change`` (the last relative change of s), ``force_change``
-        (last relative change of the forces, rms norm), ``inner_status``,
-        ``fp_converged`` and ``shift_history``.
+    CoulombResult
+        The last inner solve with the fixed point's record (shift, outer
+        iterations, last changes, branch flips); ``status`` is ``converged``
+        only if the fixed point and the last inner solve converged
+        (``max_iter`` when the outer loop ran out, the inner status when an
+        inner solve failed). The problem is normalised once: outer iterations
+        change only the shift of the prepared problem (``W`` is not rebuilt).
     """
     tol_fp = checks.positive_scalar("tol_fp", tol_fp)
     max_outer = int(checks.positive("max_outer", max_outer, shape=()))
@@ -173,12 +119,9 @@ def solve_coulomb(problem, method: str = "clarabel", *, tol: float = 1e-9, tol_f
     if not problem.cones.has_friction:
         result = solve(problem.with_shift(current), method, tol=tol, max_iter=max_iter,
                        warm_start=warm_start, **options)
-        info = dict(result.info, outer_iterations=1, shift_change=0.0, force_change=np.inf,
-                    inner_status=result.status, fp_converged=True, shift=current,
-                    shift_history=np.zeros(0))
-        return replace(result, info=info)
-    scaling = problem.normalized().scaling
-    length, force_unit = scaling.length, scaling.force
+        return CoulombResult.single(result)
+    normalized = problem.normalized()           # set up once: only the shift changes below
+    length, force_unit = normalized.scaling.length, normalized.scaling.force
     accelerator = _Anderson(anderson)
     branches = _Branches(problem, warm_start, threshold=max(1e3 * tol, 1e-7))
     forces, inner, history = warm_start, 0, []
@@ -196,7 +139,8 @@ def solve_coulomb(problem, method: str = "clarabel", *, tol: float = 1e-9, tol_f
         used = branches.restrict(current)
         inner_tol = tol if forcing == 0 else max(tol, forcing * min(shift_change, 1.0))
         result = solve(convex.with_shift(used), method, tol=inner_tol, max_iter=max_iter,
-                       warm_start=forces, **options)
+                       warm_start=forces,
+                       normalized=branches.on(normalized).with_shift(used / length), **options)
         inner += result.iterations
         if forces is not None:
             force_change = _relative_change(result.forces / force_unit, forces / force_unit)
@@ -214,12 +158,12 @@ def solve_coulomb(problem, method: str = "clarabel", *, tol: float = 1e-9, tol_f
         if flipped:
             accelerator.restart()
     status = CONVERGED if converged else (result.status if not result.success else MAX_ITER)
-    info = dict(result.info, joint_iterations=joint_iterations, outer_iterations=outer,
-                shift_change=shift_change,
-                force_change=force_change, inner_status=result.status, fp_converged=converged,
-                shift=used, shift_history=np.asarray(history), pulled=branches.pulled_contacts,
-                branch_flips=branches.flips)
-    return replace(result, status=status, iterations=inner, info=info)
+    return CoulombResult(**{**vars(result), "status": status, "iterations": inner},
+                         outer_iterations=outer, shift_change=shift_change,
+                         force_change=force_change, inner_status=result.status,
+                         fixed_point_converged=converged, shift_history=np.asarray(history),
+                         pulled=branches.pulled_contacts, branch_flips=branches.flips,
+                         joint_iterations=joint_iterations)
 
 
 def _joint_phase(convex, shift: np.ndarray, warm_start: np.ndarray | None, tol: float,
@@ -322,9 +266,13 @@ class _Branches:
 
     def problem(self):
         """The convex problem with every UNION contact on its current piece."""
+        return self.on(self.base)
+
+    def on(self, problem):
+        """``problem`` (the base problem or its normalised form) with the current pieces."""
         if not self.union.any():
-            return self.base
-        return self.base.with_cones(self.base.cones.with_branches(self.pulled))
+            return problem
+        return problem.with_cones(problem.cones.with_branches(self.pulled))
 
     def restrict(self, shift: np.ndarray) -> np.ndarray:
         """No shift on pulled contacts."""

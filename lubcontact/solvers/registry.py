@@ -25,6 +25,7 @@ from typing import Callable
 
 import numpy as np
 
+from .. import checks
 from ..problem.cones import ConeKind
 from ..problem.conic import ConicProblem
 from .result import (CONVERGED, DIVERGED, FAILED, INACCURATE, SUSPICIOUS_RESIDUAL, MethodOutput,
@@ -150,7 +151,7 @@ def solver_info(name: str) -> SolverInfo:
 
 def solve(problem: ConicProblem, method: str = "clarabel", *, tol: float = 1e-9,
           max_iter: int | None = None, warm_start: np.ndarray | None = None,
-          **options) -> SolveResult:
+          normalized: ConicProblem | None = None, **options) -> SolveResult:
     """Solve a step (or local) problem with a registered method.
 
     Parameters
@@ -168,6 +169,11 @@ def solve(problem: ConicProblem, method: str = "clarabel", *, tol: float = 1e-9,
         Iteration cap, > 0 (method default when None).
     warm_start : ndarray, shape (n_rows,), optional
         Initial forces in physical units.
+    normalized : ConicProblem, optional
+        ``problem.normalized()`` when the caller holds it already: a caller
+        that re-solves with another shift (the fixed point on s) prepares the
+        normalised problem once and passes ``prepared.with_shift(s / length)``,
+        which shares ``W`` instead of rebuilding it.
     **options
         Passed to the method.
 
@@ -186,7 +192,9 @@ def solve(problem: ConicProblem, method: str = "clarabel", *, tol: float = 1e-9,
     if max_iter is not None and not (float(max_iter) == int(max_iter) and int(max_iter) > 0):
         raise ValueError(f"max_iter: must be a positive integer, got {max_iter}")
     start = time.perf_counter()
-    scaled = problem.normalized()
+    scaled = problem.normalized() if normalized is None else normalized
+    checks.require(scaled.scaling is not None and scaled.n_rows == problem.n_rows, "normalized",
+                   "must be the problem's normalized() form")
     scale = scaled.scaling
     normalise_time = time.perf_counter() - start
     if warm_start is not None:
@@ -222,7 +230,7 @@ def solve(problem: ConicProblem, method: str = "clarabel", *, tol: float = 1e-9,
                        iterations=out.iterations, residual=residual, method=method,
                        force_scale=scale.force, setup_time=setup_time + normalise_time,
                        solve_time=solve_time, residual_history=out.residual_history,
-                       info=out.info)
+                       info=out.info, shift=np.array(problem.shift, dtype=float))
 
 
 def capable_methods(problem: ConicProblem, kind: str | None = None) -> list[str]:

@@ -95,6 +95,8 @@ class SolveResult:
         Residual per iteration where the method records it (may be empty).
     info : dict
         Method-specific extras (e.g. the raw solver status).
+    shift : ndarray, shape (nc,)
+        The shift ``s`` the problem was solved with (physical length units).
     """
 
     x: np.ndarray
@@ -108,6 +110,7 @@ class SolveResult:
     solve_time: float = 0.0
     residual_history: np.ndarray = field(default_factory=lambda: np.zeros(0))
     info: dict = field(default_factory=dict)
+    shift: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
     @property
     def forces(self) -> np.ndarray:
@@ -116,6 +119,54 @@ class SolveResult:
     @property
     def success(self) -> bool:
         return self.status == CONVERGED
+
+
+@dataclass
+class CoulombResult(SolveResult):
+    """A solve of exact Coulomb friction by the fixed point on s (:func:`~lubcontact.solvers.solve_coulomb`).
+
+    The inherited fields describe the last inner solve (solved with ``shift``
+    frozen), except ``status`` (``converged`` only if the fixed point and the
+    last inner solve converged) and ``iterations`` (all inner iterations, the
+    joint phase's included). A problem without friction, or the convex
+    relaxation, is one inner solve: ``outer_iterations = 1``.
+
+    Attributes
+    ----------
+    outer_iterations : int
+        Inner solves done.
+    shift_change : float
+        Last relative change of ``s`` (the stopping measure).
+    force_change : float
+        Last relative change of the forces (rms norm; inf after one solve).
+    inner_status : str
+        Status of the last inner solve.
+    fixed_point_converged : bool
+        Whether the fixed point met its tolerance.
+    shift_history : ndarray
+        ``shift_change`` after each outer iteration.
+    pulled : ndarray of int
+        UNION contacts on their pulled piece at the end.
+    branch_flips : list of int
+        UNION contacts that changed piece after each outer iteration.
+    joint_iterations : int
+        APGD iterations of the joint phase (0 without one).
+    """
+
+    outer_iterations: int = 1
+    shift_change: float = 0.0
+    force_change: float = np.inf
+    inner_status: str = CONVERGED
+    fixed_point_converged: bool = True
+    shift_history: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    pulled: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
+    branch_flips: list = field(default_factory=list)
+    joint_iterations: int = 0
+
+    @classmethod
+    def single(cls, result: SolveResult) -> CoulombResult:
+        """One convex solve (no friction, or the relaxation), its shift frozen."""
+        return cls(**vars(result), inner_status=result.status)
 
 
 def check_status(result: SolveResult, policy: str) -> None:

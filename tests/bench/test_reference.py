@@ -73,23 +73,23 @@ def test_frictional_and_mixed_solutions_are_polished_to_rounding(hard_cases, nam
 @pytest.mark.parametrize("name", ["mass_ratio_1e6_collision", "radius_ratio_100"])
 def test_clarabel_direct_is_polished_like_the_cvxpy_reference(hard_cases, name):
     """Unpolished, clarabel-direct was 3-5e-6 off on these cases (docs/hard_cases.md, finding 4)."""
-    from lubcontact.bench.hard import error_against
+    from lubcontact.problem.metrics import scaled_velocity_error
 
     problem = hard_cases[name].problem
     reference = solve(problem, "clarabel", tol=1e-10).velocities
     raw = solve(problem, "clarabel-direct", tol=1e-9, polish=False)
     polished = solve(problem, "clarabel-direct", tol=1e-9)
-    assert error_against(problem, raw.velocities, reference) > 1e-6
-    assert error_against(problem, polished.velocities, reference) <= 1e-12
+    assert scaled_velocity_error(problem, raw.velocities, reference) > 1e-6
+    assert scaled_velocity_error(problem, polished.velocities, reference) <= 1e-12
 
 
 @pytest.mark.parametrize("name", ["glued_chain_free", "hex_box_glued"])
 def test_scs_solves_problems_without_inequality_rows(hard_cases, name):
     """Every contact FREE: no row in the conic form; SCS gets one empty row and solves it."""
-    from lubcontact.bench.hard import error_against
+    from lubcontact.problem.metrics import scaled_velocity_error
 
     problem = hard_cases[name].problem
     result = solve(problem, "scs", tol=1e-9)
     reference = solve(problem, "clarabel", tol=1e-10)
     assert result.status == "converged"
-    assert error_against(problem, result.velocities, reference.velocities) <= 1e-8
+    assert scaled_velocity_error(problem, result.velocities, reference.velocities) <= 1e-8

@@ -16,7 +16,8 @@ import scipy.sparse as sp
 h5py = pytest.importorskip("h5py")
 
 from lubcontact import io  # noqa: E402
-from lubcontact.solvers.coulomb import coulomb_error, solve_coulomb  # noqa: E402
+from lubcontact.problem.metrics import coulomb_error  # noqa: E402
+from lubcontact.solvers.coulomb import solve_coulomb  # noqa: E402
 from lubcontact.bench.problem_sets import BENCHMARKS  # noqa: E402
 
 # Two 2D contacts in contact-major layout (normal, tangent per contact).

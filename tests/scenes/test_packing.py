@@ -12,11 +12,11 @@ def test_interrupted_settling_resumes_to_the_same_pile(tmp_path, monkeypatch):
     original_step = integrator.Simulation.step
     calls = {"count": 0}
 
-    def interrupted_step(self):
+    def interrupted_step(self, settings=None):
         calls["count"] += 1
         if calls["count"] == 110:            # after the checkpoint of step 100
             raise KeyboardInterrupt
-        return original_step(self)
+        return original_step(self, settings)
 
     folder = tmp_path / "resumed"
     monkeypatch.setattr(integrator.Simulation, "step", interrupted_step)

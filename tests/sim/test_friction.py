@@ -3,11 +3,12 @@ import numpy as np
 import pytest
 
 from lubcontact import Grains, Scene, Schedule, Simulation, find_contacts, scenes, solvers
-from lubcontact.bench.piles import velocity_error
+from lubcontact.problem.metrics import coulomb_error, velocity_error
 from lubcontact.problem.cones import ConeKind
-from lubcontact.solvers.coulomb import coulomb_error, solve_coulomb
+from lubcontact.solvers.coulomb import solve_coulomb
 from lubcontact.model.laws import Coulomb, GlueyCoulomb
 from lubcontact.solvers.reference import union_violation
+from lubcontact.model.assemble import assemble
 
 FAST = "apgd"
 
@@ -100,7 +101,7 @@ def test_fixed_point_removes_dilatancy_of_a_sliding_disk():
                           tol=1e-10)
     gaps = np.array([report.gaps_after[0] for report in reports])
     assert np.max(np.abs(gaps)) <= 1e-9
-    assert all(report.result.info["fp_converged"] for report in reports)
+    assert all(report.result.fixed_point_converged for report in reports)
     speed = record["velocities"][:, 0, 0]
     np.testing.assert_allclose(speed, 2.0 - mu * record["times"], atol=1e-8)   # sliding all along
 
@@ -126,12 +127,12 @@ def test_fixed_point_reports_non_convergence():
                          gravity=[0.0, -1.0])
     sim = Simulation(scene, Coulomb(0.5), 1e-2, d_max=0.05)
     contacts = find_contacts(sim.scene, 0.05)
-    problem = sim.build_problem(contacts, sim.law.cones(contacts, np.zeros(contacts.count)))
+    problem = assemble(sim.scene, contacts, sim.law.cones(contacts, np.zeros(contacts.count)), sim.dt, rotations=sim.law.needs_rotation)
     capped = solve_coulomb(problem, "clarabel", max_outer=1)
-    assert capped.status == solvers.MAX_ITER and not capped.info["fp_converged"]
-    assert capped.info["outer_iterations"] == 1 and capped.info["shift_change"] > 1e-3
+    assert capped.status == solvers.MAX_ITER and not capped.fixed_point_converged
+    assert capped.outer_iterations == 1 and capped.shift_change > 1e-3
     full = solve_coulomb(problem, "clarabel", tol_fp=1e-10)
-    assert full.success and full.info["shift_change"] < 1e-10
+    assert full.success and full.shift_change < 1e-10
     assert coulomb_error(problem.normalized(), full.forces / full.force_scale) < 1e-8
     assert coulomb_error(problem.normalized(), capped.forces / capped.force_scale) > 1e-4
 
@@ -178,7 +179,7 @@ def test_branch_rule_flips_a_pulled_contact():
                          external_force=[0.0, 1.0])                              # pulls away
     sim = Simulation(scene, GlueyCoulomb(0.5, gamma_min=-1.0), 1e-2, d_max=0.05)
     contacts = find_contacts(sim.scene, 0.05)
-    problem = sim.build_problem(contacts, sim.law.cones(contacts, np.array([-1.0])))
+    problem = assemble(sim.scene, contacts, sim.law.cones(contacts, np.array([-1.0])), sim.dt, rotations=sim.law.needs_rotation)
     assert problem.cones.kinds[0] == ConeKind.UNION
     pushed_guess = np.array([1.0, 0.0])
     reference = solvers.solve(problem, "clarabel", tol=1e-10, warm_start=pushed_guess)
@@ -219,7 +220,7 @@ def settling_step():
                      tol=1e-8, tol_fp=1e-6, on_failure="ignore")
     sim.run(30)
     contacts = find_contacts(sim.scene, sim.d_max)
-    problem = sim.build_problem(contacts, sim.law.cones(contacts, sim.state.lookup(contacts.keys)))
+    problem = assemble(sim.scene, contacts, sim.law.cones(contacts, sim.state.pairs.lookup(contacts.keys)), sim.dt, rotations=sim.law.needs_rotation)
     reference = solve_coulomb(problem, "clarabel", tol=1e-10, tol_fp=1e-10, max_outer=500)
     assert reference.success and problem.n_contacts >= 30
     return problem, reference
@@ -231,14 +232,14 @@ def test_joint_fixed_point_matches_clarabel(settling_step, joint):
     the shift frozen (one inner solve accepting its warm start, one at the final tolerance)."""
     problem, reference = settling_step
     result = solve_coulomb(problem, "apgd-jacobi", tol=1e-9, tol_fp=1e-9, forcing=1e-4, joint=joint)
-    assert result.success and result.info["fp_converged"]
+    assert result.success and result.fixed_point_converged
     assert velocity_error(problem, result.velocities, reference.velocities) <= 1e-6
     assert coulomb_error(problem.normalized(), result.forces / result.force_scale) <= 1e-7
     if joint:
-        assert result.info["joint_iterations"] > 0 and result.info["outer_iterations"] == 2
-        assert result.info["shift_change"] <= 1e-9
+        assert result.joint_iterations > 0 and result.outer_iterations == 2
+        assert result.shift_change <= 1e-9
     else:
-        assert result.info["joint_iterations"] == 0 and result.info["outer_iterations"] > 2
+        assert result.joint_iterations == 0 and result.outer_iterations > 2
 
 
 def test_joint_phase_stops_honestly_when_capped(settling_step):
@@ -246,5 +247,5 @@ def test_joint_phase_stops_honestly_when_capped(settling_step):
     problem, _ = settling_step
     capped = solve_coulomb(problem, "apgd-jacobi", tol=1e-9, tol_fp=1e-9, joint=1, max_iter=10,
                            max_outer=3)
-    assert capped.status == solvers.MAX_ITER and not capped.info["fp_converged"]
+    assert capped.status == solvers.MAX_ITER and not capped.fixed_point_converged
     assert coulomb_error(problem.normalized(), capped.forces / capped.force_scale) > 1e-7

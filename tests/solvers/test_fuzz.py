@@ -18,8 +18,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from lubcontact import GlueyLubrication, Inelastic, methods, solve
-from lubcontact.bench.hard import (CONE_TOL, ENERGY_TOL, ERROR_TOL, FRICTION_ERROR_TOL, PROPERTY_TOL,
-                             error_against, properties)
+from lubcontact.bench.hard import CONE_TOL, ENERGY_TOL, ERROR_TOL, FRICTION_ERROR_TOL, properties
+from lubcontact.problem.metrics import PROPERTY_TOL, scaled_velocity_error
 from lubcontact.model.laws import Coulomb, GlueyCoulomb
 from lubcontact.solvers import CONVERGED
 from lubcontact.bench.cases.builders import floor_scene, pyramid, scene_problem
@@ -83,4 +83,4 @@ def test_fast_solver_matches_clarabel_with_physical_properties(problem):
         # agreed to 1e-8 whenever both converged, so a disagreement is worth a look
         unpolished = problem.cones.has_friction and not reference.info["polished"]
         tolerance = FRICTION_ERROR_TOL if unpolished else ERROR_TOL
-        assert error_against(problem, result.velocities, reference.velocities) <= tolerance
+        assert scaled_velocity_error(problem, result.velocities, reference.velocities) <= tolerance

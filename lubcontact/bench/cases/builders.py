@@ -1,7 +1,7 @@
 """Building blocks of the hard cases: arrangements of grains and scene -> step problem.
 
 Every hard case ends as a :class:`~lubcontact.problem.StepProblem` built by the
-same code the time stepper uses (``Simulation.build_problem``), so the suite
+same code the time stepper uses (:func:`lubcontact.model.assemble.assemble`), so the suite
 tests what a simulation would hand to a solver. Units are dimensionless:
 radius ``r = 0.5`` unless said otherwise, ``g = 1``, natural time
 ``sqrt(r / g)``.
@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from lubcontact import Cones, ConeKind, Grains, Law, Scene, Simulation, StepProblem, find_contacts
+from lubcontact.model.assemble import assemble
 
 
 class ExplicitFriction(Law):
@@ -44,7 +45,8 @@ def scene_problem(scene: Scene, law: Law, dt: float, *, d_max: float | None = No
     sim = Simulation(scene, law, dt, d_max=d_max)
     contacts = find_contacts(sim.scene, sim.d_max)
     gamma = np.zeros(contacts.count) if gamma is None else np.asarray(gamma, dtype=float)
-    return sim.build_problem(contacts, law.cones(contacts, gamma))
+    return assemble(sim.scene, contacts, law.cones(contacts, gamma), sim.dt,
+                    rotations=law.needs_rotation)
 
 
 def floor_scene(positions, radii, *, masses=None, densities=None, velocities=None, gravity=1.0,

@@ -15,7 +15,7 @@ from typing import Callable
 import numpy as np
 
 from lubcontact import Grains, GlueyLubrication, Inelastic, Scene, StepProblem, solve
-from lubcontact.solvers.coulomb import coulomb_shift
+from lubcontact.problem.metrics import coulomb_shift
 from lubcontact.model.laws import GlueyCoulomb
 from lubcontact.model.scene import inclined_plane_normal
 
