@@ -19,9 +19,8 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.spatial import cKDTree
 
-from .geometry import lever_coefficients, tangent_basis
+from .geometry import close_pairs, lever_coefficients, smaller_radius, tangent_basis
 from .scene import Scene, n_rotations
 
 
@@ -78,7 +77,8 @@ class Contacts:
 
     @property
     def smaller_radius(self) -> np.ndarray:
-        return np.where(self.radius_a > 0, np.minimum(self.radius_a, self.radius_b), self.radius_b)
+        """The smaller radius of the two bodies (the grain's for a plane contact)."""
+        return smaller_radius(self.radius_a, self.radius_b)
 
 
 def find_contacts(scene: Scene, d_max: float) -> Contacts:
@@ -91,88 +91,14 @@ def find_contacts(scene: Scene, d_max: float) -> Contacts:
         Detection distance (length), >= 0.
     """
     grains = scene.grains
-    n, dim = grains.count, grains.dim
-    centres = np.vstack([grains.positions, scene.fixed_positions])
-    radii = np.concatenate([grains.radii, scene.fixed_radii])
-    parts = [_grain_pairs(centres, radii, n, d_max, scene.period), _plane_pairs(scene, n + len(scene.fixed_radii), d_max)]
-    a = np.concatenate([p[0] for p in parts])
-    b = np.concatenate([p[1] for p in parts])
-    gaps = np.concatenate([p[2] for p in parts])
-    normals = np.vstack([p[3] for p in parts]).reshape(-1, dim)
-    radius_a = np.concatenate([p[4] for p in parts])
-    n_bodies = n + len(scene.fixed_radii) + scene.planes.count
-    keys = a.astype(np.int64) * n_bodies + b
-    order = np.argsort(keys, kind="stable")
-    a, b, gaps, normals, radius_a, keys = a[order], b[order], gaps[order], normals[order], \
-        radius_a[order], keys[order]
+    a, b, keys, gaps, normals, radius_a = close_pairs(
+        np.vstack([grains.positions, scene.fixed_positions]),
+        np.concatenate([grains.radii, scene.fixed_radii]), grains.count, d_max, scene.period,
+        scene.planes.points, scene.planes.normals)
     radius_b = grains.radii[b]
     points = grains.positions[b] - (radius_b + 0.5 * gaps)[:, None] * normals
     return Contacts(body_a=a, body_b=b, keys=keys, gaps=gaps, normals=normals, points=points,
-                    radius_a=radius_a, radius_b=radius_b, n_grains=n)
-
-
-def _grain_pairs(centres, radii, n_free, d_max, period=None):
-    dim = centres.shape[1]
-    empty = (np.zeros(0, int), np.zeros(0, int), np.zeros(0), np.zeros((0, dim)), np.zeros(0))
-    if len(radii) < 2 or n_free == 0:
-        return empty
-    reach = 2.0 * radii.max() + d_max
-    points, owner = _with_ghosts(centres, reach, period)
-    pairs = cKDTree(points).query_pairs(reach, output_type="ndarray")
-    if pairs.size == 0:
-        return empty
-    first, second = owner[pairs[:, 0]], owner[pairs[:, 1]]
-    i, j = np.minimum(first, second), np.maximum(first, second)   # a fixed grain can only be j
-    keep = (i < n_free) & (i != j)
-    i, j = i[keep], j[keep]
-    if period is not None:                   # a pair seen directly and through images: once
-        _, unique = np.unique(i * len(radii) + j, return_index=True)
-        i, j = i[unique], j[unique]
-    delta = centres[j] - centres[i]
-    if period is not None:
-        delta[:, 0] -= period * np.round(delta[:, 0] / period)
-    dist = np.linalg.norm(delta, axis=1)
-    gaps = dist - radii[i] - radii[j]
-    keep = gaps < d_max
-    i, j, delta, dist, gaps = i[keep], j[keep], delta[keep], dist[keep], gaps[keep]
-    fixed_j = j >= n_free                    # orient so that b is always free
-    a = np.where(fixed_j, j, i)
-    b = np.where(fixed_j, i, j)
-    normals = np.where(fixed_j[:, None], -delta, delta) / dist[:, None]
-    return a, b, gaps, normals, radii[a]
-
-
-def _with_ghosts(centres, reach, period):
-    """Centres plus their periodic images near the ends of ``[0, period)``, and the owner of each.
-
-    Raises
-    ------
-    ValueError
-        If the period is not larger than twice the search reach (the minimum
-        image would be ambiguous).
-    """
-    owner = np.arange(len(centres))
-    if period is None:
-        return centres, owner
-    if not period > 2.0 * reach:
-        raise ValueError(f"period: must exceed twice the contact reach 2 (2 r_max + d_max) = "
-                         f"{2.0 * reach:.6g}, got {period}")
-    x = np.mod(centres[:, 0], period)
-    wrapped = centres.copy()
-    wrapped[:, 0] = x
-    near_start, near_end = np.flatnonzero(x < reach), np.flatnonzero(x >= period - reach)
-    shift = np.zeros(centres.shape[1])
-    shift[0] = period
-    points = np.vstack([wrapped, wrapped[near_start] + shift, wrapped[near_end] - shift])
-    return points, np.concatenate([owner, near_start, near_end])
-
-
-def _plane_pairs(scene, first_plane_id, d_max):
-    planes, grains = scene.planes, scene.grains
-    offsets = np.einsum("pd,pd->p", planes.points, planes.normals)
-    gaps = grains.positions @ planes.normals.T - offsets[None, :] - grains.radii[:, None]
-    b, p = np.nonzero(gaps < d_max)
-    return (first_plane_id + p, b, gaps[b, p], planes.normals[p], np.zeros(len(b)))
+                    radius_a=radius_a, radius_b=radius_b, n_grains=grains.count)
 
 
 def dof_count(n_grains: int, dim: int, rotations: bool) -> int:

@@ -1,7 +1,13 @@
-"""Small vectorised geometric helpers (any dimension)."""
+"""Vectorised geometry (any dimension): the pair search, tangent bases and lever arms.
+
+Bodies are numbered globally: free grains ``0..N-1``, fixed grains
+``N..N+F-1``, planes ``N+F..N+F+P-1``. Periodic boundaries along x are
+handled by ghost images (see :mod:`lubcontact.model.contacts`).
+"""
 from __future__ import annotations
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 
 def tangent_basis(normals: np.ndarray) -> np.ndarray:
@@ -43,3 +49,111 @@ def lever_coefficients(normals: np.ndarray, tangents: np.ndarray) -> np.ndarray:
         cross = normals[:, None, 0] * tangents[:, :, 1] - normals[:, None, 1] * tangents[:, :, 0]
         return cross[:, :, None]
     return np.cross(normals[:, None, :], tangents)
+
+
+def smaller_radius(radius_a: np.ndarray, radius_b: np.ndarray) -> np.ndarray:
+    """The smaller radius of each pair; ``radius_a = 0`` marks a plane (the grain's radius)."""
+    return np.where(radius_a > 0, np.minimum(radius_a, radius_b), radius_b)
+
+
+def close_pairs(centres: np.ndarray, radii: np.ndarray, n_free: int, d_max: float,
+                period: float | None, plane_points: np.ndarray, plane_normals: np.ndarray
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Every pair of bodies with gap ``D < d_max``, sorted by pair key (a k-d tree search).
+
+    Parameters
+    ----------
+    centres : ndarray, shape (N + F, dim)
+        Free grains first, then fixed grains.
+    radii : ndarray, shape (N + F,)
+    n_free : int
+        ``N``, the number of free grains (each pair has a free body ``b``).
+    d_max : float
+        Detection distance (length), >= 0.
+    period : float or None
+        Period along x (None: not periodic).
+    plane_points, plane_normals : ndarray, shape (P, dim)
+
+    Returns
+    -------
+    body_a, body_b, keys, gaps, normals, radius_a
+        Arrays of length ``nc``: global body numbers (``a`` any kind, ``b`` a
+        free grain), pair keys ``a * n_bodies + b``, gaps, unit normals from
+        ``a`` to ``b`` (shape (nc, dim)) and the radius of ``a`` (0 for a plane).
+    """
+    dim = centres.shape[1]
+    n_fixed = len(radii) - n_free
+    parts = [_grain_pairs(centres, radii, n_free, d_max, period),
+             _plane_pairs(centres[:n_free], radii[:n_free], plane_points, plane_normals,
+                          n_free + n_fixed, d_max)]
+    a = np.concatenate([p[0] for p in parts])
+    b = np.concatenate([p[1] for p in parts])
+    gaps = np.concatenate([p[2] for p in parts])
+    normals = np.vstack([p[3] for p in parts]).reshape(-1, dim)
+    radius_a = np.concatenate([p[4] for p in parts])
+    keys = a.astype(np.int64) * (len(radii) + len(plane_points)) + b
+    order = np.argsort(keys, kind="stable")
+    return a[order], b[order], keys[order], gaps[order], normals[order], radius_a[order]
+
+
+def _grain_pairs(centres, radii, n_free, d_max, period=None):
+    dim = centres.shape[1]
+    empty = (np.zeros(0, int), np.zeros(0, int), np.zeros(0), np.zeros((0, dim)), np.zeros(0))
+    if len(radii) < 2 or n_free == 0:
+        return empty
+    reach = 2.0 * radii.max() + d_max
+    points, owner = _with_ghosts(centres, reach, period)
+    pairs = cKDTree(points).query_pairs(reach, output_type="ndarray")
+    if pairs.size == 0:
+        return empty
+    first, second = owner[pairs[:, 0]], owner[pairs[:, 1]]
+    i, j = np.minimum(first, second), np.maximum(first, second)   # a fixed grain can only be j
+    keep = (i < n_free) & (i != j)
+    i, j = i[keep], j[keep]
+    if period is not None:                   # a pair seen directly and through images: once
+        _, unique = np.unique(i * len(radii) + j, return_index=True)
+        i, j = i[unique], j[unique]
+    delta = centres[j] - centres[i]
+    if period is not None:
+        delta[:, 0] -= period * np.round(delta[:, 0] / period)
+    dist = np.linalg.norm(delta, axis=1)
+    gaps = dist - radii[i] - radii[j]
+    keep = gaps < d_max
+    i, j, delta, dist, gaps = i[keep], j[keep], delta[keep], dist[keep], gaps[keep]
+    fixed_j = j >= n_free                    # orient so that b is always free
+    a = np.where(fixed_j, j, i)
+    b = np.where(fixed_j, i, j)
+    normals = np.where(fixed_j[:, None], -delta, delta) / dist[:, None]
+    return a, b, gaps, normals, radii[a]
+
+
+def _with_ghosts(centres, reach, period):
+    """Centres plus their periodic images near the ends of ``[0, period)``, and the owner of each.
+
+    Raises
+    ------
+    ValueError
+        If the period is not larger than twice the search reach (the minimum
+        image would be ambiguous).
+    """
+    owner = np.arange(len(centres))
+    if period is None:
+        return centres, owner
+    if not period > 2.0 * reach:
+        raise ValueError(f"period: must exceed twice the contact reach 2 (2 r_max + d_max) = "
+                         f"{2.0 * reach:.6g}, got {period}")
+    x = np.mod(centres[:, 0], period)
+    wrapped = centres.copy()
+    wrapped[:, 0] = x
+    near_start, near_end = np.flatnonzero(x < reach), np.flatnonzero(x >= period - reach)
+    shift = np.zeros(centres.shape[1])
+    shift[0] = period
+    points = np.vstack([wrapped, wrapped[near_start] + shift, wrapped[near_end] - shift])
+    return points, np.concatenate([owner, near_start, near_end])
+
+
+def _plane_pairs(centres, radii, plane_points, plane_normals, first_plane_id, d_max):
+    offsets = np.einsum("pd,pd->p", plane_points, plane_normals)
+    gaps = centres @ plane_normals.T - offsets[None, :] - radii[:, None]
+    b, p = np.nonzero(gaps < d_max)
+    return (first_plane_id + p, b, gaps[b, p], plane_normals[p], np.zeros(len(b)))

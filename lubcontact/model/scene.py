@@ -16,6 +16,7 @@ from typing import Callable, Union
 import numpy as np
 
 from .. import checks
+from .geometry import close_pairs, smaller_radius
 
 ForceLike = Union[None, np.ndarray, "Schedule", Callable[[float], np.ndarray]]
 
@@ -315,19 +316,20 @@ class Scene:
 
     def check_overlaps(self) -> None:
         """Raise ``ValueError`` if any initial overlap exceeds the tolerance."""
-        from .contacts import find_contacts  # local import: contacts depends on scene
-
-        contacts = find_contacts(self, d_max=0.0)
-        if contacts.count == 0:
+        a, b, _, gaps, _, radius_a = close_pairs(
+            np.vstack([self.grains.positions, self.fixed_positions]),
+            np.concatenate([self.grains.radii, self.fixed_radii]), self.grains.count, 0.0,
+            self.period, self.planes.points, self.planes.normals)
+        if gaps.size == 0:
             return
-        limit = -self.overlap_tolerance * contacts.smaller_radius
-        deep = np.flatnonzero(contacts.gaps < limit)
+        smaller = smaller_radius(radius_a, self.grains.radii[b])
+        deep = np.flatnonzero(gaps < -self.overlap_tolerance * smaller)
         if deep.size:
-            c = deep[np.argmin(contacts.gaps[deep])]
+            c = deep[np.argmin(gaps[deep])]
             raise ValueError(
-                f"positions: initial overlap {-contacts.gaps[c]:.3e} between body "
-                f"{contacts.body_a[c]} and grain {contacts.body_b[c]} exceeds overlap_tolerance "
-                f"{self.overlap_tolerance} x radius {contacts.smaller_radius[c]:.3e}")
+                f"positions: initial overlap {-gaps[c]:.3e} between body "
+                f"{a[c]} and grain {b[c]} exceeds overlap_tolerance "
+                f"{self.overlap_tolerance} x radius {smaller[c]:.3e}")
 
     def copy(self) -> "Scene":
         return replace(self, grains=self.grains.copy(), metadata=dict(self.metadata))

@@ -123,12 +123,6 @@ def _combine(normal_rows, normal_values, tangent_rows, tangent_value, n) -> sp.c
     return sp.csr_matrix((data, (rows, cols)), shape=(m, n))
 
 
-def _empty(problem) -> MethodOutput | None:
-    if problem.n_rows == 0:
-        return MethodOutput(np.zeros(0), CONVERGED, 0, 0.0, 0.0)
-    return None
-
-
 @register("clarabel-direct", kind=INTERIOR_POINT, cones=CONVEX_CONES, warm_start=False,
           polishing=True)
 def clarabel_direct(problem, *, tol: float = 1e-10, max_iter: int = 200, warm_start=None,
@@ -141,8 +135,6 @@ def clarabel_direct(problem, *, tol: float = 1e-10, max_iter: int = 200, warm_st
     """
     import clarabel
 
-    if (out := _empty(problem)) is not None:
-        return out
     start = time.perf_counter()
     form = conic_form(problem, polyhedral)
     cones = []
@@ -210,8 +202,6 @@ def osqp_method(problem, *, tol: float = 1e-10, max_iter: int = 100000, warm_sta
     """OSQP on the polyhedral :func:`conic_form` (raises ValueError for 3D friction)."""
     import osqp
 
-    if (out := _empty(problem)) is not None:
-        return out
     start = time.perf_counter()
     form = conic_form(problem, polyhedral=True)
     lower = np.concatenate([form.c[: form.zero], np.full(form.nonneg, -np.inf)])
@@ -244,8 +234,6 @@ def scs_method(problem, *, tol: float = 1e-10, max_iter: int = 100000, warm_star
     """
     import scs
 
-    if (out := _empty(problem)) is not None:
-        return out
     start = time.perf_counter()
     form = conic_form(problem, polyhedral)
     rows, zero = form.A, form.zero

@@ -53,8 +53,6 @@ def clarabel_settings(tol: float, max_iter: int) -> dict:
 def _solve_symbolic(step: StepProblem, form: str, tol: float, max_iter: int,
                     polyhedral: bool, polish: bool = True) -> MethodOutput:
     start = time.perf_counter()
-    if step.n_rows == 0:
-        return MethodOutput(np.zeros(0), CONVERGED, 0, 0.0, 0.0)
     builder = symbolic.dual_form if form == "dual" else symbolic.primal_form
     symbolic_form = builder(step, polyhedral)
     built = time.perf_counter()

@@ -8,6 +8,9 @@ calls the method, re-checks what it returns (finite forces, natural residual)
 and maps the forces back to physical units. Residuals in results are in scaled
 units and therefore comparable across scenes.
 
+Methods never see a problem without contacts (``solve`` answers it: zero
+forces, ``converged``, 0 iterations).
+
 Adding a solver (see ``docs/guide/adding-a-solver.md``)::
 
     from lubcontact.solvers import CONVERGED, MethodOutput, register
@@ -207,7 +210,10 @@ def solve(problem: ConicProblem, method: str = "clarabel", *, tol: float = 1e-9,
     if max_iter is not None:
         kwargs["max_iter"] = int(max_iter)
     called = time.perf_counter()
-    out = info.function(scaled, **kwargs)
+    if problem.n_rows == 0:                  # no contact: nothing to solve, for every method
+        out = MethodOutput(np.zeros(0), CONVERGED, 0)
+    else:
+        out = info.function(scaled, **kwargs)
     call_time = time.perf_counter() - called
     status = out.status
     forces = out.forces

@@ -1,24 +1,27 @@
 """Readers of external frictional problems (lubcontact.io) and solving them exactly.
 
 Small files written here check each format (shapes, values, symmetry, mu,
-spacedim, the layout permutation) and the errors on bad input; the shared
-Siconos/FCLIB files (``problem_sets.BENCHMARKS``, skipped when absent) are
-solved by the fixed point on s to the FCLIB error of MODEL.md section 6.
+spacedim, the layout permutation) and the errors on bad input; the Siconos and
+FCLIB files that ship with the package (``lubcontact/bench/data``, found by
+:func:`lubcontact.bench.problem_sets.data_dir`) are read and solved by the fixed
+point on s to the FCLIB error of MODEL.md section 6. The data always ships: a
+missing file is a failure, never a skip. The last tests check how ``data_dir``
+picks the folder (override, ``LUBCONTACT_DATA_DIR``, package data).
 """
 from __future__ import annotations
 
 import re
+import shutil
 
+import h5py
 import numpy as np
 import pytest
 import scipy.sparse as sp
 
-h5py = pytest.importorskip("h5py")
-
-from lubcontact import io  # noqa: E402
-from lubcontact.problem.metrics import coulomb_error  # noqa: E402
-from lubcontact.solvers.coulomb import solve_coulomb  # noqa: E402
-from lubcontact.bench.problem_sets import BENCHMARKS  # noqa: E402
+from lubcontact import io
+from lubcontact.bench import problem_sets
+from lubcontact.problem.metrics import coulomb_error
+from lubcontact.solvers.coulomb import solve_coulomb
 
 # Two 2D contacts in contact-major layout (normal, tangent per contact).
 W2 = np.array([[4.0, 1.0, 0.5, 0.0],
@@ -29,14 +32,9 @@ Q2 = np.array([-1.0, 0.5, 2.0, -0.3])
 MU2 = np.array([0.3, 0.5])
 OURS2 = [0, 2, 1, 3]          # [normals, tangents] from contact-major
 
-SICONOS = BENCHMARKS / "siconos-fc2d"
-FCLIB = BENCHMARKS / "fclib-local"
-
-
-def needs(path):
-    if not path.is_file():
-        pytest.skip(f"benchmark file {path} is absent")
-    return path
+DATA = problem_sets.data_dir()
+SICONOS = DATA / "siconos-fc2d"
+FCLIB = DATA / "fclib-local"
 
 
 # -- writers of the file formats (test side) -------------------------------------------------
@@ -141,7 +139,7 @@ def test_missing_file_and_unknown_format(tmp_path):
 
 
 def test_siconos_2020_file():
-    problem = io.read_problem(needs(SICONOS / "fc2d_granularflowonwall_02020_00213.dat"))
+    problem = io.read_problem(SICONOS / "fc2d_granularflowonwall_02020_00213.dat")
     assert (problem.n_contacts, problem.dim, problem.delassus.shape) == (2020, 2, (4040, 4040))
     np.testing.assert_array_equal(problem.cones.mu, np.full(2020, 0.5))
     assert abs(problem.delassus - problem.delassus.T).max() == 0.0
@@ -149,7 +147,7 @@ def test_siconos_2020_file():
 
 def test_siconos_667_solved_by_the_fast_fixed_point():
     """The 667-contact problem has |q| ~ 4e-18: the error is checked on the normalised problem."""
-    problem = io.read_problem(needs(SICONOS / "fc2d_granularflowonwall_00667_00000.dat"))
+    problem = io.read_problem(SICONOS / "fc2d_granularflowonwall_00667_00000.dat")
     result = solve_coulomb(problem, "apgd-jacobi", tol=1e-10, tol_fp=1e-10, max_outer=300,
                            forcing=1e-4, anderson=5)
     assert result.status == "converged"
@@ -163,7 +161,7 @@ def test_siconos_667_solved_by_the_fast_fixed_point():
 
 @pytest.mark.slow
 def test_siconos_2020_solved_by_the_fast_fixed_point():
-    problem = io.read_problem(needs(SICONOS / "fc2d_granularflowonwall_02020_00213.dat"))
+    problem = io.read_problem(SICONOS / "fc2d_granularflowonwall_02020_00213.dat")
     result = solve_coulomb(problem, "apgd-jacobi", tol=1e-9, tol_fp=1e-9, max_outer=300,
                            forcing=1e-4, anderson=5)
     assert result.status == "converged"
@@ -223,7 +221,7 @@ def test_fclib_bad_input_names_the_field(tmp_path, change, field):
 
 
 def test_fclib_local_problem_solved_by_the_fast_fixed_point():
-    problem = io.read_problem(needs(FCLIB / "LMGC_100_PR_PerioBox-i00361-60-03000.hdf5"))
+    problem = io.read_problem(FCLIB / "LMGC_100_PR_PerioBox-i00361-60-03000.hdf5")
     assert (problem.n_contacts, problem.dim) == (60, 3)
     result = solve_coulomb(problem, "apgd-jacobi", tol=1e-10, tol_fp=1e-10, max_outer=100)
     assert result.status == "converged"
@@ -266,7 +264,7 @@ def test_fclib_global_small_problem(tmp_path):
 
 def test_box_stacks_global_round_trip():
     """W read from M and H equals the Delassus matrix assembled here from the raw arrays."""
-    path = needs(FCLIB / "Box_Stacks-i0122-82-5.hdf5")
+    path = FCLIB / "Box_Stacks-i0122-82-5.hdf5"
     problem = io.read_problem(path)
     with h5py.File(path, "r") as handle:
         group = handle["fclib_global"]
@@ -293,3 +291,67 @@ def test_box_stacks_global_round_trip():
     result = solve_coulomb(problem, "apgd-jacobi", tol=1e-10, tol_fp=1e-10, max_outer=100)
     assert result.status == "converged"
     assert coulomb_error(problem, result.forces) <= 1e-8
+
+
+# -- the packaged data and data_dir ------------------------------------------------------------
+SHIPPED = {
+    "siconos-fc2d": ["fc2d_granularflowonwall_00667_00000.dat",
+                     "fc2d_granularflowonwall_02020_00213.dat",
+                     "fc2d_granularflowonwall_07002_00801.dat"],
+    "fclib-local": ["Box_Stacks-i0122-82-5.hdf5", "Capsules-i125-1213.hdf5",
+                    "LMGC_100_PR_PerioBox-i00361-60-03000.hdf5", "local_problem_test.hdf5"],
+    "siconos-testdata": ["README.md", "FrictionContact3D_1c.dat", "GFC3D_TwoRods1.dat",
+                         "Spheres-i099-356-679.hdf5"],
+}
+
+
+def test_the_benchmark_data_ships_with_the_package(monkeypatch):
+    monkeypatch.delenv(problem_sets.DATA_DIR_ENV, raising=False)
+    root = problem_sets.data_dir()
+    assert root == problem_sets.PACKAGE_DATA
+    assert root.parent.name == "bench" and (root / "README.md").is_file()
+    for folder, names in SHIPPED.items():
+        for name in names:
+            assert problem_sets.benchmark_file(folder, name) == root / folder / name
+    assert len(list((root / "siconos-testdata").iterdir())) == 29     # 28 problems + README
+    with pytest.raises(problem_sets.SetUnavailable, match=r"'fclib-local' has no file 'absent\.hdf5'"):
+        problem_sets.benchmark_file("fclib-local", "absent.hdf5")
+
+
+def test_data_dir_honours_the_environment_and_the_override(tmp_path, monkeypatch):
+    from_env, explicit = tmp_path / "env", tmp_path / "explicit"
+    (from_env / "fclib-local").mkdir(parents=True)
+    (explicit / "fclib-local").mkdir(parents=True)
+    name = "LMGC_100_PR_PerioBox-i00361-60-03000.hdf5"
+    shutil.copy(FCLIB / name, from_env / "fclib-local" / name)
+    shutil.copy(FCLIB / "local_problem_test.hdf5", explicit / "fclib-local")
+
+    monkeypatch.setenv("LUBCONTACT_DATA_DIR", str(from_env))
+    assert problem_sets.data_dir() == from_env
+    assert problem_sets.data_dir(explicit) == explicit              # the override wins
+    assert problem_sets.data_dir(str(explicit)) == explicit
+    assert problem_sets.BENCHMARKS == from_env                      # the legacy name follows
+    fclib = problem_sets.SETS["fclib"]
+    assert [i.name for i in fclib.instances()] == [name.removesuffix(".hdf5")]
+    assert [i.name for i in fclib.instances(data=explicit)] == ["local_problem_test"]
+    with pytest.raises(problem_sets.SetUnavailable, match=r"no problem files \(\*\.dat\) in benchmark folder 'siconos-fc2d'"):
+        problem_sets.SETS["siconos-fc2d"].instances()
+    with pytest.raises(problem_sets.SetUnavailable, match=r"'siconos-fc2d' has no file 'x\.dat'"):
+        problem_sets.benchmark_file("siconos-fc2d", "x.dat")
+
+    monkeypatch.setenv("LUBCONTACT_DATA_DIR", "")                   # empty: unset
+    assert problem_sets.data_dir() == problem_sets.PACKAGE_DATA
+
+
+def test_data_dir_rejects_a_non_directory(tmp_path, monkeypatch):
+    monkeypatch.delenv(problem_sets.DATA_DIR_ENV, raising=False)
+    a_file = tmp_path / "problems.dat"
+    a_file.write_text("2\n")
+    for bad in (a_file, tmp_path / "absent", str(a_file)):
+        with pytest.raises(ValueError, match=r"^data_dir: not a directory: .*(problems\.dat|absent)"):
+            problem_sets.data_dir(bad)
+    monkeypatch.setenv("LUBCONTACT_DATA_DIR", str(a_file))
+    with pytest.raises(ValueError, match=r"data_dir: not a directory: .*LUBCONTACT_DATA_DIR"):
+        problem_sets.data_dir()
+    with pytest.raises(ValueError, match="data_dir"):
+        problem_sets.SETS["fclib"].instances()

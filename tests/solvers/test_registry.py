@@ -1,0 +1,136 @@
+"""The solver registry: capabilities, kinds, up-front rejection, and SolveSettings dispatch."""
+import numpy as np
+import pytest
+
+from lubcontact import Coulomb, Grains, Inelastic, Scene, Simulation, scenes, solve
+from lubcontact.bench.cases.hard import CASES
+from lubcontact.model.assemble import assemble
+from lubcontact.model.contacts import find_contacts
+from lubcontact.problem import ConeKind, ConicProblem
+from lubcontact.problem.metrics import velocity_error
+from lubcontact.solvers import (CONVERGED, FIRST_ORDER, INTERIOR_POINT, KINDS, QP, CoulombResult,
+                                MethodOutput, SolveSettings, capable_methods, methods, register,
+                                solver_info, unregister)
+
+
+def test_every_method_has_a_kind_and_the_kinds_partition_the_registry():
+    by_kind = {kind: set(methods(kind=kind)) for kind in KINDS}
+    assert set().union(*by_kind.values()) == set(methods())
+    assert sum(len(names) for names in by_kind.values()) == len(methods())
+    assert {"pgd", "apgd", "apgd-jacobi", "apgd-as", "bb"} <= by_kind[FIRST_ORDER]
+    assert {"clarabel", "clarabel-dual", "clarabel-direct"} <= by_kind[INTERIOR_POINT]
+    assert by_kind[QP] == {"osqp"}
+
+
+def test_unknown_kind_and_duplicate_name_are_rejected():
+    with pytest.raises(ValueError, match="kind"):
+        methods(kind="newton")
+    with pytest.raises(ValueError, match="name: solver 'apgd' is already registered"):
+        register("apgd")(lambda problem, **_: None)
+    with pytest.raises(ValueError, match="kind"):
+        register("new-one", kind="magic")
+
+
+def test_an_unsupported_problem_is_rejected_before_any_work():
+    """osqp takes no UNION cones and no 3D cones: one message, naming the methods that can."""
+    calls = []
+
+    @register("test-convex-only", kind=QP, cones={ConeKind.NONNEG, ConeKind.FREE},
+              second_order=False)
+    def _never(problem, *, tol, warm_start=None):
+        calls.append(1)
+        return MethodOutput(np.zeros(problem.n_rows), CONVERGED, 1)
+
+    try:
+        union = CASES["gamma_states_gluey_coulomb"].problem
+        assert not union.cones.is_convex
+        with pytest.raises(ValueError, match=r"method: 'osqp' cannot solve this problem: UNION"):
+            solve(union, "osqp")
+        with pytest.raises(ValueError, match="UNION contacts are not supported"):
+            solve(union, "test-convex-only")
+        assert calls == []
+        cone_3d = CASES["cone_apex_3d"].problem
+        with pytest.raises(ValueError, match="second-order"):
+            solve(cone_3d, "osqp")
+        assert solver_info("osqp").rejection(CASES["wedge_planes"].problem) is None
+        assert "test-convex-only" not in capable_methods(union)
+        assert "clarabel" in capable_methods(union)
+    finally:
+        unregister("test-convex-only")
+    assert "test-convex-only" not in methods()
+
+
+@pytest.mark.parametrize("value", [0, -3, 2.5])
+def test_bad_max_iter_is_rejected_naming_the_field(value):
+    with pytest.raises(ValueError, match="max_iter"):
+        solve(CASES["wedge_planes"].problem, "apgd", max_iter=value)
+
+
+def test_both_problem_kinds_satisfy_the_protocol():
+    from lubcontact.io import read_problem
+    from lubcontact.bench.problem_sets import data_dir
+
+    step = CASES["wedge_planes"].problem
+    local = read_problem(data_dir() / "fclib-local" / "local_problem_test.hdf5")
+    for problem in (step, local, step.normalized(), local.normalized()):
+        assert isinstance(problem, ConicProblem)
+    assert local.delassus_factor is None and step.delassus_factor is not None
+
+
+def _frictional_step():
+    """A disk sliding on a floor (tangential speed 1, mu = 0.3): the contact slides."""
+    grains = Grains.create(positions=[[0.0, 0.5]], radii=0.5, masses=1.0, velocities=[[1.0, 0.0]])
+    scene = Scene.create(grains, plane_points=[[0.0, 0.0]], plane_normals=[[0.0, 1.0]],
+                         gravity=[0.0, -1.0])
+    contacts = find_contacts(scene, 0.05)
+    law = Coulomb(0.3)
+    return assemble(scene, contacts, law.cones(contacts, np.zeros(contacts.count)), 0.1,
+                    rotations=law.needs_rotation)
+
+
+def test_settings_solve_exact_coulomb_or_the_relaxation():
+    problem = _frictional_step()
+    assert problem.cones.has_friction
+    exact = SolveSettings(method="clarabel", tol=1e-9, tol_fp=1e-8).solve(problem)
+    relaxed = SolveSettings(method="clarabel", tol=1e-9, exact_coulomb=False).solve(problem)
+    assert isinstance(exact, CoulombResult) and isinstance(relaxed, CoulombResult)
+    assert exact.success and exact.fixed_point_converged and exact.outer_iterations > 1
+    assert np.any(exact.shift > 0)                       # sliding contacts got their shift
+    assert relaxed.success and relaxed.outer_iterations == 1 and np.all(relaxed.shift == 0)
+    # the relaxation lifts the sliding disk off (dilatancy mu |u_T|); the shift removes it
+    assert problem.gaps_after(relaxed.velocities)[0] > 1e-3
+    assert abs(problem.gaps_after(exact.velocities)[0]) < 1e-9
+    assert velocity_error(problem, exact.velocities, relaxed.velocities) > 1e-3
+
+
+def test_outer_iterations_share_the_delassus_matrix():
+    """The fixed point normalises once: every inner solve sees the same W object."""
+    problem = _frictional_step()
+    seen = []
+
+    apgd = solver_info("apgd").function
+
+    @register("test-spy", kind=FIRST_ORDER)
+    def _spy(scaled, **kwargs):
+        seen.append(id(scaled.delassus))
+        return apgd(scaled, **kwargs)
+
+    try:
+        SolveSettings(method="test-spy", tol=1e-6, max_outer=4).solve(problem)
+    finally:
+        unregister("test-spy")
+    assert len(seen) >= 2 and len(set(seen)) == 1
+
+
+def test_settings_validate_their_fields():
+    with pytest.raises(ValueError, match="solver: must be a registered method"):
+        SolveSettings(method="foo")
+    with pytest.raises(ValueError, match="tol"):
+        SolveSettings(tol=0.0)
+    with pytest.raises(ValueError, match="max_outer"):
+        SolveSettings(max_outer=0)
+    with pytest.raises(ValueError, match="max_iter"):
+        SolveSettings(max_iter=5, options={"max_iter": 6})
+    assert SolveSettings(options={"max_iter": 6}).max_iter == 6
+    with pytest.raises(ValueError, match="solver"):
+        Simulation(scenes.push_pull(), Inelastic(), dt=0.1, solver="foo")
