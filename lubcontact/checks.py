@@ -55,6 +55,26 @@ def positive(field: str, value, shape: tuple[int | None, ...] | None = None) -> 
     return arr
 
 
+def per_item(field: str, value, count: int) -> np.ndarray:
+    """One value for each of ``count`` items: a scalar is repeated, an array must have shape (count,).
+
+    Returns a new float array of shape (count,); finiteness is checked as in :func:`as_array`.
+    """
+    arr = np.asarray(value, dtype=float)
+    if arr.ndim == 0:
+        arr = np.full(count, float(arr))
+    require(arr.shape == (count,), field, f"expected one value or shape ({count},), "
+                                          f"got shape {arr.shape}")
+    return as_array(field, arr, shape=(count,)).copy()
+
+
+def integer(field: str, value, minimum: int = 0) -> int:
+    """An integer (an integral float such as 3.0 is accepted) >= ``minimum``."""
+    ok = np.ndim(value) == 0 and np.isfinite(value) and float(value) == int(value)
+    require(bool(ok) and int(value) >= minimum, field, f"must be an integer >= {minimum}", value)
+    return int(value)
+
+
 def positive_scalar(field: str, value) -> float:
     """A finite, strictly positive float."""
     return float(positive(field, value, shape=()))

@@ -257,5 +257,9 @@ def gamma_min_from_roughness(viscosity: float, roughness: float, r_eff: np.ndarr
     r_eff : ndarray
         Effective radius of each contact (length).
     """
+    rough = np.flatnonzero(roughness >= r_eff)
+    checks.require(rough.size == 0, "roughness", f"must be smaller than the effective radius of "
+                   f"every contact (gamma_min >= 0 would switch the glue off), got {roughness} "
+                   f"against an effective radius {float(np.min(r_eff, initial=np.inf)):.6g}")
     k = 6.0 * np.pi * viscosity * r_eff**2
     return k * np.log(roughness / r_eff)

@@ -114,21 +114,24 @@ class Grains:
         """
         positions = checks.as_array("positions", positions, shape=(None, None))
         n, dim = positions.shape
+        checks.require(n > 0, "positions", "at least one grain is needed, got 0 grains")
         checks.require(dim in (2, 3), "positions", "dimension must be 2 or 3", dim)
-        radii = checks.positive("radii", np.broadcast_to(radii, (n,)) if np.ndim(radii) == 0 else radii,
-                                shape=(n,))
+        radii = checks.positive("radii", checks.per_item("radii", radii, n))
         if densities is not None:
-            densities = checks.positive("densities", np.broadcast_to(densities, (n,)).copy(), shape=(n,))
+            densities = checks.positive("densities", checks.per_item("densities", densities, n))
         if masses is None:
             checks.require(densities is not None, "masses", "give masses or densities", None)
             masses = densities * ball_volume(radii, dim)
-        masses = checks.positive("masses", np.broadcast_to(masses, (n,)).copy(), shape=(n,))
+        masses = checks.positive("masses", checks.per_item("masses", masses, n))
         if inertias is None:
             inertias = ball_inertia(masses, radii, dim)
-        inertias = checks.positive("inertias", np.broadcast_to(inertias, (n,)).copy(), shape=(n,))
+        inertias = checks.positive("inertias", checks.per_item("inertias", inertias, n))
         nrot = n_rotations(dim)
         velocities = np.zeros((n, dim)) if velocities is None else velocities
-        spins = np.zeros((n, nrot)) if spins is None else np.reshape(spins, (n, nrot))
+        if spins is None:
+            spins = np.zeros((n, nrot))
+        elif np.size(spins) == n * nrot:            # (n,) is accepted for disks
+            spins = np.reshape(spins, (n, nrot))
         return cls(positions=positions.copy(), radii=radii.copy(), masses=masses,
                    inertias=inertias,
                    velocities=checks.as_array("velocities", velocities, shape=(n, dim)).copy(),
@@ -165,10 +168,19 @@ class Planes:
 
     @classmethod
     def create(cls, points, normals, dim: int) -> "Planes":
-        points = checks.as_array("planes.points", np.reshape(points, (-1, dim)) if np.size(points) else
-                                 np.zeros((0, dim)), shape=(None, dim))
-        normals = checks.as_array("planes.normals", np.reshape(normals, (-1, dim)) if np.size(normals) else
-                                  np.zeros((0, dim)), shape=(points.shape[0], dim))
+        """Validate planes given as one vector each (or a single vector for one plane).
+
+        Raises
+        ------
+        ValueError
+            Naming ``planes.points`` or ``planes.normals`` (the ``plane_points`` and
+            ``plane_normals`` of :meth:`Scene.create`) for vectors of another
+            dimension than the grains', unequal counts, non-finite or zero normals.
+        """
+        points = _vectors("planes.points", points, dim)
+        normals = _vectors("planes.normals", normals, dim)
+        checks.require(normals.shape == points.shape, "planes.normals",
+                       f"expected one normal per point ({points.shape[0]}), got {normals.shape[0]}")
         lengths = np.linalg.norm(normals, axis=1)
         checks.require(bool(np.all(lengths > 0)), "planes.normals", "must be non-zero", normals)
         return cls(points=points, normals=normals / lengths[:, None])
@@ -176,6 +188,18 @@ class Planes:
     @property
     def count(self) -> int:
         return self.points.shape[0]
+
+
+def _vectors(field: str, value, dim: int) -> np.ndarray:
+    """Vectors of dimension ``dim`` as an array of shape (count, dim); one vector may be flat."""
+    arr = np.asarray(value, dtype=float)
+    if arr.size == 0:
+        return np.zeros((0, dim))
+    arr = arr.reshape(1, -1) if arr.ndim == 1 else arr
+    checks.require(arr.ndim == 2 and arr.shape[1] == dim, field,
+                   f"expected vectors of dimension {dim} (that of the grains), got shape "
+                   f"{np.shape(value)}")
+    return checks.as_array(field, arr, shape=(None, dim))
 
 
 def inclined_plane_normal(angle: float, dim: int = 2) -> np.ndarray:
@@ -250,7 +274,9 @@ class Scene:
         dim = grains.dim
         planes = Planes.create(plane_points, plane_normals, dim)
         if fixed_positions is None:
+            checks.require(fixed_radii is None, "fixed_positions", "required with fixed_radii")
             fixed_positions, fixed_radii = np.zeros((0, dim)), np.zeros(0)
+        checks.require(fixed_radii is not None, "fixed_radii", "required with fixed_positions")
         fixed_positions = checks.as_array("fixed_positions", fixed_positions, shape=(None, dim))
         fixed_radii = checks.positive("fixed_radii", np.broadcast_to(fixed_radii, (len(fixed_positions),))
                                       if np.ndim(fixed_radii) == 0 else fixed_radii,

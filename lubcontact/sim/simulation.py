@@ -91,6 +91,8 @@ class Simulation:
                  on_failure: str = "raise", warm_start: bool = True, fixed_point: bool = True,
                  tol_fp: float = 1e-8, max_outer: int = 50, fallback_solver: str = "clarabel",
                  keep_trajectory: bool = True):
+        checks.require(isinstance(law, Law), "law", "must be a Law (Inelastic(), "
+                       f"GlueyLubrication(...), Coulomb(mu), GlueyCoulomb(mu, ...)), got {law!r}")
         self.law = law
         self.dt = checks.positive_scalar("dt", dt)
         radii = np.concatenate([scene.grains.radii, scene.fixed_radii])
@@ -179,10 +181,9 @@ class Simulation:
         n_trans = grains.velocities.size
         velocity = result.velocities
         grains.velocities[:] = velocity[:n_trans].reshape(grains.velocities.shape)
-        if problem.n_dof > n_trans:
+        if problem.n_dof > n_trans:                  # rotations modelled (friction)
             grains.spins[:] = velocity[n_trans:].reshape(grains.spins.shape)
-        else:
-            grains.spins[:] = 0.0
+        # else: normal forces through the centres cannot change a spin: it is carried unchanged
         grains.positions += self.dt * grains.velocities
         state.scene.wrap_positions()
         grains.angles += self.dt * grains.spins
@@ -198,7 +199,7 @@ class Simulation:
     def run(self, n_steps: int, callback: Callable[[Simulation, StepReport], None] | None = None
             ) -> Trajectory:
         """Advance ``n_steps`` steps, calling ``callback(sim, report)`` after each."""
-        n_steps = int(checks.nonnegative("n_steps", n_steps, shape=()))
+        n_steps = checks.integer("n_steps", n_steps)
         for _ in range(n_steps):
             report = self.step()
             if callback is not None:

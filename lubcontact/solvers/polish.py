@@ -144,9 +144,14 @@ def _components(problem: StepProblem, layout: _Layout, vector: np.ndarray):
 
 
 def _initial_states(problem, layout, forces, threshold):
-    """States read from a near-optimal solution: open below ``threshold x max |lam|``; a
-    friction contact sticks when its force is farther inside the cone than its slip."""
-    scale = max(float(np.max(np.abs(forces))), 1e-300)
+    """States read from a near-optimal solution: open below ``threshold x max(max |lam|, 1)``;
+    a friction contact sticks when its force is farther inside the cone than its slip.
+
+    The force level has a floor of 1, the force unit of the normalised problem (the force
+    that changes the velocity by the free-velocity scale in one step): when every contact is
+    open, ``max |lam|`` is the interior point's noise, and a level relative to it classed
+    noise as pressed contacts (forces of 1e-10 to 1e-8 were left in place)."""
+    scale = max(float(np.max(np.abs(forces))), 1.0)
     normal, tangential = _components(problem, layout, forces)
     _, slip = _components(problem, layout, problem.gradient(forces))
     closed = (layout.sign == 0) | (layout.sign * normal > threshold * scale)

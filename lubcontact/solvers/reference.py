@@ -29,6 +29,7 @@ does not settle is left as it is) to reach velocities accurate to about 1e-12. `
 from __future__ import annotations
 
 import time
+import warnings
 
 import cvxpy as cp
 import numpy as np
@@ -57,7 +58,10 @@ def _solve_symbolic(step: StepProblem, form: str, tol: float, max_iter: int,
     symbolic_form = builder(step, polyhedral)
     built = time.perf_counter()
     try:
-        symbolic_form.problem.solve(solver=cp.CLARABEL, **clarabel_settings(tol, max_iter))
+        with warnings.catch_warnings():      # "Solution may be inaccurate": the status says it
+            warnings.filterwarnings("ignore", message="Solution may be inaccurate",
+                                    category=UserWarning)
+            symbolic_form.problem.solve(solver=cp.CLARABEL, **clarabel_settings(tol, max_iter))
     except cp.error.SolverError as exc:
         return MethodOutput(np.full(step.n_rows, np.nan), FAILED, 0, built - start,
                             time.perf_counter() - built, info={"error": str(exc)})

@@ -1,7 +1,9 @@
 """SimulationState: a checkpoint is the state as arrays, and a restored run continues bit for bit."""
 import numpy as np
+import pytest
 
-from lubcontact import GlueyLubrication, Simulation, SimulationState, scenes
+from lubcontact import (Coulomb, GlueyLubrication, Grains, Inelastic, Scene, Simulation,
+                        SimulationState, scenes)
 
 
 def _simulation():
@@ -32,3 +34,16 @@ def test_the_state_keeps_the_time_without_drift():
     sim = _simulation()
     sim.run(7)
     assert sim.steps_done == 7 and sim.scene.time == sim.state.start_time + 7 * 0.05
+
+
+@pytest.mark.parametrize("law", [Inelastic(), GlueyLubrication(gamma_min=-1.0), Coulomb(0.3)],
+                         ids=["inelastic", "gluey", "coulomb"])
+def test_a_free_spin_is_carried_by_every_law(law):
+    """Frictionless laws model no rotation: a spin is carried unchanged (it used to be zeroed)."""
+    grains = Grains.create(positions=[[0.0, 5.0]], radii=0.5, masses=1.0, spins=[2.0])
+    scene = Scene.create(grains, plane_points=[0.0, 0.0], plane_normals=[0.0, 1.0],
+                         gravity=[0.0, -1.0])
+    sim = Simulation(scene, law, dt=0.01)
+    sim.run(3)
+    assert sim.scene.grains.spins[0, 0] == 2.0
+    assert sim.scene.grains.angles[0, 0] == pytest.approx(0.06)

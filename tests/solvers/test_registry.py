@@ -134,3 +134,43 @@ def test_settings_validate_their_fields():
     assert SolveSettings(options={"max_iter": 6}).max_iter == 6
     with pytest.raises(ValueError, match="solver"):
         Simulation(scenes.push_pull(), Inelastic(), dt=0.1, solver="foo")
+
+
+OPEN_TRIOS = {   # gaps (floor, pair, top), velocities, masses: every contact stays open
+    "a": ([0.01469577229359832, 0.0334092122436204, 0.02034169783681011],
+          [[1.1845819264950987, -0.01413158109420849], [1.2084563349160844, -0.43371072315125064],
+           [-0.2839232402680096, 1.2998307451335014]],
+          [0.2789631201536663, 6.561309939438363, 3.6486039157564614]),
+    "b": ([0.01610528477221524, 0.06760981381745425, 0.03103741861436504],
+          [[-0.08536547813463852, 0.4632147488587887], [-0.38360045147230754, 0.2340887321493547],
+           [-0.16373362210959072, -0.01746817702280519]],
+          [0.14644466963720845, 5.6644492685809515, 2.2184755527672033]),
+}
+
+
+def _open_trio(name):
+    """Three disks near a floor and each other whose gaps all stay open after the free step."""
+    gaps, velocities, masses = OPEN_TRIOS[name]
+    positions = [[0.0, 0.5 + gaps[0]], [1.0 + gaps[1], 0.5 + gaps[0]],
+                 [0.5, 0.5 + gaps[0] + 0.866 + gaps[2]]]
+    grains = Grains.create(positions=positions, radii=0.5, masses=masses, velocities=velocities)
+    scene = Scene.create(grains, plane_points=[[0.0, 0.0]], plane_normals=[[0.0, 1.0]],
+                         gravity=[0.0, -1.0])
+    contacts = find_contacts(scene, 0.1)
+    law = Inelastic()
+    return assemble(scene, contacts, law.cones(contacts, np.zeros(contacts.count)), 0.01,
+                    rotations=False)
+
+
+@pytest.mark.parametrize("method", ["clarabel", "clarabel-dual", "clarabel-direct", "apgd-as"])
+@pytest.mark.parametrize("tol", [1e-9, 1e-6])
+@pytest.mark.parametrize("trio", sorted(OPEN_TRIOS))
+def test_open_contacts_get_exactly_zero_force(method, tol, trio):
+    """Polishing classes contacts against an absolute force level, not the largest force (noise
+    when every contact is open): the interior point's ~1e-10 forces become exact zeros."""
+    problem = _open_trio(trio)
+    assert problem.n_contacts >= 2 and problem.gaps_after(problem.free_velocity).min() > 1e-3
+    result = solve(problem, method, tol=tol)
+    assert result.success
+    assert np.all(result.forces == 0.0)
+    assert np.array_equal(result.velocities, problem.free_velocity)
