@@ -116,12 +116,12 @@ def _plot_pile(path, sim, report):
 def flow_section(out: Path) -> str:
     """The inclined-flow demo when :mod:`lubcontact.experiment` provides one."""
     try:
-        experiment = importlib.import_module("lubcontact.flow.experiment")
+        flow_demo = importlib.import_module("lubcontact.flow.demo")
     except ModuleNotFoundError:
         return ""
-    if not hasattr(experiment, "demo"):
+    if not hasattr(flow_demo, "demo"):
         return ""
-    summary = experiment.demo(out / "flow")
+    summary = flow_demo.demo(out / "flow")
     lines = [f"Inclined flow (see {out / 'flow'}):"]
     lines += [f"  {key}: {value}" for key, value in dict(summary or {}).items()]
     return "\n".join(lines)

@@ -1,4 +1,4 @@
-"""Measurements of a periodic layer flowing along x (MODEL.md section 8).
+"""Measurements of a periodic layer flowing along x (docs/guide/model.md section 8).
 
 Profiles are exact area averages over horizontal slabs: a disk of centre
 height ``y_i`` and radius ``r_i`` covers the area ``A_i(k)`` of slab ``k``
@@ -31,14 +31,36 @@ def disk_area_below(height: np.ndarray, radius: np.ndarray) -> np.ndarray:
     """Area of a disk of radius ``r`` below a line at ``height`` above its centre.
 
     ``r^2 (asin(u) + u sqrt(1 - u^2) + pi/2)`` with ``u = clip(height / r, -1, 1)``.
-    Broadcasts ``height`` against ``radius``.
+
+    Parameters
+    ----------
+    height, radius : ndarray
+        Lengths, broadcast against each other.
+
+    Returns
+    -------
+    ndarray
+        Areas (length^2), of the broadcast shape.
     """
     u = np.clip(height / radius, -1.0, 1.0)
     return radius**2 * (np.arcsin(u) + u * np.sqrt(1.0 - u * u) + 0.5 * np.pi)
 
 
 def slab_areas(heights: np.ndarray, radii: np.ndarray, edges: np.ndarray) -> np.ndarray:
-    """Area of each disk inside each slab ``[edges[k], edges[k+1])``, shape (N, K)."""
+    """Area of each disk inside each slab ``[edges[k], edges[k+1])``.
+
+    Parameters
+    ----------
+    heights, radii : ndarray, shape (N,)
+        Centre heights and radii of the disks (length).
+    edges : ndarray, shape (K + 1,)
+        Slab boundaries (length).
+
+    Returns
+    -------
+    ndarray, shape (N, K)
+        Areas (length^2).
+    """
     below = disk_area_below(edges[None, :] - heights[:, None], radii[:, None])
     return np.diff(below, axis=1)
 
@@ -64,6 +86,7 @@ class Profile:
 
     @property
     def centres(self) -> np.ndarray:
+        """Slab mid-heights, shape (K,) (length)."""
         return 0.5 * (self.edges[1:] + self.edges[:-1])
 
 
@@ -77,6 +100,11 @@ class ProfileAccumulator:
         Slab boundaries (length), increasing.
     period : float
         Length of the periodic cell along x.
+    area, momentum : ndarray, shape (K,), optional
+        Sums so far of the grain area (length^2) and of area x downhill
+        velocity (length^3 / time) per slab (default zeros).
+    samples : int
+        Number of samples in those sums.
     """
 
     edges: np.ndarray
@@ -128,13 +156,26 @@ class ProfileAccumulator:
         self.momentum = np.concatenate([self.momentum, np.zeros(extra)])
 
     def reset(self) -> None:
+        """Forget the samples (the grid is kept)."""
         self.area[:] = 0.0
         self.momentum[:] = 0.0
         self.samples = 0
 
 
 def profile(scene: Scene, edges: np.ndarray) -> Profile:
-    """The instantaneous profile of a periodic scene."""
+    """The instantaneous profile of a periodic scene.
+
+    Parameters
+    ----------
+    scene : Scene
+        Periodic along x.
+    edges : ndarray, shape (K + 1,)
+        Slab boundaries (length), increasing; extended upwards if grains lie above.
+
+    Returns
+    -------
+    Profile
+    """
     accumulator = ProfileAccumulator(edges, _period(scene))
     accumulator.add(scene)
     return accumulator.profile()
@@ -147,13 +188,30 @@ def _period(scene: Scene) -> float:
 
 
 def flow_rate(scene: Scene) -> float:
-    """``Q = sum_i pi r_i^2 v_x,i / L``: grain area crossing a section per unit time."""
+    """``Q = sum_i pi r_i^2 v_x,i / L``: grain area crossing a section per unit time.
+
+    Parameters
+    ----------
+    scene : Scene
+        Periodic along x, of period ``L``.
+
+    Returns
+    -------
+    float
+        Flow rate (length^2 / time).
+    """
     grains = scene.grains
     return float(np.pi * grains.radii**2 @ grains.velocities[:, 0] / _period(scene))
 
 
 def kinetic_energy(scene: Scene) -> float:
-    """Translational plus rotational kinetic energy of the free grains."""
+    """Translational plus rotational kinetic energy of the free grains.
+
+    Returns
+    -------
+    float
+        ``sum_i (m_i |v_i|^2 + I_i |w_i|^2) / 2`` (mass length^2 / time^2).
+    """
     grains = scene.grains
     return float(0.5 * grains.masses @ np.sum(grains.velocities**2, axis=1)
                  + 0.5 * grains.inertias @ np.sum(grains.spins**2, axis=1))

@@ -13,26 +13,32 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+from matplotlib.axes import Axes  # noqa: E402
 from matplotlib.collections import LineCollection, PatchCollection  # noqa: E402
+from matplotlib.figure import Figure  # noqa: E402
 from matplotlib.patches import Circle  # noqa: E402
 
-from ..scenes import inclined as flow  # noqa: E402
+from ..io.files import atomic_path  # noqa: E402
+from ..scenes import inclined  # noqa: E402
+from ..sim import Simulation, StepReport  # noqa: E402
 from . import measure  # noqa: E402
-from ..sim.simulation import Simulation, StepReport  # noqa: E402
+from .sweep import run_folder  # noqa: E402
 
 GAMMA_COLORMAP = "plasma"
 
 
-def _save(fig, path: pathlib.Path) -> None:
+def _save(fig: Figure, path: pathlib.Path) -> None:
+    """Write ``fig`` atomically (format from the suffix of ``path``) and close it."""
     path = pathlib.Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    temporary = path.with_name(path.stem + ".tmp" + path.suffix)
-    fig.savefig(temporary, dpi=130, bbox_inches="tight")
-    plt.close(fig)
-    temporary.replace(path)
+    try:
+        with atomic_path(path) as temporary:
+            fig.savefig(temporary, format=path.suffix[1:] or None, dpi=130, bbox_inches="tight")
+    finally:
+        plt.close(fig)
 
 
-def _disks(ax, centres: np.ndarray, radii: np.ndarray, scale: float, **style) -> None:
+def _disks(ax: Axes, centres: np.ndarray, radii: np.ndarray, scale: float, **style) -> None:
+    """Disks of ``centres`` (n, 2) and ``radii`` (n,), lengths divided by ``scale``."""
     patches = [Circle((x / scale, y / scale), r / scale) for (x, y), r in zip(centres, radii)]
     ax.add_collection(PatchCollection(patches, **style))
 
@@ -43,9 +49,16 @@ def contact_segments(sim: Simulation, report: StepReport) -> tuple[np.ndarray, n
     Across the periodic boundary a segment is drawn from grain ``b`` to the
     nearest image of ``a``.
 
+    Parameters
+    ----------
+    sim : Simulation
+        After the step of ``report``.
+    report : StepReport
+
     Returns
     -------
     segments : ndarray, shape (m, 2, 2)
+        End points (length, the run's units).
     gamma : ndarray, shape (m,)
     gamma_floor : float
         The lowest finite gamma_min among the contacts (colour scale bottom).
@@ -70,7 +83,18 @@ def contact_segments(sim: Simulation, report: StepReport) -> tuple[np.ndarray, n
 
 def snapshot(sim: Simulation, report: StepReport | None, path: pathlib.Path,
              title: str | None = None) -> None:
-    """Grains, rough bed and contacts coloured by gamma (gamma_min frictional, 0 lubricated)."""
+    """Grains, rough bed and contacts coloured by gamma (gamma_min frictional, 0 lubricated).
+
+    Parameters
+    ----------
+    sim : Simulation
+    report : StepReport or None
+        The last step (None: no contacts drawn).
+    path : pathlib.Path
+        The image file (format from its suffix).
+    title : str, optional
+        Default: time, angle and number of grains.
+    """
     scene = sim.scene
     d = 2.0 * float(np.mean(scene.grains.radii))
     width = scene.period or float(np.ptp(scene.grains.positions[:, 0]) + d)
@@ -99,8 +123,18 @@ def snapshot(sim: Simulation, report: StepReport | None, path: pathlib.Path,
 
 
 def profiles(curves: list[tuple[str, measure.Profile]], path: pathlib.Path,
-             params: flow.FlowParameters) -> None:
-    """Velocity u(z) and packing fraction phi(z), one line per labelled profile."""
+             params: inclined.FlowParameters) -> None:
+    """Velocity u(z) and packing fraction phi(z), one line per labelled profile.
+
+    Parameters
+    ----------
+    curves : list of (str, Profile)
+        Label and profile of each line.
+    path : pathlib.Path
+        The image file.
+    params : FlowParameters
+        The runs' parameters (units of the axes).
+    """
     d, speed = 2.0 * params.radius, params.velocity_scale
     fig, (ax_u, ax_phi) = plt.subplots(1, 2, figsize=(9, 4.5), sharey=True)
     for label, prof in curves:
@@ -117,14 +151,26 @@ def profiles(curves: list[tuple[str, measure.Profile]], path: pathlib.Path,
 
 
 def _by_model(rows: list[dict]) -> dict[str, list[dict]]:
+    """Rows grouped by model, each group sorted by angle."""
     models: dict[str, list[dict]] = {}
     for row in rows:
         models.setdefault(row["model"], []).append(row)
     return {m: sorted(r, key=lambda row: float(row["angle"])) for m, r in models.items()}
 
 
-def flow_rate_curve(rows: list[dict], path: pathlib.Path, params: flow.FlowParameters) -> None:
-    """Q(theta) per model, Q in units of ``d sqrt(g' d)``."""
+def flow_rate_curve(rows: list[dict], path: pathlib.Path,
+                    params: inclined.FlowParameters) -> None:
+    """Q(theta) per model, Q in units of ``d sqrt(g' d)``, with its standard deviation.
+
+    Parameters
+    ----------
+    rows : list of dict
+        Sweep rows (``model``, ``angle``, ``flow_rate``, ``flow_rate_std``).
+    path : pathlib.Path
+        The image file.
+    params : FlowParameters
+        The runs' parameters (unit of Q).
+    """
     unit = 2.0 * params.radius * params.velocity_scale
     fig, ax = plt.subplots(figsize=(6, 4.5))
     for model, group in _by_model(rows).items():
@@ -140,7 +186,15 @@ def flow_rate_curve(rows: list[dict], path: pathlib.Path, params: flow.FlowParam
 
 
 def state_fractions(rows: list[dict], path: pathlib.Path) -> None:
-    """Fractions of active contacts unglued / glued / frictional against the angle."""
+    """Fractions of active contacts unglued / glued / frictional against the angle.
+
+    Parameters
+    ----------
+    rows : list of dict
+        Sweep rows (``model``, ``angle``, ``fraction_<state>``).
+    path : pathlib.Path
+        The image file.
+    """
     fig, ax = plt.subplots(figsize=(6, 4.5))
     styles = {"dry": "--", "gluey": "-"}
     for model, group in _by_model(rows).items():
@@ -159,15 +213,28 @@ def state_fractions(rows: list[dict], path: pathlib.Path) -> None:
 
 
 def sweep_figures(rows: list[dict], out_dir: pathlib.Path, preset: str = "dimensionless") -> None:
-    """Q(theta), contact-state fractions and the profiles of every run of a sweep."""
+    """Q(theta), contact-state fractions and the profiles of every run of a sweep.
+
+    Writes ``flow_rate.png``, ``contact_states.png`` and ``profiles_<model>.png``
+    (from the runs' ``measurements.npz``) in ``out_dir``.
+
+    Parameters
+    ----------
+    rows : list of dict
+        Sweep rows (:func:`lubcontact.flow.sweep.sweep`).
+    out_dir : pathlib.Path
+        The sweep's folder.
+    preset : str
+        Parameter preset of the runs (units of the axes).
+    """
     out_dir = pathlib.Path(out_dir)
-    params = flow.PRESETS[preset]()
+    params = inclined.PRESETS[preset]()
     flow_rate_curve(rows, out_dir / "flow_rate.png", params)
     state_fractions(rows, out_dir / "contact_states.png")
     for model, group in _by_model(rows).items():
         curves = []
         for row in group:
-            path = out_dir / model / f"angle_{float(row['angle']):05.2f}" / "measurements.npz"
+            path = run_folder(out_dir, model, row["angle"]) / "measurements.npz"
             if path.exists():
                 with np.load(path) as data:
                     curves.append((f"{float(row['angle']):g} deg", measure.Profile(

@@ -11,6 +11,7 @@ say, and the state a step takes and returns is a :class:`SimulationState`.
 """
 from __future__ import annotations
 
+import warnings
 from dataclasses import replace
 from typing import Callable
 
@@ -22,8 +23,9 @@ from ..model.contacts import Contacts, find_contacts
 from ..model.laws import Law, PairState
 from ..model.scene import Scene
 from ..problem.step import StepProblem
-from ..solvers import SolveSettings, check_status, methods
+from ..solvers import SolverWarning, SolveSettings, check_status, methods
 from ..solvers.result import CoulombResult
+from ..solvers.verify import verify
 from .state import PreviousStep, SimulationState
 from .trajectory import StepReport, Trajectory
 
@@ -75,6 +77,17 @@ class Simulation:
     keep_trajectory : bool
         Record every step in :attr:`trajectory` (False keeps memory flat on
         long runs: the trajectory then holds the initial state only).
+    verify_every : int
+        Every ``verify_every`` steps (0: never), check the step's solution
+        against ``verify_with`` (:func:`~lubcontact.solvers.verify.verify`,
+        before the state moves on); each report is kept in
+        ``trajectory.verifications`` as ``(step, report)`` (also when
+        ``keep_trajectory`` is False), and a failed verdict issues a
+        :class:`~lubcontact.solvers.SolverWarning`.
+    verify_with : str
+        The reference method of the verification (default ``clarabel``).
+    verify_tol : float
+        Tolerance of the verification verdict (normalised units).
 
     Attributes
     ----------
@@ -90,7 +103,8 @@ class Simulation:
                  d_max: float | None = None, tol: float = 1e-9, solver_options: dict | None = None,
                  on_failure: str = "raise", warm_start: bool = True, fixed_point: bool = True,
                  tol_fp: float = 1e-8, max_outer: int = 50, fallback_solver: str = "clarabel",
-                 keep_trajectory: bool = True):
+                 keep_trajectory: bool = True, verify_every: int = 0,
+                 verify_with: str = "clarabel", verify_tol: float = 1e-6):
         checks.require(isinstance(law, Law), "law", "must be a Law (Inelastic(), "
                        f"GlueyLubrication(...), Coulomb(mu), GlueyCoulomb(mu, ...)), got {law!r}")
         self.law = law
@@ -107,6 +121,11 @@ class Simulation:
                        f"must be a registered method ({', '.join(methods())}), "
                        f"got {fallback_solver!r}")
         self.fallback_solver = fallback_solver
+        self.verify_every = checks.integer("verify_every", verify_every)
+        checks.require(verify_with in methods(), "verify_with",
+                       f"must be a registered method ({', '.join(methods())}), got {verify_with!r}")
+        self.verify_with = verify_with
+        self.verify_tol = checks.positive_scalar("verify_tol", verify_tol)
         self.warm_start = warm_start
         self.keep_trajectory = keep_trajectory
         scene = scene.copy()
@@ -164,6 +183,8 @@ class Simulation:
             result = fallback.solve(problem, guess, shift)
             result.info["fallback_from"] = (failed.method, failed.status, failed.residual)
         check_status(result, "raise" if self.on_failure == "fallback" else self.on_failure)
+        if self.verify_every and (self.steps_done + 1) % self.verify_every == 0:
+            self._verify(problem, result)
         normal, _ = problem.cones.split(result.forces)
         new_gamma = self.law.update_gamma(contacts, gamma, normal, self.dt, result.force_scale)
         self._advance(problem, result, PairState.from_contacts(contacts.keys, new_gamma))
@@ -173,6 +194,17 @@ class Simulation:
             self.trajectory.record_state(self.scene)
             self.trajectory.record_step(report)
         return report
+
+    def _verify(self, problem: StepProblem, result: CoulombResult) -> None:
+        """Check the step's solution against the reference; keep the report, warn on failure."""
+        report = verify(problem, result.forces, result.velocities, tol=self.verify_tol,
+                        reference=self.verify_with)
+        step = self.steps_done + 1
+        self.trajectory.verifications.append((step, report))
+        if not report.passed:
+            warnings.warn(f"step {step}: {result.method} fails verification against "
+                          f"{self.verify_with} ({', '.join(report.failed)}; FCLIB error "
+                          f"{report.coulomb_error:.2e})", SolverWarning, stacklevel=3)
 
     def _advance(self, problem: StepProblem, result: CoulombResult, pairs: PairState) -> None:
         """Integrate positions with the new velocities and store the step's state."""

@@ -40,7 +40,8 @@ class Trajectory:
 
     ``times[k]``, ``positions[k]`` and ``velocities[k]`` describe the state
     after step ``k`` (index 0 is the initial state); the other fields have one
-    entry per step.
+    entry per step, except ``verifications``: ``(step, VerificationReport)``
+    for each verified step (``Simulation(verify_every=k)``).
     """
 
     times: list = field(default_factory=list)
@@ -56,6 +57,7 @@ class Trajectory:
     iterations: list = field(default_factory=list)
     outer_iterations: list = field(default_factory=list)
     min_gap: list = field(default_factory=list)
+    verifications: list = field(default_factory=list)
 
     def record_state(self, scene: Scene) -> None:
         """Append the scene's time, positions, velocities and spins."""
@@ -80,4 +82,5 @@ class Trajectory:
 
     def arrays(self) -> dict[str, np.ndarray]:
         """All fields as numpy arrays."""
-        return {name: np.asarray(value) for name, value in vars(self).items()}
+        return {name: np.asarray(value) for name, value in vars(self).items()
+                if name != "verifications"}

@@ -4,10 +4,15 @@ import json
 import numpy as np
 import pytest
 
-from lubcontact.flow import experiment
-from lubcontact.scenes import inclined as flow
+from lubcontact.flow import cli as flow_cli
+from lubcontact.flow import demo as flow_demo
 from lubcontact.flow import measure
+from lubcontact.flow.bed import initial_scene
+from lubcontact.flow.config import RunConfig
+from lubcontact.flow.run import FlowRun
 from lubcontact.model.scene import Grains, Scene
+from lubcontact.scenes import inclined as flow
+from lubcontact.solvers import methods
 
 
 # -- scenes ---------------------------------------------------------------------------------------
@@ -162,7 +167,7 @@ def small_config(**changes):
                   steps=40, dt_fraction=0.05, settle_steps=0, solver="clarabel", tol=1e-8,
                   checkpoint_every=20, sample_every=3, fixed_point=True)
     values.update(changes)
-    return experiment.RunConfig(**values)
+    return RunConfig(**values)
 
 
 def final_state(run):
@@ -181,10 +186,10 @@ RESUME_CASES = {"dry-clarabel-fixed-point": dict(model="dry"),
 def test_resume_from_checkpoint_reaches_the_uninterrupted_state(tmp_path, case):
     """Warm starts (forces, shift) and the gluey state must travel in the checkpoint."""
     config = small_config(**RESUME_CASES[case])
-    if config.solver not in experiment.methods():
+    if config.solver not in methods():
         pytest.skip(f"solver {config.solver} not registered")
-    scene = experiment.initial_scene(config)
-    straight = experiment.FlowRun(config, scene)
+    scene = initial_scene(config)
+    straight = FlowRun(config, scene)
     straight.advance(config.steps)
     assert straight.last_report.contacts.count > 5          # grains touched the bed and each other
     if config.model == "gluey":
@@ -192,10 +197,10 @@ def test_resume_from_checkpoint_reaches_the_uninterrupted_state(tmp_path, case):
     if config.joint:                                        # the joint phase of the fixed point ran
         assert straight.last_report.result.joint_iterations > 0
 
-    first = experiment.FlowRun(config, scene, tmp_path)
+    first = FlowRun(config, scene, tmp_path)
     first.advance(20)                                       # checkpoint written at step 20
     first.advance(7)                                        # ... then "interrupted" at step 27
-    resumed = experiment.FlowRun.resume(tmp_path / "checkpoint.npz")
+    resumed = FlowRun.resume(tmp_path / "checkpoint.npz")
     assert resumed.steps_done == 20
     resumed.advance(config.steps)
     for got, want in zip(final_state(resumed), final_state(straight)):
@@ -216,7 +221,7 @@ def test_run_command_writes_files_and_resumes(tmp_path):
                 "--dt", "0.05", "--settle-steps", "0", "--solver", "clarabel",
                 "--checkpoint-every", "3", "--sample-every", "3", "--out", str(out), "--no-progress"]
 
-    assert experiment.run_main(argv(6)) == 0
+    assert flow_cli.run_main(argv(6)) == 0
     summary = json.loads((out / "summary.json").read_text())
     assert summary["steps"] == 6
     # stepping cost: wall and processor time (the latter is what a shared machine cannot inflate)
@@ -224,7 +229,7 @@ def test_run_command_writes_files_and_resumes(tmp_path):
         6 / summary["cpu_time"])
     for name in ("checkpoint.npz", "measurements.npz", "snapshot.png", "profile.png", "bed.npz"):
         assert (out / name).stat().st_size > 0
-    assert experiment.run_main(argv(18) + ["--resume"]) == 0
+    assert flow_cli.run_main(argv(18) + ["--resume"]) == 0
     assert json.loads((out / "summary.json").read_text())["steps"] == 18
     with np.load(out / "measurements.npz") as data:
         # the extension moved the averaging window to steps > 9: samples 12, 15, 18 only
@@ -232,8 +237,8 @@ def test_run_command_writes_files_and_resumes(tmp_path):
         np.testing.assert_array_equal(data["series.step"], [3, 6, 9, 12, 15, 18])
     assert not list(out.glob("*.tmp"))
     # continuing with another friction coefficient: stored, and the law uses it
-    assert experiment.run_main(argv(21) + ["--resume", "--mu", "0.5"]) == 0
-    resumed = experiment.FlowRun.resume(out / "checkpoint.npz")
+    assert flow_cli.run_main(argv(21) + ["--resume", "--mu", "0.5"]) == 0
+    resumed = FlowRun.resume(out / "checkpoint.npz")
     assert resumed.steps_done == 21 and resumed.config.friction == 0.5
     from lubcontact import find_contacts
     contacts = find_contacts(resumed.sim.scene, resumed.sim.d_max)
@@ -243,7 +248,7 @@ def test_run_command_writes_files_and_resumes(tmp_path):
 def test_friction_override_reaches_the_law_and_the_checkpoint():
     config = small_config(friction=0.5)
     assert config.params.friction == 0.5 and small_config().params.friction == 0.3
-    assert experiment.RunConfig.from_json(config.to_json()).friction == 0.5
+    assert RunConfig.from_json(config.to_json()).friction == 0.5
     from lubcontact import find_contacts
     scene = Scene.create(Grains.create([[0.0, 0.0], [2.0, 0.0]], 1.0, densities=1.0))
     np.testing.assert_array_equal(config.params.law("dry").mu(find_contacts(scene, 0.1)), [0.5])
@@ -261,13 +266,13 @@ def test_config_rejects_bad_values():
     with pytest.raises(ValueError, match="joint"):
         small_config(joint=-1)
     with pytest.raises(ValueError, match="angles"):
-        experiment.parse_angles("15:28")
-    np.testing.assert_allclose(experiment.parse_angles("15:28:1"), np.arange(15, 29))
+        flow_cli.parse_angles("15:28")
+    np.testing.assert_allclose(flow_cli.parse_angles("15:28:1"), np.arange(15, 29))
 
 
 def test_small_demo_writes_its_figures_and_report(tmp_path):
     """The demo's pipeline on a tiny layer: files written, cross-checks recorded, state sane."""
-    summary = experiment.demo(tmp_path, n_grains=24, steps=25, settle_steps=40, width=12.0)
+    summary = flow_demo.demo(tmp_path, n_grains=24, steps=25, settle_steps=40, width=12.0)
     for name in ("flow_snapshot.png", "flow_profile.png", "flow_report.md"):
         assert (tmp_path / name).stat().st_size > 0
     assert summary["steps"] == 25 and summary["unconverged_steps"] == 0
@@ -280,10 +285,10 @@ def test_small_demo_writes_its_figures_and_report(tmp_path):
 # -- long validations (pytest -m slow; results recorded in docs/validation.md) ---------------------
 def thick_dry_run(angle, steps):
     """400 grains on a 40-radius period: a dry layer about 20 diameters thick."""
-    config = experiment.RunConfig(scene="inclined_flow", n_grains=400, width=40.0, model="dry",
-                                  angle=angle, steps=steps, dt_fraction=0.025, settle_steps=800,
-                                  sample_every=10, tol=1e-6)
-    run = experiment.FlowRun(config, experiment.initial_scene(config))
+    config = RunConfig(scene="inclined_flow", n_grains=400, width=40.0, model="dry",
+                       angle=angle, steps=steps, dt_fraction=0.025, settle_steps=800,
+                       sample_every=10, tol=1e-6)
+    run = FlowRun(config, initial_scene(config))
     run.advance(steps)
     return run
 
@@ -306,12 +311,12 @@ def test_dry_thick_layer_flows_steadily_at_22_degrees_with_a_bagnold_profile(tmp
     that state at mu = 0.4 up to 8100 steps (286 sqrt(r/g)), profiles averaged
     over the last 20 % of the run.
     """
-    config = experiment.RunConfig(scene="inclined_flow", n_grains=400, width=40.0, model="dry",
-                                  angle=22.0, steps=2100, dt_fraction=0.025, settle_steps=800,
-                                  sample_every=5, checkpoint_every=2100, tol=1e-6)
-    experiment.FlowRun(config, experiment.initial_scene(config), tmp_path).advance(config.steps)
-    run = experiment.FlowRun.resume(tmp_path / "checkpoint.npz", steps=8100, friction=0.4,
-                                    average_from=0.8)
+    config = RunConfig(scene="inclined_flow", n_grains=400, width=40.0, model="dry",
+                       angle=22.0, steps=2100, dt_fraction=0.025, settle_steps=800,
+                       sample_every=5, checkpoint_every=2100, tol=1e-6)
+    FlowRun(config, initial_scene(config), tmp_path).advance(config.steps)
+    run = FlowRun.resume(tmp_path / "checkpoint.npz", steps=8100, friction=0.4,
+                         average_from=0.8)
     run.advance(run.config.steps)
     assert run.summary()["state"] == "steady"
     prof = run.profiles.profile()

@@ -3,6 +3,7 @@ import numpy as np
 import pytest
 
 from lubcontact import (Coulomb, GlueyLubrication, Grains, Inelastic, Scene, Simulation,
+                        SolverWarning,
                         SimulationState, scenes)
 
 
@@ -47,3 +48,27 @@ def test_a_free_spin_is_carried_by_every_law(law):
     sim.run(3)
     assert sim.scene.grains.spins[0, 0] == 2.0
     assert sim.scene.grains.angles[0, 0] == pytest.approx(0.06)
+
+
+def test_verification_inside_a_run_records_every_kth_step():
+    sim = Simulation(scenes.settling_pile(40, seed=5), GlueyLubrication(gamma_min=-2.0), dt=0.05,
+                     solver="apgd-as", tol=1e-9, verify_every=5, verify_tol=1e-7)
+    sim.run(20)
+    steps = [step for step, _ in sim.trajectory.verifications]
+    assert steps == [5, 10, 15, 20]
+    for _, report in sim.trajectory.verifications:
+        assert report.passed, report.text()
+        assert report.reference["status"] == "converged"
+        assert report.velocity_error <= 1e-7 and report.coulomb_error <= 1e-7
+
+
+def test_a_failed_verification_warns_and_is_recorded():
+    """A starved fast solver (5 iterations) is caught by the cross-check, not applied silently."""
+    sim = Simulation(scenes.settling_pile(40, seed=5), GlueyLubrication(gamma_min=-2.0), dt=0.05,
+                     solver="apgd", tol=1e-9, solver_options={"max_iter": 5}, on_failure="ignore",
+                     verify_every=1)
+    sim.run(14)                                     # the pile has landed: contacts carry load
+    with pytest.warns(SolverWarning, match="fails verification against clarabel"):
+        sim.step()
+    step, report = sim.trajectory.verifications[-1]
+    assert step == 15 and not report.passed and report.worst

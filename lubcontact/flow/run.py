@@ -1,0 +1,423 @@
+"""One run of the flow experiment: :class:`FlowRun` steps a simulation, measures it, writes files.
+
+In its output folder a run writes:
+
+- ``checkpoint.npz``: the full simulation state every ``checkpoint_every``
+  steps (:meth:`SimulationState.to_arrays <lubcontact.sim.SimulationState.to_arrays>`:
+  scene arrays, gluey state and warm start by pair key, step count) with the
+  measurement accumulators; :meth:`FlowRun.resume` continues from it and
+  reaches the same final state as an uninterrupted run;
+- ``measurements.npz``: time series (kinetic energy, flow rate, contact
+  states, solver residuals and iterations, Clarabel cross-checks), the
+  time-averaged profiles and the gamma histogram;
+- ``frames/frame_<step>.npz``: positions, velocities, spins and the contacts
+  with their gamma (:func:`frame_arrays`), every ``frame_every`` steps;
+- ``summary.json`` (:meth:`FlowRun.finish`): means over the averaging window.
+
+Every file is written atomically (:mod:`lubcontact.io.files`), so an
+interruption never leaves a half-written file and loses nothing already saved.
+"""
+from __future__ import annotations
+
+import json
+import pathlib
+import time
+from dataclasses import replace
+from typing import Any
+
+import numpy as np
+
+from ..io.files import save_npz, save_text
+from ..model.scene import Scene
+from ..scenes import inclined
+from ..sim import Simulation, SimulationState, StepReport
+from ..solvers import CONVERGED, solve
+from . import measure
+from .config import RunConfig
+
+SERIES = ("step", "time", "kinetic_energy", "flow_rate", "contacts", "unglued", "glued",
+          "frictional", "residual", "iterations", "converged")
+"""Time series sampled every ``sample_every`` steps (``measurements.npz``: ``series.<name>``)."""
+GAMMA_BINS = 20
+"""Bins of the gamma / gamma_min histogram over [0, 1]."""
+
+
+class FlowRun:
+    """A simulation with its measurements, checkpoints and frames.
+
+    Parameters
+    ----------
+    config : RunConfig
+    scene : Scene
+        Initial scene (periodic); copied by the simulation.
+    out_dir : pathlib.Path or None
+        Where files go (None: nothing is written).
+
+    Attributes
+    ----------
+    config : RunConfig
+    params : FlowParameters
+        ``config.params``.
+    sim : Simulation
+        Steps the scene (no trajectory kept: memory stays flat).
+    series : dict of str to list
+        The :data:`SERIES`, one entry per sample.
+    profiles : ProfileAccumulator
+        Depth profiles summed over the samples of the averaging window.
+    gamma_counts : ndarray of int64, shape (GAMMA_BINS,)
+        Histogram of ``gamma / gamma_min`` of glued contacts over that window.
+    cross_checks : list of (int, float)
+        Step and relative velocity difference of each Clarabel cross-check.
+    statuses : dict of str to int, or None
+        Steps per solver status (None: unknown, a checkpoint predating it).
+    wall_time, cpu_time : float
+        Stepping time (seconds), wall clock and processor.
+    last_report : StepReport or None
+        What the last step computed.
+    """
+
+    def __init__(self, config: RunConfig, scene: Scene, out_dir: pathlib.Path | None = None):
+        self.config = config
+        self.params = config.params
+        self.out_dir = None if out_dir is None else pathlib.Path(out_dir)
+        self.sim = Simulation(scene, self.params.law(config.model),
+                              inclined.time_step(self.params, config.dt_fraction),
+                              solver=config.solver, tol=config.tol, on_failure="ignore",
+                              fixed_point=config.fixed_point, tol_fp=config.tol_fp,
+                              max_outer=config.max_outer,
+                              solver_options={"joint": config.joint} if config.joint else None,
+                              keep_trajectory=False)
+        r = self.params.radius
+        top = float(scene.grains.positions[:, 1].max() + 2 * r)
+        self.profiles = measure.ProfileAccumulator(
+            np.arange(0.0, top + r / config.bins_per_radius, r / config.bins_per_radius),
+            scene.period)
+        self.series: dict[str, list] = {name: [] for name in SERIES}
+        self.gamma_counts = np.zeros(GAMMA_BINS, dtype=np.int64)
+        self.cross_checks: list[tuple[int, float]] = []
+        self.statuses: dict[str, int] | None = {}
+        self.wall_time = 0.0
+        self.cpu_time = 0.0
+        self.last_report: StepReport | None = None
+
+    @property
+    def steps_done(self) -> int:
+        """Steps taken since the run started (across resumes)."""
+        return self.sim.steps_done
+
+    @property
+    def averaging(self) -> bool:
+        """Whether the run is past ``average_from`` of its steps (samples enter the averages)."""
+        return self.steps_done > self.config.average_from * self.config.steps
+
+    # -- stepping ---------------------------------------------------------------------------
+    def advance(self, n_steps: int, progress: bool = False) -> None:
+        """Step ``n_steps`` times (not beyond ``config.steps``), measuring and checkpointing.
+
+        Parameters
+        ----------
+        n_steps : int
+            Steps to take.
+        progress : bool
+            Show a progress bar (tqdm) on the terminal.
+        """
+        end = min(self.config.steps, self.steps_done + n_steps)
+        bar = _progress_bar(end - self.steps_done, progress, self.config)
+        while self.steps_done < end:
+            start, start_cpu = time.perf_counter(), time.process_time()
+            report = self.sim.step()
+            self.wall_time += time.perf_counter() - start
+            self.cpu_time += time.process_time() - start_cpu
+            if self.statuses is not None:
+                status = report.result.status
+                self.statuses[status] = self.statuses.get(status, 0) + 1
+            self.last_report = report
+            self._measure(report)
+            if bar is not None:
+                bar.update(1)
+        if bar is not None:
+            bar.close()
+
+    def finish(self, progress: bool = False) -> dict[str, Any]:
+        """Step to ``config.steps``, then write the final checkpoint and ``summary.json``.
+
+        Parameters
+        ----------
+        progress : bool
+            Show a progress bar (tqdm) on the terminal.
+
+        Returns
+        -------
+        dict
+            :meth:`summary`.
+        """
+        self.advance(self.config.steps - self.steps_done, progress)
+        self.save_checkpoint()
+        summary = self.summary()
+        save_text(self._file("summary.json"), json.dumps(summary, indent=2))
+        return summary
+
+    def _measure(self, report: StepReport) -> None:
+        k, config = self.steps_done, self.config
+        if config.cross_check_every and k % config.cross_check_every == 0:
+            self.cross_checks.append((k, cross_check(report)))
+        if k % config.sample_every == 0:
+            self._sample(report)
+        if self.out_dir is not None and config.frame_every and k % config.frame_every == 0:
+            self.save_frame()
+        if self.out_dir is not None and k % config.checkpoint_every == 0:
+            self.save_checkpoint()
+
+    def _sample(self, report: StepReport) -> None:
+        scene, contacts = self.sim.scene, report.contacts
+        gamma_min = self.sim.law.gamma_min(contacts)
+        normal = report.result.forces[: contacts.count]
+        active = (report.gamma < 0) | (normal > self.config.tol * report.result.force_scale)
+        if self.config.model == "dry":       # every active contact is a Coulomb contact
+            states = np.array([0, 0, np.count_nonzero(active)])
+        else:
+            states = measure.contact_states(report.gamma, gamma_min, active)
+        values = (self.steps_done, scene.time, measure.kinetic_energy(scene),
+                  measure.flow_rate(scene), int(np.count_nonzero(active)), *states,
+                  report.result.residual, report.result.iterations, report.result.success)
+        for name, value in zip(SERIES, values):
+            self.series[name].append(value)
+        if self.averaging:
+            self.profiles.add(scene)
+            self.gamma_counts += measure.gamma_histogram(report.gamma, gamma_min,
+                                                         self.gamma_counts.size)
+
+    # -- files ------------------------------------------------------------------------------
+    def measurements(self) -> dict[str, np.ndarray]:
+        """Time series, averaged profiles and histograms as arrays (``measurements.npz``).
+
+        Returns
+        -------
+        dict of str to ndarray
+            ``series.<name>`` for each of :data:`SERIES`, shape (samples,);
+            ``profile.edges`` (K + 1,), ``profile.packing``,
+            ``profile.velocity``, ``profile.area``, ``profile.momentum`` (K,)
+            and ``profile.samples``; ``gamma_histogram`` (GAMMA_BINS,);
+            ``cross_checks`` (n, 2) of (step, relative difference);
+            ``wall_time`` and ``cpu_time`` (seconds); ``statuses`` and
+            ``config`` as JSON strings.
+        """
+        prof = self.profiles.profile()
+        out = {f"series.{k}": np.asarray(v, dtype=float) for k, v in self.series.items()}
+        out.update({"profile.edges": prof.edges, "profile.packing": prof.packing,
+                    "profile.velocity": prof.velocity, "profile.area": self.profiles.area,
+                    "profile.momentum": self.profiles.momentum,
+                    "profile.samples": np.int64(self.profiles.samples),
+                    "gamma_histogram": self.gamma_counts,
+                    "cross_checks": np.asarray(self.cross_checks, dtype=float).reshape(-1, 2),
+                    "wall_time": np.float64(self.wall_time),
+                    "cpu_time": np.float64(self.cpu_time),
+                    "statuses": np.array(json.dumps(self.statuses)),
+                    "config": np.array(self.config.to_json())})
+        return out
+
+    def save_checkpoint(self) -> None:
+        """Write ``checkpoint.npz`` and ``measurements.npz`` (atomically).
+
+        Raises
+        ------
+        ValueError
+            If the run has no output folder.
+        """
+        measurements = self.measurements()
+        save_npz(self._file("measurements.npz"), **measurements)
+        save_npz(self._file("checkpoint.npz"), **self.sim.state.to_arrays(), **measurements)
+
+    def save_frame(self) -> None:
+        """Write :func:`frame_arrays` of the current step to ``frames/frame_<step>.npz``.
+
+        Raises
+        ------
+        ValueError
+            If the run has no output folder.
+        """
+        save_npz(self._file("frames") / f"frame_{self.steps_done:08d}.npz",
+                 **frame_arrays(self.sim, self.last_report))
+
+    def _file(self, name: str) -> pathlib.Path:
+        if self.out_dir is None:
+            raise ValueError("out_dir: this run writes no files (it was created with out_dir=None)")
+        return self.out_dir / name
+
+    @classmethod
+    def resume(cls, path: pathlib.Path, out_dir: pathlib.Path | None = None,
+               steps: int | None = None, **changes: Any) -> FlowRun:
+        """Rebuild a run from its checkpoint.
+
+        When ``steps`` extends the run so that the averaging window starts
+        after the checkpoint, the time averages (profiles, gamma histogram)
+        restart, so that they cover the new window only; series are kept whole.
+
+        Parameters
+        ----------
+        path : pathlib.Path
+            A ``checkpoint.npz``.
+        out_dir : pathlib.Path, optional
+            Where the resumed run writes (default: the checkpoint's folder).
+        steps : int, optional
+            New total number of steps.
+        **changes
+            :class:`RunConfig` fields (e.g. ``friction=0.5``) that continue the
+            run with other settings from the checkpoint's state; they are
+            stored in the config of the checkpoints written afterwards.
+
+        Returns
+        -------
+        FlowRun
+            At the checkpoint's step, with its measurements so far.
+        """
+        path = pathlib.Path(path)
+        with np.load(path) as data:
+            data = dict(data)
+        config = RunConfig.from_json(str(data["config"]))
+        if steps is not None:
+            changes = {**changes, "steps": int(steps)}
+        config = replace(config, **changes)
+        state = SimulationState.from_arrays(data)
+        run = cls(config, state.scene, path.parent if out_dir is None else out_dir)
+        run.sim.restore(state)
+        run._restore_measurements(data)
+        return run
+
+    def _restore_measurements(self, data: dict[str, np.ndarray]) -> None:
+        """Take the accumulators back from :meth:`measurements` arrays."""
+        self.series = {name: list(data[f"series.{name}"]) for name in SERIES}
+        self.profiles = measure.ProfileAccumulator(
+            data["profile.edges"], self.profiles.period, area=data["profile.area"],
+            momentum=data["profile.momentum"], samples=int(data["profile.samples"]))
+        self.gamma_counts = data["gamma_histogram"].astype(np.int64)
+        self.cross_checks = [tuple(row) for row in data["cross_checks"]]
+        self.wall_time = float(data["wall_time"])
+        self.cpu_time = float(data.get("cpu_time", np.nan))  # older checkpoints: unknown
+        self.statuses = json.loads(str(data["statuses"])) if "statuses" in data else None
+        if not self.averaging and self.profiles.samples:
+            self.profiles.reset()
+            self.gamma_counts[:] = 0
+
+    def summary(self) -> dict[str, Any]:
+        """Means over the averaging window and the flow verdict.
+
+        Returns
+        -------
+        dict
+            ``model``, ``angle`` (degrees), ``steps``, ``time``; ``flow_rate``
+            and ``flow_rate_std`` (length^2 / time, over the averaging
+            window); the last ``kinetic_energy``; the verdict of
+            :func:`~lubcontact.flow.measure.classify_flow` (``state``,
+            ``energy_ratio``, ``relative_change``); ``fraction_<state>`` of
+            the active contacts per contact state; ``unconverged_steps`` (None
+            if unknown), ``step_statuses``, ``unconverged_samples``;
+            ``max_cross_check`` (NaN without cross-checks); ``wall_time`` and
+            ``cpu_time`` (seconds), ``steps_per_second``,
+            ``steps_per_cpu_second``; ``solver`` and ``tol``.
+        """
+        series = {k: np.asarray(v, dtype=float) for k, v in self.series.items()}
+        window = series["step"] > self.config.average_from * self.config.steps
+        if not np.any(window):
+            window = np.ones_like(series["step"], dtype=bool)
+        active = series["contacts"][window]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            fractions = {name: float(np.sum(series[name][window]) / max(np.sum(active), 1))
+                         for name in measure.STATES}
+        verdict = (measure.classify_flow(series["time"], series["kinetic_energy"],
+                                         series["flow_rate"])
+                   if series["time"].size >= 4 else None)
+        cross = np.asarray(self.cross_checks, dtype=float).reshape(-1, 2)
+        rate = series["flow_rate"][window]
+        return {"model": self.config.model, "angle": self.config.angle,
+                "steps": self.steps_done, "time": float(self.sim.scene.time),
+                "flow_rate": float(np.mean(rate)) if window.any() else 0.0,
+                "flow_rate_std": float(np.std(rate)) if window.any() else 0.0,
+                "kinetic_energy": (float(series["kinetic_energy"][-1]) if series["time"].size
+                                   else 0.0),
+                "state": verdict.label if verdict else "unknown",
+                "energy_ratio": verdict.energy_ratio if verdict else float("nan"),
+                "relative_change": verdict.relative_change if verdict else float("nan"),
+                **{f"fraction_{k}": v for k, v in fractions.items()},
+                "unconverged_steps": (None if self.statuses is None else
+                                      sum(n for s, n in self.statuses.items() if s != CONVERGED)),
+                "step_statuses": self.statuses,
+                "unconverged_samples": int(np.count_nonzero(series["converged"] == 0)),
+                "max_cross_check": float(cross[:, 1].max()) if cross.size else float("nan"),
+                "wall_time": self.wall_time,
+                "steps_per_second": self.steps_done / self.wall_time if self.wall_time else 0.0,
+                "cpu_time": self.cpu_time,
+                "steps_per_cpu_second": (self.steps_done / self.cpu_time if self.cpu_time
+                                         else 0.0),
+                "solver": self.config.solver, "tol": self.config.tol}
+
+
+def frame_arrays(sim: Simulation, report: StepReport | None) -> dict[str, np.ndarray]:
+    """One frame of a run as arrays (``frames/frame_<step>.npz``).
+
+    Parameters
+    ----------
+    sim : Simulation
+    report : StepReport or None
+        The last step (None: the frame has no contacts).
+
+    Returns
+    -------
+    dict of str to ndarray
+        ``time``; ``positions`` and ``velocities`` (N, 2), ``spins`` (N, 1)
+        and ``radii`` (N,) of the free grains; ``fixed_positions``
+        (M, 2) and ``fixed_radii`` (M,); ``period`` (0: not periodic); with a
+        report, per contact (nc,): ``contact_a``, ``contact_b`` (body
+        indices), ``contact_gamma``, ``contact_gamma_min``, ``contact_force``
+        (normal impulse).
+    """
+    scene = sim.scene
+    out = {"time": np.float64(scene.time), "positions": scene.grains.positions,
+           "radii": scene.grains.radii, "velocities": scene.grains.velocities,
+           "spins": scene.grains.spins, "fixed_positions": scene.fixed_positions,
+           "fixed_radii": scene.fixed_radii, "period": np.float64(scene.period or 0.0)}
+    if report is not None:
+        contacts = report.contacts
+        out.update({"contact_a": contacts.body_a, "contact_b": contacts.body_b,
+                    "contact_gamma": report.gamma,
+                    "contact_gamma_min": sim.law.gamma_min(contacts),
+                    "contact_force": report.result.forces[: contacts.count]})
+    return out
+
+
+def cross_check(report: StepReport) -> float:
+    """Largest velocity difference between the step's solution and a Clarabel re-solve.
+
+    Union contacts keep the push/pull branch the step chose, and the shift of
+    the fixed point is frozen, so both solve the same convex problem.
+
+    Parameters
+    ----------
+    report : StepReport
+        A step as solved.
+
+    Returns
+    -------
+    float
+        ``max |v - v_ref|`` relative to ``max |v_ref| + max |U - v^k|`` (the
+        velocity scale of the step); 0 without contacts.
+    """
+    problem, result = report.problem, report.result
+    if problem.n_contacts == 0:
+        return 0.0
+    normal = result.forces[: problem.n_contacts]
+    convex = problem.with_cones(problem.cones.with_branches(normal < 0))
+    convex = convex.with_shift(result.shift)
+    reference = solve(convex, "clarabel", tol=1e-9)
+    scale = np.max(np.abs(reference.velocities)) + np.max(np.abs(problem.free_velocity))
+    return float(np.max(np.abs(result.velocities - reference.velocities)) / scale)
+
+
+def _progress_bar(total: int, enabled: bool, config: RunConfig):
+    """A tqdm bar over ``total`` steps, or None when disabled or there is nothing to do."""
+    if not enabled or total <= 0:
+        return None
+    from tqdm import tqdm
+
+    return tqdm(total=total, desc=f"{config.scene} {config.model} {config.angle:g} deg",
+                unit="step", leave=False)
