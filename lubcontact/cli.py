@@ -10,11 +10,13 @@ import sys
 
 COMMANDS = {
     "demo": ("lubcontact.demo", "main", "run the built-in demo and write its report under out/"),
-    "bench": ("lubcontact.bench.piles", "main", "benchmarks (e.g. 'bench solvers'); prints tables"),
+    "bench": ("lubcontact.bench.commands", "main", "benchmarks (e.g. 'bench solvers'); prints tables"),
     "run": ("lubcontact.flow.cli", "run_main", "run a scene with checkpoints"),
     "sweep": ("lubcontact.flow.cli", "sweep_main", "inclined-flow sweep over angles"),
     "compare": ("lubcontact.bench.compare", "main", "solver-comparison report"),
     "check-hard": ("lubcontact.bench.hard", "main", "run every solver on the hard-case suite"),
+    "verify": ("lubcontact.bench.verify", "main",
+               "judge a solution file against a problem file (exit 0 pass, 1 fail)"),
 }
 
 

@@ -10,13 +10,13 @@ from . import direct  # noqa: F401  (clarabel-direct, osqp, scs)
 from . import gradient  # noqa: F401  (pgd, apgd, bb, apgd-jacobi, apgd-as)
 from . import reference  # noqa: F401  (registers the reference methods)
 from .registry import (FIRST_ORDER, INTERIOR_POINT, KINDS, QP, SolverInfo, capable_methods,
-                       methods, register, solve, solver_info, unregister)
+                       methods, reference_method, register, solve, solver_info, unregister)
 from .coulomb import solve_coulomb
 from .settings import SolveSettings
 from .result import (CONVERGED, DIVERGED, FAILED, INACCURATE, MAX_ITER, STATUSES, CoulombResult,
                      MethodOutput, SolverError, SolverWarning, SolveResult, check_status)
 
-__all__ = ["solve", "solve_coulomb", "SolveSettings", "CoulombResult", "methods", "register", "unregister", "solver_info", "capable_methods",
+__all__ = ["solve", "solve_coulomb", "SolveSettings", "CoulombResult", "methods", "register", "unregister", "solver_info", "capable_methods", "reference_method",
            "SolverInfo", "FIRST_ORDER", "INTERIOR_POINT", "QP", "KINDS", "check_status",
            "MethodOutput", "SolveResult", "SolverError", "SolverWarning", "CONVERGED", "DIVERGED",
            "FAILED", "INACCURATE", "MAX_ITER", "STATUSES"]

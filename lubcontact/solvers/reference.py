@@ -159,7 +159,7 @@ def clarabel_dual(step: StepProblem, *, tol: float = 1e-10, max_iter: int = 200,
     return _solve(step, "dual", tol, max_iter, polyhedral, warm_start, max_branch_rounds)
 
 
-@register("clarabel", kind=INTERIOR_POINT, warm_start=False, polishing=True)
+@register("clarabel", kind=INTERIOR_POINT, warm_start=False, polishing=True, step_only=True)
 def clarabel_primal(step: StepProblem, *, tol: float = 1e-10, max_iter: int = 200,
                     warm_start=None, polyhedral: bool = False,
                     max_branch_rounds: int = 8) -> MethodOutput:

@@ -31,6 +31,7 @@ import numpy as np
 from .. import checks
 from ..problem.cones import ConeKind
 from ..problem.conic import ConicProblem
+from ..problem.step import StepProblem
 from .result import (CONVERGED, DIVERGED, FAILED, INACCURATE, SUSPICIOUS_RESIDUAL, MethodOutput,
                      SolveResult)
 
@@ -67,6 +68,9 @@ class SolverInfo:
         Whether it uses a warm start (others ignore it).
     polishing : bool
         Whether its result is polished on its active set.
+    step_only : bool
+        Whether it needs a :class:`~lubcontact.problem.StepProblem` (a primal
+        form over velocities and masses; a local problem has neither).
     description : str
         One line for tables and ``--help``.
     """
@@ -78,10 +82,13 @@ class SolverInfo:
     second_order: bool
     warm_start: bool
     polishing: bool
+    step_only: bool
     description: str
 
     def rejection(self, problem: ConicProblem) -> str | None:
         """Why this method cannot solve ``problem``, or None when it can."""
+        if self.step_only and not isinstance(problem, StepProblem):
+            return "it needs a step problem (velocities and masses), not a local problem"
         cones = problem.cones
         unsupported = sorted({ConeKind(k).name for k in np.unique(cones.kinds)}
                              - {k.name for k in self.cones})
@@ -96,7 +103,7 @@ _REGISTRY: dict[str, SolverInfo] = {}
 
 
 def register(name: str, *, kind: str = FIRST_ORDER, cones=ALL_CONES, second_order: bool = True,
-             warm_start: bool = True, polishing: bool = False,
+             warm_start: bool = True, polishing: bool = False, step_only: bool = False,
              description: str = "") -> Callable[[Method], Method]:
     """Decorator registering a method under ``name`` with its capabilities.
 
@@ -108,7 +115,7 @@ def register(name: str, *, kind: str = FIRST_ORDER, cones=ALL_CONES, second_orde
         One of :data:`KINDS`.
     cones : iterable of ConeKind
         Force sets the method accepts (default: all, the non-convex union included).
-    second_order, warm_start, polishing, description
+    second_order, warm_start, polishing, step_only, description
         See :class:`SolverInfo`.
 
     Raises
@@ -126,7 +133,7 @@ def register(name: str, *, kind: str = FIRST_ORDER, cones=ALL_CONES, second_orde
         _REGISTRY[name] = SolverInfo(name=name, function=function, kind=kind,
                                      cones=frozenset(ConeKind(k) for k in cones),
                                      second_order=second_order, warm_start=warm_start,
-                                     polishing=polishing,
+                                     polishing=polishing, step_only=step_only,
                                      description=description or (doc[0] if doc else ""))
         return function
 
@@ -242,3 +249,9 @@ def solve(problem: ConicProblem, method: str = "clarabel", *, tol: float = 1e-9,
 def capable_methods(problem: ConicProblem, kind: str | None = None) -> list[str]:
     """Registered methods (of one ``kind``) that accept ``problem``."""
     return [name for name in methods(kind) if _REGISTRY[name].rejection(problem) is None]
+
+
+def reference_method(problem: ConicProblem) -> str:
+    """The symbolic reference for ``problem``: Clarabel on the primal form (``clarabel``) where
+    velocities exist (a step problem), on the dual form (``clarabel-dual``) otherwise."""
+    return "clarabel" if isinstance(problem, StepProblem) else "clarabel-dual"

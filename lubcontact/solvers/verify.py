@@ -34,7 +34,7 @@ from ..problem.cones import ConeKind
 from ..problem.conic import ConicProblem
 from ..problem.metrics import coulomb_error, coulomb_shift, relative_error
 from ..problem.step import StepProblem
-from .registry import solve
+from .registry import reference_method, solve
 from .settings import SolveSettings
 
 CONDITIONS = ("penetration", "cone", "complementarity", "residual")
@@ -55,12 +55,15 @@ class ContactViolation:
         The condition it fails most (one of :data:`CONDITIONS`).
     amount : float
         By how much, in the normalised problem's units.
+    amounts : dict
+        Every condition's violation at this contact (name -> amount).
     """
 
     index: int
     kind: str
     condition: str
     amount: float
+    amounts: dict = field(default_factory=dict)
 
 
 @dataclass
@@ -141,15 +144,17 @@ class VerificationReport:
                          f"{self.reference['status']}, FCLIB error "
                          f"{self.reference['coulomb_error']:.3e}")
         if self.worst:
-            lines += ["worst contacts:", "  contact  kind      condition        amount"]
-            lines += [f"  {c.index:7d}  {c.kind:<8}  {c.condition:<15}  {c.amount:.3e}"
-                      for c in self.worst]
+            lines += ["worst contacts (normalised units):",
+                      "  contact  kind      worst condition  " + "  ".join(
+                          f"{name:>15}" for name in CONDITIONS)]
+            lines += [f"  {c.index:7d}  {c.kind:<8}  {c.condition:<15}  " + "  ".join(
+                f"{c.amounts[name]:15.3e}" for name in CONDITIONS) for c in self.worst]
         return "\n".join(lines)
 
 
 def verify(problem: ConicProblem, forces: np.ndarray | None = None,
            velocities: np.ndarray | None = None, *, tol: float = 1e-8,
-           reference: str | None = "clarabel", reference_tol: float = 1e-10,
+           reference: str | None = "auto", reference_tol: float = 1e-10,
            worst: int = 5) -> VerificationReport:
     """Judge a candidate solution of ``problem``.
 
@@ -168,7 +173,8 @@ def verify(problem: ConicProblem, forces: np.ndarray | None = None,
         Tolerance of the verdict, in normalised units.
     reference : str or None
         Registered method computing the reference (exact Coulomb when
-        frictional); None skips it.
+        frictional); ``"auto"``: :func:`~lubcontact.solvers.registry.reference_method`;
+        None skips it.
     reference_tol : float
         Tolerance of the reference solve.
     worst : int
@@ -195,6 +201,8 @@ def verify(problem: ConicProblem, forces: np.ndarray | None = None,
     error = coulomb_error(exact, lam)
     summary = {name: float(values.max(initial=0.0)) for name, values in per_contact.items()}
     velocity_error, decides, reference_record = None, False, {}
+    if reference == "auto":
+        reference = reference_method(problem)
     if reference is not None:
         settings = SolveSettings(method=reference, tol=reference_tol, tol_fp=reference_tol)
         solved = settings.solve(problem.with_shift(np.zeros(problem.n_contacts)))
@@ -317,5 +325,6 @@ def _worst(cones, per_contact: dict[str, np.ndarray], count: int) -> list[Contac
     order = np.argsort(-amount, kind="stable")[:count]
     return [ContactViolation(index=int(c), kind=ConeKind(cones.kinds[c]).name,
                              condition=CONDITIONS[int(np.argmax(table[:, c]))],
-                             amount=float(amount[c]))
+                             amount=float(amount[c]),
+                             amounts={name: float(table[k, c]) for k, name in enumerate(CONDITIONS)})
             for c in order if amount[c] > 0]
