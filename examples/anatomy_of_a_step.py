@@ -3,7 +3,8 @@
 Run: .venv/bin/python examples/anatomy_of_a_step.py
 """
 from lubcontact import GlueyLubrication, Simulation, methods, scenes
-from lubcontact.bench.tables import compare_methods, format_table
+from lubcontact.bench.harness import compare_methods
+from lubcontact.bench.tables import format_table
 
 sim = Simulation(scenes.settling_pile(n_grains=300, seed=1), GlueyLubrication(), dt=0.05)
 sim.run(80)

@@ -6,7 +6,9 @@ file only dispatches, so that importing the CLI stays cheap.
 from __future__ import annotations
 
 import importlib
+import importlib.util
 import sys
+from pathlib import Path
 
 COMMANDS = {
     "demo": ("lubcontact.demo", "main", "run the built-in demo and write its report under out/"),
@@ -20,20 +22,94 @@ COMMANDS = {
 }
 
 
+SOLVER_ENTRY_POINTS = "lubcontact.solvers"
+"""Entry-point group of installed packages that register solvers (loaded by every command)."""
+
+
 def _usage() -> str:
-    lines = ["usage: lubcontact COMMAND [options]", "", "commands:"]
+    lines = ["usage: lubcontact [--version] [--solver-module MODULE ...] COMMAND [options]", "",
+             "commands:"]
     lines += [f"  {name:<11} {help_}" for name, (_, _, help_) in COMMANDS.items()]
+    lines += ["", "--solver-module MODULE  import MODULE (a dotted name or a .py file) before the "
+                  "command,", "                        so that the solvers it registers run in "
+                  "compare, check-hard, verify, ...",
+              "Installed packages can also register solvers through the entry-point group "
+              f"{SOLVER_ENTRY_POINTS!r}."]
     return "\n".join(lines)
 
 
+def load_solver_module(name: str) -> None:
+    """Import a module that registers solvers: a dotted module name or a path to a ``.py`` file.
+
+    Raises
+    ------
+    ValueError
+        Naming ``--solver-module`` when the module cannot be found.
+    """
+    if name.endswith(".py"):
+        path = Path(name)
+        if not path.is_file():
+            raise ValueError(f"--solver-module: no file {name}")
+        spec = importlib.util.spec_from_file_location(path.stem, path)
+        module = importlib.util.module_from_spec(spec)
+        sys.modules[path.stem] = module
+        spec.loader.exec_module(module)
+        return
+    try:
+        importlib.import_module(name)
+    except ModuleNotFoundError as exc:
+        raise ValueError(f"--solver-module: cannot import {name!r} ({exc})") from None
+
+
+def _load_entry_points() -> None:
+    """Import every installed package's solver entry point (group :data:`SOLVER_ENTRY_POINTS`)."""
+    from importlib.metadata import entry_points
+
+    for entry in entry_points(group=SOLVER_ENTRY_POINTS):
+        entry.load()
+
+
+def _solver_modules(argv: list[str]) -> tuple[list[str], list[str]]:
+    """Split ``--solver-module X`` pairs (given before the command) from the other arguments."""
+    modules = []
+    while argv and (argv[0] == "--solver-module" or argv[0].startswith("--solver-module=")):
+        if "=" in argv[0]:
+            modules.append(argv[0].split("=", 1)[1])
+            argv = argv[1:]
+        elif len(argv) < 2:
+            raise ValueError("--solver-module: expects a module name or a .py file")
+        else:
+            modules.append(argv[1])
+            argv = argv[2:]
+    return modules, argv
+
+
 def main(argv: list[str] | None = None) -> int:
+    """Dispatch ``lubcontact COMMAND ...``; returns the exit status."""
     argv = sys.argv[1:] if argv is None else list(argv)
+    if argv[:1] == ["--version"]:
+        from . import __version__
+
+        print(f"lubcontact {__version__}")
+        return 0
+    try:
+        modules, argv = _solver_modules(argv)
+    except ValueError as exc:
+        print(f"lubcontact: {exc}", file=sys.stderr)
+        return 2
     if not argv or argv[0] in ("-h", "--help"):
         print(_usage())
         return 0
     name, rest = argv[0], argv[1:]
     if name not in COMMANDS:
         print(f"lubcontact: unknown command {name!r}\n\n{_usage()}", file=sys.stderr)
+        return 2
+    try:
+        _load_entry_points()
+        for module in modules:
+            load_solver_module(module)
+    except ValueError as exc:
+        print(f"lubcontact: {exc}", file=sys.stderr)
         return 2
     module_name, function, _ = COMMANDS[name]
     try:

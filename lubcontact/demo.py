@@ -17,7 +17,8 @@ import numpy as np
 from . import scenes
 from .sim.simulation import Simulation
 from .model.laws import GlueyLubrication
-from .bench.tables import compare_methods, format_table
+from .bench.harness import compare_methods
+from .bench.tables import format_table
 from .solvers import methods
 
 

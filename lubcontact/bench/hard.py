@@ -1,6 +1,7 @@
 """The hard-case suite runner: every registered solver on every hard case (``lubcontact check-hard``).
 
-The cases live in ``reference/hard`` (repository root). Each solve is judged
+The cases live in :mod:`lubcontact.bench.cases.hard`; each solve goes through
+the benchmark harness (:func:`lubcontact.bench.harness.timed_solve`) and is judged
 in the units of the normalised problem (``StepProblem.normalized``: velocities
 by the free-velocity scale ``V``, lengths by ``dt V``, forces by ``m_ref V / dt``):
 
@@ -8,13 +9,15 @@ by the free-velocity scale ``V``, lengths by ``dt V``, forces by ``m_ref V / dt`
   freedom in its scaled unit) and the error of ``g = [D + s, 0] + dt H v``
   (gaps after the step and tangential displacements, max norm, in ``dt V``),
   against the exact answer when the case has one, else the Clarabel reference
-  (``clarabel``, tol 1e-10);
-- **properties** (with the final shift s for a fixed-point solve): no gap below ``-PROPERTY_TOL``; forces inside their cones
-  to ``CONE_TOL`` (relative to the largest force, at least 1); per-contact
-  complementarity ``|lam_c . g_c| <= PROPERTY_TOL`` (same relative measure);
-  kinetic energy not above the free velocity's (``ENERGY_TOL`` relative)
-  when zero velocity is admissible (to ``PROPERTY_TOL``): the contacts then
-  do no work, the step is a projection onto a convex set holding 0.
+  (:func:`lubcontact.solvers.reference_method`: ``clarabel`` on these step
+  problems, tol 1e-10);
+- **properties** (with the final shift s for a fixed-point solve): no gap
+  below ``-PROPERTY_TOL``; forces inside their cones to ``CONE_TOL``
+  (relative to the largest force, at least 1); per-contact complementarity
+  ``|lam_c . g_c| <= PROPERTY_TOL`` (same relative measure); kinetic energy
+  not above the free velocity's (``ENERGY_TOL`` relative) when zero velocity
+  is admissible (to ``PROPERTY_TOL``): the contacts then do no work, the step
+  is a projection onto a convex set holding 0.
 
 Verdicts: ``ok`` (converged, error and properties within tolerance),
 ``flagged`` (a non-converged status: acceptable, the caller is told),
@@ -26,22 +29,26 @@ result).
 from __future__ import annotations
 
 import argparse
-import sys
 import time
 from dataclasses import dataclass, field
-from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..problem.metrics import PROPERTY_TOL, scaled_velocity_error, solution_properties
 from ..problem.step import StepProblem
-from ..solvers import CONVERGED, CoulombResult, SolveResult, SolveSettings, methods
+from ..solvers import CONVERGED, CoulombResult, SolveResult, SolveSettings, methods, reference_method
+from .harness import timed_solve
+from .options import check_methods, names
 
-REFERENCE_METHOD = "clarabel"
+if TYPE_CHECKING:
+    from .cases.hard import HardCase
+
 REFERENCE_TOL = 1e-10
 ERROR_TOL = 1e-6
-#: against a frictional Clarabel reference that polishing could not refine (3D sliding contacts,
-#: solvers/polish.py): its velocities are only as good as its gap tolerance (docs/hard_cases.md)
+#: against a frictional Clarabel reference that polishing could not refine (3D sliding
+#: contacts, lubcontact/solvers/polish.py): its velocities are only as good as its gap
+#: tolerance (docs/records/hard_cases.md)
 FRICTION_ERROR_TOL = 1e-5
 CONE_TOL = 1e-10
 ENERGY_TOL = 1e-6
@@ -83,21 +90,27 @@ class Expected:
     reference: CoulombResult | None
 
 
+def case_settings(method: str, tol: float, max_iter: int | None = None,
+                  fixed_point: bool = False) -> SolveSettings:
+    """How a case is solved: the convex problem as given, or (``fixed_point``, frictional
+    problems) exact Coulomb friction by the fixed point on s to ``FIXED_POINT_TOL``."""
+    return SolveSettings(method=method, tol=tol, max_iter=max_iter, exact_coulomb=fixed_point,
+                         tol_fp=FIXED_POINT_TOL)
+
+
 def solve_case(problem: StepProblem, method: str, tol: float, max_iter: int | None = None,
                fixed_point: bool = False) -> CoulombResult:
-    """One solve of a case: the convex problem as given, or (``fixed_point``, frictional
-    problems) exact Coulomb friction by the fixed point on s started from ``s = 0``, as the
-    time stepper does (``result.shift`` holds the final shift)."""
-    settings = SolveSettings(method=method, tol=tol, max_iter=max_iter, exact_coulomb=fixed_point,
-                             tol_fp=FIXED_POINT_TOL)
-    return settings.solve(problem)
+    """One solve of a case (:func:`case_settings`), a fixed point started from ``s = 0`` as the
+    time stepper does (``result.shift`` holds the final shift); exceptions propagate."""
+    return case_settings(method, tol, max_iter, fixed_point).solve(problem)
 
 
-def expected_for(case, problem: StepProblem, fixed_point: bool = False) -> Expected:
+def expected_for(case: HardCase, problem: StepProblem, fixed_point: bool = False) -> Expected:
     """The exact velocities when the case has them, else the Clarabel reference's."""
     if case.reference_fails and case.exact is None:
         raise ValueError(f"{case.name}: a case whose reference fails needs an exact answer")
-    reference = solve_case(problem, REFERENCE_METHOD, REFERENCE_TOL, fixed_point=fixed_point)
+    reference = solve_case(problem, reference_method(problem), REFERENCE_TOL,
+                           fixed_point=fixed_point)
     if case.exact is not None:
         return Expected(np.asarray(case.exact(problem), dtype=float), "exact", reference)
     if reference.status == CONVERGED:
@@ -111,7 +124,8 @@ def properties(problem: StepProblem, result: SolveResult) -> dict[str, float]:
     return solution_properties(problem.with_shift(result.shift), result.forces, result.velocities)
 
 
-def judge(case, problem: StepProblem, expected: Expected, result: CoulombResult, seconds: float) -> Cell:
+def judge(case: HardCase, problem: StepProblem, expected: Expected, result: CoulombResult,
+          seconds: float) -> Cell:
     """The verdict of one finished solve."""
     cell = Cell(case.name, result.method, OK, result.status, iterations=int(result.iterations),
                 seconds=seconds)
@@ -144,23 +158,19 @@ def error_tolerance(problem: StepProblem, expected: Expected) -> float:
     return ERROR_TOL
 
 
-def run_case(case, solvers: list[str], tol: float, max_iter: int | None,
+def run_case(case: HardCase, solvers: list[str], tol: float, max_iter: int | None,
              fixed_point: bool = False) -> list[Cell]:
     """Every solver of ``solvers`` on one case (see :func:`solve_case` for ``fixed_point``)."""
     problem = case.problem
     expected = expected_for(case, problem, fixed_point)
     cells = []
     for name in solvers:
-        start = time.perf_counter()
-        try:
-            result = solve_case(problem, name, tol, max_iter, fixed_point)
-        except ValueError as exc:
-            cells.append(Cell(case.name, name, REJECTED, message=str(exc).splitlines()[0]))
-            continue
-        except Exception as exc:  # noqa: BLE001 -- a crash is a verdict, reported, not hidden
-            cells.append(Cell(case.name, name, CRASH, message=f"{type(exc).__name__}: {exc}"))
-            continue
-        cells.append(judge(case, problem, expected, result, time.perf_counter() - start))
+        timed = timed_solve(problem, case_settings(name, tol, max_iter, fixed_point))
+        if timed.result is not None:
+            cells.append(judge(case, problem, expected, timed.result, timed.seconds))
+        else:
+            cells.append(Cell(case.name, name, REJECTED if timed.rejected else CRASH,
+                              message=timed.message))
     return cells
 
 
@@ -239,10 +249,13 @@ def main(argv: list[str] | None = None) -> int:
         for name, case in load_cases().items():
             print(f"{name}\n    hard:     {case.hard}\n    expected: {case.expected}")
         return 0
-    split = (lambda text: None if text is None else [s.strip() for s in text.split(",") if s.strip()])
+    solvers = names(args.solvers)
+    try:
+        check_methods("--solvers", solvers or [])
+    except ValueError as exc:
+        parser.error(str(exc))
     start = time.perf_counter()
-    cells = run_suite(split(args.cases), split(args.solvers), args.tol, args.max_iter,
-                      args.fixed_point)
+    cells = run_suite(names(args.cases), solvers, args.tol, args.max_iter, args.fixed_point)
     print(matrix(cells, markdown=args.markdown))
     print()
     print(summary(cells))

@@ -1,20 +1,20 @@
-"""Benchmarks: ``lubcontact bench NAME [options]``; each prints a table.
+"""``lubcontact bench solvers``: every method on the step problems of 2D piles at rest.
 
-Sub-benchmarks are dispatched through :data:`BENCHMARKS` with lazy imports:
-
-- ``solvers``: every registered method on 2D piles at rest (:func:`solvers_main`);
-- ``friction``: the friction benchmarks (``lubcontact.bench_friction:main``).
-
-``bench solvers`` builds, for each size N, a polydisperse pile at rest: by
-default settled by the dynamics (:func:`lubcontact.packing.settle_pile`,
-cached under ``out/cache``; ``--tiles k`` starts it from k settled piles of
-N/k grains side by side, cheaper to settle for large N), with ``--pile deposited`` as deposited
-(:func:`lubcontact.packing.deposit_pile`: zero velocities, closed contacts,
-not in equilibrium),
-its step problem with inelastic frictionless contacts (``dry``) and the same
-with a fraction of the closed contacts glued (``glued``: FREE cones), and
-solves each with every method. Errors are measured against the reference
-(``clarabel`` through cvxpy, ``tol = 1e-10``, polished on its active set):
+For each size N it builds a polydisperse pile at rest: by default settled by
+the dynamics (:func:`lubcontact.scenes.packing.settle_pile`, cached under
+``out/cache``; ``--tiles k`` starts it from k settled piles of N/k grains
+side by side, cheaper to settle for large N), with ``--pile deposited`` as
+deposited (:func:`lubcontact.scenes.packing.deposit_pile`: zero velocities,
+closed contacts, not in equilibrium); its step problem with inelastic
+frictionless contacts (``dry``) and the same with a fraction of the closed
+contacts glued (``glued``: FREE cones). Each is solved with every method
+(default: every registered method but the symbolic references), iterative
+(first-order) methods to ``--tol``, the others (interior point, QP) to
+``--reference-tol``, each solve timed once by
+:func:`lubcontact.bench.harness.timed_solve` after an untimed warm-up.
+Errors are measured against the reference
+(:func:`lubcontact.bench.harness.solve_reference`: ``clarabel`` through
+cvxpy at ``--reference-tol``, polished on its active set):
 
 - relative velocity error ``|v - v_ref|_M / |U|_M`` (mass-weighted norms,
   relative to the free velocity, i.e. in units of ``g dt`` for a pile at rest);
@@ -23,235 +23,241 @@ solves each with every method. Errors are measured against the reference
 
 It then advances the pile one step with the reference velocities and solves
 the next step's problem cold and warm-started from each method's forces
-(matched by pair key), to compare iteration counts.
+(matched by pair key), for the methods that use a warm start, to compare
+iteration counts.
 
 ``--condition`` also prints the condition number of the Delassus matrix on
-the reference's loaded rows (:func:`active_condition`), which sets how many
-iterations the gradient methods need on the pile.
+the reference's loaded rows (:func:`~lubcontact.problem.metrics.active_condition`),
+which sets how many iterations the gradient methods need on the pile.
 """
 from __future__ import annotations
 
 import argparse
-import importlib
-import time
-from dataclasses import dataclass
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field
 
 import numpy as np
-from ..model.assemble import assemble
+
+from ..problem.cones import ConeKind
 from ..problem.metrics import active_condition, velocity_error
+from ..problem.step import StepProblem
+from ..solvers import CONVERGED, INTERIOR_POINT, SolveSettings, solver_info
+from ..solvers import methods as registered
+from .harness import TimedSolve, iterative, solve_reference, timed_solve, warm_up
+from .options import check_methods, names
+from .pile_problems import PILES, PileCase, matched_forces, next_step_problem, pile_cases
 
-BENCHMARKS = {
-    "solvers": ("lubcontact.bench.piles", "solvers_main", "every solver on 2D piles at rest"),
-    "friction": ("lubcontact.bench.friction", "main", "friction benchmarks"),
-}
-
-FAST_METHODS = ("pgd", "apgd", "bb", "apgd-jacobi", "apgd-as")
-REFERENCE_METHODS = ("clarabel-direct", "osqp", "scs")
-
-
-def main(argv: list[str] | None = None) -> int:
-    """Dispatch ``bench NAME ...`` to the sub-benchmark's ``main(argv)``."""
-    argv = list(argv or [])
-    if not argv or argv[0] in ("-h", "--help"):
-        print("usage: lubcontact bench NAME [options]\n\nbenchmarks:")
-        for name, (_, _, help_) in BENCHMARKS.items():
-            print(f"  {name:<10} {help_}")
-        return 0
-    if argv[0] not in BENCHMARKS:
-        print(f"lubcontact bench: unknown benchmark {argv[0]!r}; known: {', '.join(BENCHMARKS)}")
-        return 2
-    module_name, function, _ = BENCHMARKS[argv[0]]
-    try:
-        module = importlib.import_module(module_name)
-    except ModuleNotFoundError as exc:
-        if exc.name != module_name:
-            raise
-        print(f"lubcontact bench: benchmark {argv[0]!r} is not available in this version")
-        return 2
-    return int(getattr(module, function)(argv[1:]) or 0)
+BASELINE = "clarabel-direct"
+"""The method the best iterative one is compared with in the summary."""
 
 
-# -- problems ----------------------------------------------------------------------------------
-@dataclass
-class PileCase:
-    """One benchmark problem and what is needed to build the next step."""
+def default_methods() -> list[str]:
+    """Every registered method but the symbolic references, non-iterative ones first.
 
-    label: str
-    n_grains: int
-    scene: object
-    simulation: object
-    problem: object
-    glued_keys: np.ndarray
-
-
-PILES = ("settled", "deposited")
-
-
-def pile_cases(n_grains: int, glued_fraction: float, dt: float, seed: int,
-               pile: str = "settled", tiles: int = 1) -> list[PileCase]:
-    """The dry and glued step problems of a pile of ``n_grains`` disks.
-
-    ``pile``: ``"settled"`` (:func:`lubcontact.packing.settle_pile` with
-    ``tiles``, cached under ``out/cache``) or ``"deposited"``
-    (:func:`lubcontact.packing.deposit_pile`).
+    The symbolic references are the interior-point methods that polish their
+    result and accept the non-convex union (``clarabel`` and ``clarabel-dual``,
+    through cvxpy: slow on large piles); the reference of the benchmark is
+    always run.
     """
-    from ..model.contacts import find_contacts
-    from ..sim.simulation import Simulation
-    from ..model.laws import Inelastic
-    from ..scenes.packing import deposit_pile, settle_pile
+    def symbolic(name: str) -> bool:
+        info = solver_info(name)
+        return info.kind == INTERIOR_POINT and info.polishing and ConeKind.UNION in info.cones
 
-    if pile not in PILES:
-        raise ValueError(f"pile: must be one of {PILES}, got {pile!r}")
-    if pile == "settled":
-        scene, info = settle_pile(n_grains, seed=seed, tiles=tiles)
-        print(f"# settled pile N={n_grains} (tiles {tiles}): {info['steps']} steps, last max speed "
-              f"{info['max_speed']:.1e}, at rest: {info['at_rest']}")
-    else:
-        scene = deposit_pile(n_grains, seed=seed)
-    simulation = Simulation(scene, Inelastic(), dt)
-    contacts = find_contacts(simulation.scene, simulation.d_max)
-    closed = np.flatnonzero(np.abs(contacts.gaps) <= 1e-9 * contacts.smaller_radius)
-    rng = np.random.default_rng(seed)
-    glued = np.sort(rng.choice(closed, size=int(round(glued_fraction * closed.size)), replace=False))
-    cases = []
-    for label, keys in (("dry", np.zeros(0, dtype=np.int64)), ("glued", contacts.keys[glued])):
-        if label == "glued" and glued_fraction <= 0:
-            continue
-        problem = assemble(simulation.scene, contacts, _cones(contacts, keys), simulation.dt,
-                           rotations=simulation.law.needs_rotation)
-        cases.append(PileCase(label, n_grains, scene, simulation, problem, keys))
-    return cases
+    return sorted((m for m in registered() if not symbolic(m)), key=iterative)
 
 
-def _cones(contacts, glued_keys: np.ndarray):
-    from ..problem.cones import ConeKind, Cones
+@dataclass
+class PileRow:
+    """One timed solve on a pile: one printed line (:meth:`text`, :data:`HEADER`).
 
-    kinds = np.where(np.isin(contacts.keys, glued_keys), ConeKind.FREE, ConeKind.NONNEG)
-    return Cones.frictionless(kinds, contacts.dim - 1)
+    Attributes
+    ----------
+    n_grains, n_contacts : int
+    pile : str
+        ``dry`` or ``glued``.
+    method : str
+        The method, with ``(ref)``, ``cold`` or ``warm`` where it applies.
+    setup_s, solve_s, seconds : float
+        The method's own split and the wall-clock time of the call.
+    iterations : int
+    status : str
+        The solve's status, ``error`` when the method raised.
+    error : float
+        Relative velocity error ``|v - v_ref|_M / |U|_M``.
+    min_gap : float
+        Most negative gap after the step, in mean radii.
+    note : str
+        ``(next step)``, or the exception of a failed solve.
+    """
 
+    n_grains: int
+    n_contacts: int
+    pile: str
+    method: str
+    setup_s: float
+    solve_s: float
+    seconds: float
+    iterations: int
+    status: str
+    error: float
+    min_gap: float
+    note: str = ""
 
-def next_step_problem(case: PileCase, velocities: np.ndarray):
-    """The step problem after advancing the pile one step with ``velocities``."""
-    from ..model.contacts import find_contacts
+    @classmethod
+    def of(cls, case: PileCase, problem: StepProblem, method: str, timed: TimedSolve,
+           reference_velocities: np.ndarray | None, note: str = "") -> PileRow:
+        """The row of one timed solve of ``problem`` (``case``'s or its next step's)."""
+        result, nan = timed.result, float("nan")
+        if result is None:
+            return cls(case.n_grains, problem.n_contacts, case.label, method, nan, nan,
+                       timed.seconds, -1, "error", nan, nan, f"{note} {timed.message}".strip())
+        radius = float(np.mean(case.scene.grains.radii))
+        error = 0.0 if reference_velocities is None else \
+            velocity_error(problem, result.velocities, reference_velocities)
+        return cls(case.n_grains, problem.n_contacts, case.label, method, result.setup_time,
+                   result.solve_time, timed.seconds, int(result.iterations), result.status,
+                   error, float(problem.gaps_after(result.velocities).min()) / radius, note)
 
-    scene = case.simulation.scene.copy()
-    n, dim = scene.grains.count, scene.grains.dim
-    scene.grains.velocities[:] = velocities[: n * dim].reshape(n, dim)
-    scene.grains.positions += case.simulation.dt * scene.grains.velocities
-    scene.time += case.simulation.dt
-    contacts = find_contacts(scene, case.simulation.d_max)
-    return assemble(scene, contacts, _cones(contacts, case.glued_keys), case.simulation.dt,
-                    rotations=case.simulation.law.needs_rotation)
-
-
-def matched_forces(previous_keys, previous_forces, problem) -> np.ndarray:
-    """Previous normal forces matched to ``problem``'s contacts by pair key (0 if new)."""
-    guess = np.zeros(problem.n_rows)
-    pos = np.clip(np.searchsorted(previous_keys, problem.keys), 0, previous_keys.size - 1)
-    guess[: problem.n_contacts] = np.where(previous_keys[pos] == problem.keys,
-                                           previous_forces[pos], 0.0)
-    return guess
-
-
-# -- measurements --------------------------------------------------------------------------------
-def timed_solve(problem, method: str, tol: float, max_iter: int | None, warm_start=None):
-    from ..solvers import solve
-
-    start = time.perf_counter()
-    result = solve(problem, method, tol=tol, max_iter=max_iter, warm_start=warm_start)
-    return result, time.perf_counter() - start
-
-
-def _row(case, method, result, wall, error, gap, radius, note=""):
-    return (f"{case.n_grains:>6d} {case.problem.n_contacts:>6d} {case.label:<5} {method:<16} "
-            f"{result.setup_time:>8.3f} {result.solve_time:>8.3f} {wall:>8.3f} "
-            f"{result.iterations:>6d} {result.status:<9} {error:>9.1e} {gap / radius:>9.1e} {note}")
+    def text(self) -> str:
+        return (f"{self.n_grains:>6d} {self.n_contacts:>6d} {self.pile:<5} {self.method:<16} "
+                f"{self.setup_s:>8.3f} {self.solve_s:>8.3f} {self.seconds:>8.3f} "
+                f"{self.iterations:>6d} {self.status:<9} {self.error:>9.1e} {self.min_gap:>9.1e} "
+                f"{self.note}")
 
 
 HEADER = (f"{'N':>6} {'nc':>6} {'pile':<5} {'method':<16} {'setup s':>8} {'solve s':>8} "
           f"{'total s':>8} {'iter':>6} {'status':<9} {'rel v err':>9} {'min gap/r':>9}")
 
 
-def run_case(case: PileCase, methods, tol: float, reference_tol: float, max_iter, warm: bool,
-             out=print, condition: bool = False) -> dict:
-    """Solve one case with every method; print rows; return timings for the summary.
+@dataclass
+class CaseResult:
+    """The measurements of one case (:func:`run_case`).
 
-    ``condition``: also print :func:`active_condition` of the reference solution.
+    Attributes
+    ----------
+    case : PileCase
+    rows : dict
+        Method -> its row on the case's step.
+    warm_iterations : dict
+        Method -> (cold, warm) iterations on the next step.
+    """
+
+    case: PileCase
+    rows: dict[str, PileRow] = field(default_factory=dict)
+    warm_iterations: dict[str, tuple[int, int]] = field(default_factory=dict)
+
+
+def _reference(problem: StepProblem, tol: float) -> tuple[str, TimedSolve]:
+    """The reference solve of a pile step; raises RuntimeError when it fails."""
+    method, timed = solve_reference(problem, lambda m: SolveSettings(method=m, tol=tol,
+                                                                     exact_coulomb=False))
+    if timed.result is None:
+        raise RuntimeError(f"reference {method} failed: {timed.message}")
+    return method, timed
+
+
+def run_case(case: PileCase, methods: list[str], tol: float, reference_tol: float,
+             max_iter: int | None, warm: bool, out: Callable[[str], None] = print,
+             condition: bool = False) -> CaseResult:
+    """Solve one case with every method; print one row each (module docstring).
+
+    Parameters
+    ----------
+    case : PileCase
+    methods : list of str
+        Registered methods.
+    tol, reference_tol : float
+        Tolerance of the iterative (first-order) methods, and of the others
+        and the reference.
+    max_iter : int, optional
+        Iteration cap (method defaults when None).
+    warm : bool
+        Also solve the next step cold and warm-started, with every method
+        that uses a warm start.
+    out : callable
+        Receives each printed line.
+    condition : bool
+        Also print :func:`~lubcontact.problem.metrics.active_condition` of the reference solution.
     """
     problem = case.problem
     radius = float(np.mean(case.scene.grains.radii))
-    reference, reference_wall = timed_solve(problem, "clarabel", reference_tol, None)
-    reference_gaps = problem.gaps_after(reference.velocities)
-    out(_row(case, "clarabel (ref)", reference, reference_wall, 0.0, reference_gaps.min(), radius))
+    method, reference = _reference(problem, reference_tol)
+    reference_velocities = reference.result.velocities
+    out(PileRow.of(case, problem, f"{method} (ref)", reference, None).text())
+    reference_gaps = problem.gaps_after(reference_velocities)
     closed = np.abs(problem.gaps) <= 1e-9 * radius
     opening = closed & (reference_gaps > 1e-9 * radius)
     out(f"# {case.label} N={case.n_grains}: {np.count_nonzero(opening)} of "
         f"{np.count_nonzero(closed)} closed contacts open in the step")
     if condition:
-        value, count = active_condition(problem, reference.x)
+        value, count = active_condition(problem, reference.result.x)
         out(f"# {case.label} N={case.n_grains}: cond(W_AA) = {value:.2e} on {count} loaded rows")
-    totals = {}
-    results = {}
-    for method in methods:
-        method_tol = reference_tol if method in REFERENCE_METHODS else tol
-        result, wall = timed_solve(problem, method, method_tol, max_iter)
-        error = velocity_error(problem, result.velocities, reference.velocities)
-        out(_row(case, method, result, wall, error, problem.gaps_after(result.velocities).min(),
-                 radius))
-        totals[method] = (wall, error, result.status)
-        results[method] = result
-    iterations = {}
-    if warm:
-        following = next_step_problem(case, reference.velocities)
-        next_reference, _ = timed_solve(following, "clarabel", reference_tol, None)
-        for method in methods:
-            if method not in FAST_METHODS:
-                continue
-            guess = matched_forces(problem.keys, results[method].forces[: problem.n_contacts],
-                                   following)
-            pair = []
-            for label, start in (("cold", None), ("warm", guess)):
-                result, wall = timed_solve(following, method, tol, max_iter, warm_start=start)
-                error = velocity_error(following, result.velocities, next_reference.velocities)
-                out(_row(case, f"{method} {label}", result, wall, error,
-                         following.gaps_after(result.velocities).min(), radius, "(next step)"))
-                pair.append(result.iterations)
-            iterations[method] = tuple(pair)
-    return {"totals": totals, "iterations": iterations}
+
+    def settings(name: str) -> SolveSettings:
+        return SolveSettings(method=name, tol=tol if iterative(name) else reference_tol,
+                             max_iter=max_iter, exact_coulomb=False)
+
+    measured = CaseResult(case)
+    forces = {}
+    for name in methods:
+        timed = timed_solve(problem, settings(name))
+        measured.rows[name] = PileRow.of(case, problem, name, timed, reference_velocities)
+        out(measured.rows[name].text())
+        if timed.result is not None:
+            forces[name] = timed.result.forces
+    if not warm:
+        return measured
+    following = next_step_problem(case, reference_velocities)
+    _, next_reference = _reference(following, reference_tol)
+    for name in methods:
+        if not solver_info(name).warm_start or name not in forces:
+            continue
+        guess = matched_forces(problem.keys, forces[name][: problem.n_contacts], following)
+        pair = []
+        for label, start in (("cold", None), ("warm", guess)):
+            timed = timed_solve(following, settings(name), warm_start=start)
+            row = PileRow.of(case, following, f"{name} {label}", timed,
+                             next_reference.result.velocities, "(next step)")
+            out(row.text())
+            pair.append(row.iterations)
+        measured.warm_iterations[name] = tuple(pair)
+    return measured
 
 
-def summarise(case: PileCase, measured: dict, accuracy: float, out=print) -> None:
-    """Best fast method against clarabel-direct; warm against cold iterations."""
-    totals = measured["totals"]
-    if "clarabel-direct" in totals:
-        fast = {m: t for m, t in totals.items()
-                if m in FAST_METHODS and t[2] == "converged" and t[1] <= accuracy}
+def summarise(measured: CaseResult, accuracy: float, out: Callable[[str], None] = print) -> None:
+    """Best iterative method against :data:`BASELINE`; warm against cold iterations."""
+    case, rows = measured.case, measured.rows
+    if BASELINE in rows:
+        fast = {m: row for m, row in rows.items()
+                if iterative(m) and row.status == CONVERGED and row.error <= accuracy}
+        baseline = rows[BASELINE].seconds
         if fast:
-            best = min(fast, key=lambda m: fast[m][0])
-            ratio = fast[best][0] / totals["clarabel-direct"][0]
+            best = min(fast, key=lambda m: fast[m].seconds)
             out(f"   N={case.n_grains} {case.label}: best fast method {best} "
-                f"{fast[best][0]:.3f} s = {ratio:.3f} x clarabel-direct ({totals['clarabel-direct'][0]:.3f} s)")
+                f"{fast[best].seconds:.3f} s = {fast[best].seconds / baseline:.3f} x {BASELINE} "
+                f"({baseline:.3f} s)")
         else:
             out(f"   N={case.n_grains} {case.label}: no fast method reached {accuracy:g}")
-    for method, (cold, warm) in measured["iterations"].items():
+    for method, (cold, warm) in measured.warm_iterations.items():
         out(f"   N={case.n_grains} {case.label}: {method} next step warm/cold iterations "
             f"{warm}/{cold} = {warm / max(cold, 1):.2f}")
 
 
 def solvers_main(argv: list[str] | None = None) -> int:
     """``lubcontact bench solvers``: see the module docstring."""
-    from ..solvers import methods as registered
-
     parser = argparse.ArgumentParser(prog="lubcontact bench solvers", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--sizes", default="100,1000,10000", help="grain counts, comma separated")
-    parser.add_argument("--methods", default=",".join(REFERENCE_METHODS + FAST_METHODS),
-                        help="methods to compare, comma separated")
+    parser.add_argument("--methods", default=None,
+                        help="methods to compare, comma separated (default: every registered "
+                             f"method but the symbolic references: {','.join(default_methods())})")
     parser.add_argument("--glued-fraction", type=float, default=0.3,
                         help="fraction of closed contacts glued in the 'glued' pile (0: skip it)")
-    parser.add_argument("--tol", type=float, default=1e-8, help="tolerance of the fast methods")
+    parser.add_argument("--tol", type=float, default=1e-8,
+                        help="tolerance of the iterative (first-order) methods")
     parser.add_argument("--reference-tol", type=float, default=1e-10,
-                        help="tolerance of clarabel, clarabel-direct, osqp and scs")
+                        help="tolerance of the reference and of the interior-point and QP methods")
     parser.add_argument("--max-iter", type=int, default=None, help="iteration cap (method default)")
     parser.add_argument("--accuracy", type=float, default=1e-6,
                         help="relative velocity error a fast method must reach in the summary")
@@ -261,31 +267,33 @@ def solvers_main(argv: list[str] | None = None) -> int:
                         help="settled by the dynamics (cached in out/cache) or deposited")
     parser.add_argument("--tiles", type=int, default=1,
                         help="settled piles built from this many settled copies side by side "
-                             "(packing.settle_pile(tiles=...)); every size must be a multiple")
+                             "(settle_pile(tiles=...)); every size must be a multiple")
     parser.add_argument("--no-warm", action="store_true", help="skip the next-step re-solves")
     parser.add_argument("--condition", action="store_true",
                         help="print cond(W_AA) on the reference's loaded rows (active_condition)")
     args = parser.parse_args(argv)
-    sizes = [int(s) for s in args.sizes.split(",") if s]
-    methods = [m for m in args.methods.split(",") if m]
-    unknown = sorted(set(methods) - set(registered()))
-    if unknown:
-        parser.error(f"--methods: unknown {', '.join(unknown)}; registered: {', '.join(registered())}")
+    sizes = [int(s) for s in names(args.sizes)]
+    methods = default_methods() if args.methods is None else names(args.methods)
+    try:
+        check_methods("--methods", methods)
+    except ValueError as exc:
+        parser.error(str(exc))
     if any(n < 1 for n in sizes):
         parser.error(f"--sizes: must be positive, got {args.sizes}")
     if args.tiles < 1 or any(n % args.tiles for n in sizes):
         parser.error(f"--tiles: must be >= 1 and divide every size, got {args.tiles}")
+    if not all(t > 0 and math.isfinite(t) for t in (args.tol, args.reference_tol)):
+        parser.error("--tol, --reference-tol: must be finite and > 0")
     print(HEADER)
-    summaries = []
+    measured = []
     for n in sizes:
         cases = pile_cases(n, args.glued_fraction, args.dt, args.seed, args.pile, args.tiles)
-        if n == sizes[0]:            # untimed: load the compiled kernels before any timing
-            timed_solve(cases[0].problem, "apgd-jacobi", 1e-3, None)
+        if n == sizes[0]:
+            warm_up(cases[0].problem, methods)
         for case in cases:
-            measured = run_case(case, methods, args.tol, args.reference_tol, args.max_iter,
-                                not args.no_warm, condition=args.condition)
-            summaries.append((case, measured))
+            measured.append(run_case(case, methods, args.tol, args.reference_tol, args.max_iter,
+                                     not args.no_warm, condition=args.condition))
     print("\nsummary")
-    for case, measured in summaries:
-        summarise(case, measured, args.accuracy)
+    for result in measured:
+        summarise(result, args.accuracy)
     return 0

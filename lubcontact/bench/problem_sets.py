@@ -18,7 +18,7 @@ Two solve modes:
 - ``convex``: one call of :func:`lubcontact.solvers.solve` (frictionless and
   gluey problems, whose force sets are convex);
 - ``coulomb``: exact Coulomb friction by the fixed point on ``s`` around the
-  solver (:func:`lubcontact.fixed_point.solve_coulomb`), as a time step does.
+  solver (:func:`lubcontact.solvers.solve_coulomb`), as a time step does.
 
 Time-stepping sequences are consecutive steps of one simulation; each carries
 the previous step's reference forces (and shift) matched by pair key, the
@@ -39,7 +39,6 @@ from ..problem.step import StepProblem
 from ..model.scene import Scene
 from ..model.assemble import assemble
 
-ROOT = Path(__file__).resolve().parents[1]   # the package folder (compare.environment: git state)
 PACKAGE_DATA = Path(__file__).resolve().parent / "data"
 DATA_DIR_ENV = "LUBCONTACT_DATA_DIR"
 CONVEX, COULOMB = "convex", "coulomb"
@@ -83,17 +82,6 @@ def data_dir(override: str | Path | None = None) -> Path:
     if not path.is_dir():
         raise ValueError(f"data_dir: not a directory: {path}{origin}")
     return path
-
-
-def __getattr__(name: str):
-    """``BENCHMARKS``: legacy name of :func:`data_dir` ``()``, read when asked for.
-
-    Kept only for modules that still import it (``bench/friction.py``); new code calls
-    :func:`data_dir`.
-    """
-    if name == "BENCHMARKS":
-        return data_dir()
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def benchmark_file(folder: str, name: str, root: str | Path | None = None) -> Path:
@@ -288,7 +276,7 @@ def _settling(n_grains: int, law: Law, label: str, seed: int = 3) -> Instance:
 
 
 def _deposited(n_grains: int, law: Law, label: str, mode: str, seed: int = 1) -> Instance:
-    packing = _import("lubcontact.packing", "piles at rest")
+    packing = _import("lubcontact.scenes.packing", "piles at rest")
     problem = snapshot(packing.deposit_pile(n_grains, seed=seed), law, PILE_DT)
     return Instance(f"rest{n_grains}-{label}", problem, mode, group=f"rest-{label}")
 

@@ -4,8 +4,7 @@ import json
 import numpy as np
 import pytest
 
-from lubcontact.bench import compare
-from lubcontact.bench import problem_sets
+from lubcontact.bench import compare, problem_sets, runs, statistics
 from lubcontact.solvers import STATUSES, methods
 
 PNG = b"\x89PNG\r\n\x1a\n"
@@ -60,9 +59,9 @@ def test_numbers_are_sane(tiny):
     assert {r["status"] for r in rows} <= set(STATUSES) | {"error", "skipped"}
     labels = data["meta"]["solvers"]
     for tol in data["meta"]["tolerances"]:
-        summary = compare.summary_rows(rows, labels, tol)
-        assert all(0.0 <= s["success"] <= 1.0 for s in summary)
-        assert min(s["time_sgm_rel"] for s in summary) == pytest.approx(1.0)
+        summary = statistics.summary_rows([runs.Measurement(**r) for r in rows], labels, tol)
+        assert all(0.0 <= s.success <= 1.0 for s in summary)
+        assert min(s.time_sgm_rel for s in summary) == pytest.approx(1.0)
     for row in rows:
         if row["status"] not in ("error", "skipped"):       # measured rows, whatever the status
             assert row["time_min_s"] <= row["time_s"] <= row["time_max_s"]
@@ -106,23 +105,26 @@ def test_sequence_warm_start_is_the_previous_solution_matched_by_key():
 
 
 def test_statistics_on_known_numbers():
-    assert compare.shifted_geometric_mean(np.array([1.0, 1.0])) == pytest.approx(1.0)
-    assert compare.shifted_geometric_mean(np.array([0.0, 0.0])) == pytest.approx(0.0, abs=1e-15)
+    assert statistics.shifted_geometric_mean(np.array([1.0, 1.0])) == pytest.approx(1.0)
+    assert statistics.shifted_geometric_mean(np.array([0.0, 0.0])) == pytest.approx(0.0, abs=1e-15)
     # sqrt((1 + s)(4 + s)) - s with s = 1 ms
-    assert compare.shifted_geometric_mean(np.array([1.0, 4.0])) == pytest.approx(
+    assert statistics.shifted_geometric_mean(np.array([1.0, 4.0])) == pytest.approx(
         np.sqrt(1.001 * 4.001) - 0.001)
-    rows = [dict(instance=i, solver=s, tol=1e-6, success=ok, time_s=t)
+    rows = [runs.Measurement(instance=i, group="", mode=problem_sets.CONVEX, n_contacts=1, n_rows=1,
+                             solver=s, method=s, warm=False, tol=1e-6, success=ok, time_s=t)
             for i, s, ok, t in [("p", "a", True, 1.0), ("p", "b", True, 3.0),
                                 ("q", "a", False, 1.0), ("q", "b", True, 2.0)]]
-    ratios = compare.performance_ratios(rows, ["a", "b"], 1e-6)
+    ratios = statistics.performance_ratios(rows, ["a", "b"], 1e-6)
     np.testing.assert_array_equal(ratios["a"], [1.0, np.inf])
     np.testing.assert_array_equal(ratios["b"], [3.0, 1.0])
-    times = compare.penalised_times(rows, ["a", "b"], 1e-6)
-    np.testing.assert_array_equal(times["a"], [1.0, compare.FAILURE_PENALTY * 2.0])
+    times = statistics.penalised_times(rows, ["a", "b"], 1e-6)
+    np.testing.assert_array_equal(times["a"], [1.0, statistics.FAILURE_PENALTY * 2.0])
 
 
 def test_missing_sources_and_bad_arguments(tmp_path, monkeypatch, capsys):
-    monkeypatch.setattr(problem_sets, "BENCHMARKS", tmp_path / "nowhere")
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    monkeypatch.setenv(problem_sets.DATA_DIR_ENV, str(empty))
     with pytest.raises(problem_sets.SetUnavailable, match="no problem files"):
         problem_sets.SETS["siconos-fc2d"].instances()
     assert compare.main(["--set", "siconos-fc2d", "--out", str(tmp_path), "--quiet"]) == 1
@@ -133,6 +135,9 @@ def test_missing_sources_and_bad_arguments(tmp_path, monkeypatch, capsys):
     assert "--set: unknown set 'nonsense'" in capsys.readouterr().err
     assert compare.main(["--set", "tiny", "--solvers", "nonsense"]) == 2
     assert compare.main(["--set", "tiny", "--tolerances", "-1"]) == 2
+    capsys.readouterr()
+    assert compare.main(["--set", "tiny", "--data-dir", str(tmp_path / "nowhere")]) == 2
+    assert "--data-dir: not a directory" in capsys.readouterr().err
 
 
 def test_hard_cases_use_exact_answers_and_flag_infeasible_problems():
@@ -142,12 +147,12 @@ def test_hard_cases_use_exact_answers_and_flag_infeasible_problems():
         pytest.skip(str(exc))
     single, infeasible = instances["single_contact"], instances["glued_infeasible"]
     assert single.exact is not None and infeasible.must_flag
-    variant = compare.Variant("clarabel")
-    reference, summary = compare.reference_solve(single, None)
-    assert summary["errors_against"] == "exact velocities"
-    row = compare.measure(single, variant, 1e-8, reference, 1, None, compare.SUCCESS_SLACK)
-    assert row["success"] and row["velocity_error"] < 1e-8
-    reference, _ = compare.reference_solve(infeasible, None)
-    row = compare.measure(infeasible, variant, 1e-8, reference, 1, None, compare.SUCCESS_SLACK)
-    assert row["status"] != "converged" and row["success"]
-    assert np.isnan(row["velocity_error"])
+    variant = runs.Variant("clarabel")
+    reference, summary = runs.reference_solve(single, None)
+    assert summary.errors_against == "exact velocities"
+    row = runs.measure(single, variant, 1e-8, reference, 1, None, runs.SUCCESS_SLACK)
+    assert row.success and row.velocity_error < 1e-8
+    reference, _ = runs.reference_solve(infeasible, None)
+    row = runs.measure(infeasible, variant, 1e-8, reference, 1, None, runs.SUCCESS_SLACK)
+    assert row.status != "converged" and row.success
+    assert np.isnan(row.velocity_error)

@@ -330,7 +330,6 @@ def test_data_dir_honours_the_environment_and_the_override(tmp_path, monkeypatch
     assert problem_sets.data_dir() == from_env
     assert problem_sets.data_dir(explicit) == explicit              # the override wins
     assert problem_sets.data_dir(str(explicit)) == explicit
-    assert problem_sets.BENCHMARKS == from_env                      # the legacy name follows
     fclib = problem_sets.SETS["fclib"]
     assert [i.name for i in fclib.instances()] == [name.removesuffix(".hdf5")]
     assert [i.name for i in fclib.instances(data=explicit)] == ["local_problem_test"]
