@@ -339,7 +339,7 @@ def build_flows() -> list[Instance]:
 
 
 def build_hard() -> list[Instance]:
-    """The hard-case suite of ``reference/hard``: single solves, exact answers where known."""
+    """The hard-case suite of ``lubcontact.bench.cases.hard``: single solves, exact answers where known."""
     hard = _import("lubcontact.bench.cases.hard", "the hard-case suite")
     instances = []
     for name, case in hard.CASES.items():
@@ -385,7 +385,7 @@ SETS: dict[str, ProblemSet] = {s.name: s for s in [
                "cold against warm-started solves", build_sequences, seeds={"settling_pile": 3}),
     ProblemSet("flows", "inclined flows at 25 degrees, 60 disks: dry Coulomb and gluey + Coulomb, "
                "3 consecutive steps", build_flows, seeds={"sedimentation": 2}),
-    ProblemSet("hard", "the hard-case suite (reference/hard, docs/hard_cases.md): one solve "
+    ProblemSet("hard", "the hard-case suite (lubcontact/bench/cases/hard.py, docs/records/hard_cases.md): one solve "
                "each, errors against the exact velocities where known", build_hard),
     ProblemSet("siconos-fc2d", "Siconos 2D granular flow on a wall (667, 2020, 7002 contacts)",
                build_siconos, reads_data=True),

@@ -3,11 +3,11 @@
 Laws: :class:`Inelastic` (dry, frictionless), :class:`Coulomb` (dry with
 Coulomb friction), :class:`GlueyLubrication` (the gluey limit of lubrication,
 frictionless) and :class:`GlueyCoulomb` (lubrication + friction: friction acts
-only through asperities, at ``gamma = gamma_min``; MODEL.md section 4).
+only through asperities, at ``gamma = gamma_min``; docs/guide/model.md section 4).
 
 A law turns the candidate contacts (and the per-pair state gamma) into
-:class:`~lubcontact.cones.Cones`, and updates gamma from the normal forces
-after a step (MODEL.md sections 1 and 3):
+:class:`~lubcontact.problem.cones.Cones`, and updates gamma from the normal forces
+after a step (docs/guide/model.md sections 1 and 3):
 
     gamma^{k+1} = min(0, max(gamma_min, gamma^k - dt lambda_n))
 
@@ -161,7 +161,7 @@ class GlueyLubrication(Law):
         Lower bound of gamma (< 0), the same for every contact.
     viscosity, roughness : float, optional
         Alternatively, ``eta`` and ``eps``: per contact
-        ``gamma_min = 6 pi eta r_eff^2 ln(eps / r_eff)`` (MODEL.md section 1).
+        ``gamma_min = 6 pi eta r_eff^2 ln(eps / r_eff)`` (docs/guide/model.md section 1).
         With neither, gamma is not bounded below.
     state_rtol : float
         Relative tolerance snapping gamma to 0 or gamma_min.

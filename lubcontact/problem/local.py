@@ -3,13 +3,13 @@
 External benchmark problems come as a Delassus matrix ``W`` and a free
 velocity ``q`` in *contact-major* layout: for each contact its normal
 component first, then its ``dim - 1`` tangential components. Our force layout
-is ``[all normals, then all tangential blocks]`` (see :mod:`lubcontact.cones`),
+is ``[all normals, then all tangential blocks]`` (see :mod:`lubcontact.problem.cones`),
 so :class:`LocalProblem` permutes once on construction and offers the same
 protocol as :class:`~lubcontact.problem.StepProblem` (``delassus``,
 ``offset``, ``cones``, ``gradient``, ``natural_residual``, ``normalized``,
 ``velocity``, ``with_shift``; no ``delassus_factor``: no factor ``W = L^T L``
 is known), so that :func:`lubcontact.solvers.solve` and
-:func:`lubcontact.fixed_point.solve_coulomb` work on it unchanged.
+:func:`lubcontact.solvers.coulomb.solve_coulomb` work on it unchanged.
 
 The problem is the Coulomb problem of FCLIB: ``r_c`` in the cone
 ``{|r_T| <= mu r_n}``, ``u_c + mu_c |u_T,c| e_n`` in its dual, orthogonal.

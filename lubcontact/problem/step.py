@@ -1,4 +1,4 @@
-"""The per-step contact problem (MODEL.md section 4), independent of geometry.
+"""The per-step contact problem (docs/guide/model.md section 4), independent of geometry.
 
 Primal, over generalised velocities ``v`` (n_dof,)::
 

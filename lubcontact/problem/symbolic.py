@@ -2,7 +2,7 @@
 
 Both builders take a :class:`~lubcontact.problem.StepProblem` (normally its
 normalised form) and return the cvxpy problem and the handles needed to read
-the solution back. The force sets come from :class:`~lubcontact.cones.Cones`,
+the solution back. The force sets come from :class:`~lubcontact.problem.cones.Cones`,
 the single description shared with the projections and the residuals.
 """
 from __future__ import annotations
@@ -50,7 +50,7 @@ def dual_form(step, polyhedral: bool = False) -> SymbolicForm:
     """``min 1/2 lam^T W lam + b^T lam  s.t. lam_c in K_c``.
 
     ``step`` is a :class:`~lubcontact.problem.StepProblem` (``W`` through its
-    factor ``dt M^-1/2 H^T``) or a :class:`~lubcontact.local.LocalProblem`.
+    factor ``dt M^-1/2 H^T``) or a :class:`~lubcontact.problem.local.LocalProblem`.
     """
     forces = cp.Variable(step.n_rows, name="forces")
     nc = step.n_contacts

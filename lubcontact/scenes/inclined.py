@@ -46,7 +46,7 @@ class FlowParameters:
         Coulomb coefficient ``mu``.
     viscosity, roughness : float
         ``eta`` and ``eps``: ``gamma_min = 6 pi eta r_eff^2 ln(eps / r_eff)``
-        per contact (MODEL.md section 1); used unless ``gamma_min`` is given.
+        per contact (docs/guide/model.md section 1); used unless ``gamma_min`` is given.
     gamma_min : float or None
         One gamma floor for every contact (impulse), overriding eta and eps.
     units : str

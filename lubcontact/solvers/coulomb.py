@@ -23,7 +23,7 @@ with a shift therefore has spurious minimisers (a contact pulled *into* its
 neighbour by ``s``). The fixed point thus fixes each UNION contact on one
 piece during an inner solve (a convex problem, for every solver), shift on
 the pushed piece only, and updates the pieces with the shift, by the branch
-rule of docs/friction.md: a pushed contact whose normal force vanishes while
+rule of docs/records/friction.md: a pushed contact whose normal force vanishes while
 its unshifted normal gap rate is opening (``D + dt u_n > 0``) is flipped to
 pulled; a pulled contact whose force vanishes while closing is flipped to
 pushed. Initial pieces: the sign of the warm start's normal force (pushed

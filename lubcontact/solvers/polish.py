@@ -221,7 +221,7 @@ def _solve_on(problem, layout, forces, state, direction, refinements: int = 4) -
 
 def _active_gram(problem, basis: sp.spmatrix) -> sp.spmatrix:
     """``P^T W P``: as ``(L P)^T (L P)`` where a factor ``W = L^T L`` exists, else from ``W``
-    (local problems: :class:`~lubcontact.local.LocalProblem` has no factor)."""
+    (local problems: :class:`~lubcontact.problem.local.LocalProblem` has no factor)."""
     factor = problem.delassus_factor
     if factor is None:
         return sp.csr_matrix(basis.T @ problem.delassus @ basis)

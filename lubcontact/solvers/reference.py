@@ -7,7 +7,7 @@ Registered names:
   convex with a unique solution; the dual's optimal set is unbounded when
   the packing has self-stress states (a null space of W inside the cones),
   and there the interior point drifts to huge forces and wrong velocities
-  while reporting success (docs/hard_cases.md, finding 2).
+  while reporting success (docs/records/hard_cases.md, finding 2).
 - ``clarabel-dual``: the dual form (over forces) through cvxpy.
 
 Non-convex (UNION) contacts, gluey + friction at gamma_min, are solved by the
@@ -18,7 +18,7 @@ every contact that violates the optimality condition of the union, re-solve;
 at most ``max_branch_rounds`` rounds.
 
 Clarabel runs with ``direct_solve_method="qdldl"`` (the automatic choice picked a
-slower multithreaded factorisation, MODEL.md section 9) and equal absolute and
+slower multithreaded factorisation, docs/guide/model.md section 9) and equal absolute and
 relative gap/feasibility tolerances ``tol``. An interior-point gap ``tol`` only
 bounds velocities to about ``sqrt(tol)`` (worse at the friction-cone apex), so
 solutions are then polished on their active set

@@ -1,4 +1,4 @@
-"""Every registered solver on every hard case (reference/hard; docs/hard_cases.md).
+"""Every registered solver on every hard case (lubcontact/bench/cases/hard.py; docs/records/hard_cases.md).
 
 Each (case, solver) cell must be ``ok`` (converged, within tolerance of the
 exact answer or the Clarabel reference, properties hold), ``flagged`` (a
@@ -147,7 +147,7 @@ def test_far_warm_start_is_never_silently_wrong(solver, guess):
 
 
 def test_gamma_within_state_tolerance_snaps_at_the_update():
-    """gamma 1e-9 from 0 or from gamma_min is snapped exactly at the next update (laws.py)."""
+    """gamma 1e-9 from 0 or from gamma_min is snapped exactly at the next update (model/laws.py)."""
     law = GlueyLubrication(GAMMA_MIN)
     sim = Simulation(_gamma_scene(), law, 0.01)
     contacts = find_contacts(sim.scene, sim.d_max)

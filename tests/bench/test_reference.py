@@ -72,7 +72,7 @@ def test_frictional_and_mixed_solutions_are_polished_to_rounding(hard_cases, nam
 
 @pytest.mark.parametrize("name", ["mass_ratio_1e6_collision", "radius_ratio_100"])
 def test_clarabel_direct_is_polished_like_the_cvxpy_reference(hard_cases, name):
-    """Unpolished, clarabel-direct was 3-5e-6 off on these cases (docs/hard_cases.md, finding 4)."""
+    """Unpolished, clarabel-direct was 3-5e-6 off on these cases (docs/records/hard_cases.md, finding 4)."""
     from lubcontact.problem.metrics import scaled_velocity_error
 
     problem = hard_cases[name].problem

@@ -1,4 +1,4 @@
-"""Exact solutions of MODEL.md section 7, frictionless laws, stepped with Clarabel."""
+"""Exact solutions of docs/guide/model.md section 7, frictionless laws, stepped with Clarabel."""
 from functools import lru_cache
 
 import numpy as np

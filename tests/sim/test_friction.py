@@ -60,7 +60,7 @@ def test_gluey_coulomb_cones_follow_the_glue_state():
     assert not GlueyCoulomb(0.5).has_friction              # no roughness cap: never at gamma_min
 
 
-# -- exact Coulomb solutions (MODEL.md section 7) --------------------------------------------------
+# -- exact Coulomb solutions (docs/guide/model.md section 7) --------------------------------------------------
 @pytest.mark.parametrize("mu, angle", [(0.5, np.pi / 4), (0.1, np.pi / 3)], ids=["rolling", "sliding"])
 def test_disk_on_incline_matches_closed_form(mu, angle):
     dt, g, r, height = 1e-2, 1.0, 1.0, 0.05
@@ -139,7 +139,7 @@ def test_fixed_point_reports_non_convergence():
 
 # -- gluey + friction ------------------------------------------------------------------------------
 def gluey_friction_closed_form(t, angle, mu, gamma_min, t_inv, g=1.0, r=1.0):
-    """Velocity (downhill, normal) and spin of MODEL.md 7's gluey + friction disk (unit mass)."""
+    """Velocity (downhill, normal) and spin of docs/guide/model.md section 7's gluey + friction disk (unit mass)."""
     sin, cos = np.sin(angle), np.cos(angle)
     t_friction = -gamma_min / (g * cos)
     t_unstick = t_inv - gamma_min / (g * cos)

@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from lubcontact import GlueyLubrication, Inelastic, Simulation, scenes
-from lubcontact.bench.piles import matched_forces, next_step_problem, pile_cases
+from lubcontact.bench.pile_problems import matched_forces, next_step_problem, pile_cases
 from lubcontact.problem.metrics import active_condition, scaled_velocity_error, velocity_error
 from lubcontact.problem.cones import ConeKind, Cones
 from lubcontact.model.contacts import find_contacts

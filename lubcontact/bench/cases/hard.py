@@ -41,7 +41,7 @@ class HardCase:
         Exact velocities after the step, when known.
     reference_fails : bool
         Clarabel (``clarabel``, tol 1e-10) is known to be wrong here while
-        reporting convergence (docs/hard_cases.md, findings); such a case must
+        reporting convergence (docs/records/hard_cases.md, findings); such a case must
         have ``exact``. Every case with ``exact`` is checked against it, never
         against Clarabel.
     must_flag : bool

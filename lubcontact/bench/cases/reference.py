@@ -1,13 +1,13 @@
 """Reference cases: step problems taken from the built-in scenes, with tight solutions.
 
 Each case is a scene, a law and a number of steps: the problem of the step
-after those steps is the case. ``reference/data/<name>.npz`` stores the
+after those steps is the case. ``lubcontact/bench/cases/data/<name>.npz`` stores the
 problem's arrays and its Clarabel solution (primal form, tol 1e-10, polished on
-its active set), produced by ``python -m reference.regenerate``. Tests check
+its active set), produced by ``python -m lubcontact.bench.cases.regenerate``. Tests check
 that the code still builds the same problems and that every solver reproduces
 the stored velocities.
 
-Analytic results (exact solutions of MODEL.md section 7) live in ``ANALYTIC``.
+Analytic results (exact solutions of docs/guide/model.md section 7) live in ``ANALYTIC``.
 """
 from __future__ import annotations
 

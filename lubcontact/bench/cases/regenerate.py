@@ -1,4 +1,4 @@
-"""Regenerate ``reference/data/*.npz``: run ``python -m reference.regenerate``.
+"""Regenerate ``lubcontact/bench/cases/data/*.npz``: run ``python -m lubcontact.bench.cases.regenerate``.
 
 Each case's problem is rebuilt from its scene and solved with Clarabel on the
 primal form (tol 1e-10, active-set polishing); the script refuses to write a
