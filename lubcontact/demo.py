@@ -3,7 +3,7 @@
 1. The poster's push-pull (gluey contact), against its exact solution.
 2. A settling pile of polydisperse disks with gluey lubrication, and a table
    of every registered solver on its last step (time and error side by side).
-3. When available, the inclined-flow demo of :mod:`lubcontact.experiment`.
+3. When available, the inclined-flow demo of :mod:`lubcontact.flow.demo`.
 """
 from __future__ import annotations
 
@@ -87,9 +87,16 @@ def pile_section(out: Path, n_grains: int = 200, steps: int = 80) -> str:
         table])
 
 
-def _plot_pile(path, sim, report):
+def _plot_pile(path: Path, sim: Simulation, report) -> None:
+    """The pile with its grain-grain contacts: unglued in grey, glued coloured by ``log10 |gamma|``.
+
+    A linear scale drawn to the deepest glue (gamma near -100) painted the common glued
+    contacts (-5 < gamma < 0) in the colour of unglued ones; a log scale and a separate
+    colour for gamma = 0 keep the three apart (unglued, lightly and deeply glued).
+    """
     import matplotlib.pyplot as plt
     from matplotlib.collections import LineCollection, PatchCollection
+    from matplotlib.colors import LogNorm
     from matplotlib.patches import Circle
 
     grains = sim.scene.grains
@@ -99,15 +106,24 @@ def _plot_pile(path, sim, report):
     ax.add_collection(circles)
     contacts = report.contacts
     pairs = contacts.a_is_free
-    segments = np.stack([grains.positions[contacts.body_a[pairs]], grains.positions[contacts.body_b[pairs]]], 1)
-    lines = LineCollection(segments, array=report.gamma[pairs], cmap="viridis", lw=1.5)
-    ax.add_collection(lines)
-    fig.colorbar(lines, ax=ax, label=r"$\gamma$ (0: unglued, < 0: glued)")
+    segments = np.stack([grains.positions[contacts.body_a[pairs]],
+                         grains.positions[contacts.body_b[pairs]]], 1)
+    gamma = report.gamma[pairs]
+    glued = gamma < 0
+    ax.add_collection(LineCollection(segments[~glued], colors="#9a9a9a", lw=1.0,
+                                     label=f"unglued (gamma = 0): {np.count_nonzero(~glued)}"))
+    if glued.any():
+        lines = LineCollection(segments[glued], array=-gamma[glued], cmap="viridis", lw=1.6,
+                               norm=LogNorm(vmin=(-gamma[glued]).min(), vmax=(-gamma[glued]).max()),
+                               label=f"glued (gamma < 0): {np.count_nonzero(glued)}")
+        ax.add_collection(lines)
+        fig.colorbar(lines, ax=ax, label=r"glue depth $|\gamma|$ (impulse; units $\rho = g = d = 1$; log scale)")
+    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.1), ncol=2, fontsize=8)
     ax.set_xlim(0, sim.scene.metadata["width"])
     ax.set_ylim(0, grains.positions[:, 1].max() + 1)
     ax.set_aspect("equal")
-    ax.set_xlabel("x (radius units)")
-    ax.set_ylabel("y (radius units)")
+    ax.set_xlabel("x (grain diameters)")
+    ax.set_ylabel("y (grain diameters)")
     ax.set_title(f"Gluey pile at t = {sim.scene.time:.2f}: contacts coloured by glue state")
     fig.tight_layout()
     fig.savefig(path, dpi=120)
@@ -115,7 +131,7 @@ def _plot_pile(path, sim, report):
 
 
 def flow_section(out: Path) -> str:
-    """The inclined-flow demo when :mod:`lubcontact.experiment` provides one."""
+    """The inclined-flow demo when :mod:`lubcontact.flow.demo` provides one."""
     try:
         flow_demo = importlib.import_module("lubcontact.flow.demo")
     except ModuleNotFoundError:
