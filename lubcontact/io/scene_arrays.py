@@ -11,7 +11,11 @@ _GRAIN_FIELDS = ("positions", "radii", "masses", "inertias", "velocities", "spin
 
 
 def scene_arrays(scene: Scene) -> dict[str, np.ndarray]:
-    """The arrays that rebuild ``scene`` with :func:`scene_from_arrays` (no external force)."""
+    """The arrays that rebuild ``scene`` with :func:`scene_from_arrays`.
+
+    Not stored: the external force and the prescribed obstacle velocities (functions or
+    schedules); the caller rebuilds them. Obstacle positions are stored as they are now.
+    """
     grains = scene.grains
     out = {f"grains.{name}": getattr(grains, name) for name in _GRAIN_FIELDS}
     out["grains.densities"] = grains.densities if grains.densities is not None else np.zeros(0)

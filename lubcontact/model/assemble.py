@@ -13,7 +13,7 @@ import scipy.sparse as sp
 
 from ..problem.cones import Cones
 from ..problem.step import StepProblem
-from .contacts import Contacts, normal_jacobian, tangential_jacobian
+from .contacts import Contacts, normal_jacobian, obstacle_offset, tangential_jacobian
 from .scene import Scene
 
 
@@ -52,7 +52,8 @@ def assemble(scene: Scene, contacts: Contacts, cones: Cones, dt: float, *,
     Returns
     -------
     StepProblem
-        With the contacts' pair keys (for warm starts) and zero shift.
+        With the contacts' pair keys (for warm starts), zero shift, and the
+        offset of moving obstacles when some obstacle moves.
     """
     grains = scene.grains
     mass = mass_diagonal(scene, rotations)
@@ -65,5 +66,9 @@ def assemble(scene: Scene, contacts: Contacts, cones: Cones, dt: float, *,
     jacobian = normal_jacobian(contacts, rotations)
     if cones.has_friction:
         jacobian = sp.vstack([jacobian, tangential_jacobian(contacts, cones.tangential)]).tocsr()
+    obstacles = scene.obstacle_velocities()
+    moving = obstacle_offset(contacts, obstacles, cones.tangential, dt) if np.any(obstacles) \
+        else None
     return StepProblem(mass=mass, free_velocity=free_velocity, jacobian=jacobian,
-                       gaps=contacts.gaps, cones=cones, dt=dt, keys=contacts.keys)
+                       gaps=contacts.gaps, cones=cones, dt=dt, keys=contacts.keys,
+                       obstacle_offset=moving)

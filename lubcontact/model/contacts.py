@@ -156,6 +156,39 @@ def tangential_jacobian(contacts: Contacts, which: np.ndarray) -> sp.csr_matrix:
     return sp.csr_matrix((vals, (rows, cols)), shape=shape)
 
 
+def obstacle_offset(contacts: Contacts, obstacle_velocities: np.ndarray, tangential: np.ndarray,
+                    dt: float) -> np.ndarray:
+    """What moving obstacles add to the constraint values ``g``, laid out like a force vector.
+
+    A contact whose body ``a`` is an obstacle with prescribed velocity ``w_a``
+    has relative velocity ``u = v_b - w_a`` at its point (obstacles do not
+    spin), so its rows of ``g = [D + s, 0] + dt H v`` gain ``-dt (n . w_a)``
+    and ``-dt (t_k . w_a)``.
+
+    Parameters
+    ----------
+    contacts : Contacts
+    obstacle_velocities : ndarray, shape (F + P, dim)
+        ``Scene.obstacle_velocities()`` (fixed grains, then planes).
+    tangential : ndarray of int
+        Contacts with tangential rows, in row order (``cones.tangential``).
+    dt : float
+
+    Returns
+    -------
+    ndarray, shape (nc + len(tangential) * (dim - 1),)
+        Length units.
+    """
+    nc, dim, n = contacts.count, contacts.dim, contacts.n_grains
+    velocity = np.zeros((nc, dim))
+    obstacle = ~contacts.a_is_free
+    velocity[obstacle] = obstacle_velocities[contacts.body_a[obstacle] - n]
+    normal = -dt * np.einsum("cd,cd->c", contacts.normals, velocity)
+    tangents = tangent_basis(contacts.normals[tangential])                  # (m, nt, dim)
+    along = -dt * np.einsum("ckd,cd->ck", tangents, velocity[tangential])    # (m, nt)
+    return np.concatenate([normal, along.ravel()])
+
+
 def lookup_by_key(stored_keys: np.ndarray, values: np.ndarray, wanted: np.ndarray,
                   width: int | None = None) -> np.ndarray:
     """Values of the wanted keys in ``stored_keys`` (sorted), 0 for keys not stored.

@@ -190,6 +190,15 @@ class Planes:
         return self.points.shape[0]
 
 
+def _prescribed(field: str, value: ForceLike) -> ForceLike:
+    """A prescribed velocity as stored: arrays validated, schedules and callables as given."""
+    if isinstance(value, (np.ndarray, list, tuple)):
+        return checks.as_array(field, value)
+    checks.require(value is None or callable(value), field,
+                   "must be an array, a Schedule or a callable f(t)")
+    return value
+
+
 def _vectors(field: str, value, dim: int) -> np.ndarray:
     """Vectors of dimension ``dim`` as an array of shape (count, dim); one vector may be flat."""
     arr = np.asarray(value, dtype=float)
@@ -242,6 +251,13 @@ class Scene:
         set, x lives in ``[0, L)``: contacts see periodic images (a pair keeps
         its key across the boundary) and :meth:`wrap_positions` folds the
         centres back after each step.
+    plane_velocity, fixed_velocity : array_like, Schedule, callable or None
+        Prescribed velocities of the planes and of the fixed grains (moving
+        walls, a driven bed): an array broadcast to shape (P, dim) or
+        (F, dim), a :class:`Schedule` of such values, or ``f(t)`` returning
+        one; None: at rest. Obstacles have no unknowns: the simulation moves
+        them by ``dt`` times this velocity each step, and contacts see it in
+        their relative velocity (:meth:`obstacle_velocities`).
     """
 
     grains: Grains
@@ -255,13 +271,16 @@ class Scene:
     overlap_tolerance: float = 1e-6
     metadata: dict = field(default_factory=dict)
     period: float | None = None
+    plane_velocity: ForceLike = None
+    fixed_velocity: ForceLike = None
 
     @classmethod
     def create(cls, grains: Grains, *, plane_points=(), plane_normals=(), fixed_positions=None,
                fixed_radii=None, gravity=None, fluid_density: float = 0.0,
                external_force: ForceLike = None, time: float = 0.0,
                overlap_tolerance: float = 1e-6, check_overlaps: bool = True,
-               metadata: dict | None = None, period: float | None = None) -> "Scene":
+               metadata: dict | None = None, period: float | None = None,
+               plane_velocity: ForceLike = None, fixed_velocity: ForceLike = None) -> "Scene":
         """Validate and assemble a scene.
 
         Raises
@@ -294,11 +313,14 @@ class Scene:
                     fluid_density=fluid_density, external_force=external_force,
                     time=float(checks.as_array("time", time, shape=())),
                     overlap_tolerance=overlap_tolerance, metadata=dict(metadata or {}),
-                    period=None if period is None else checks.positive_scalar("period", period))
+                    period=None if period is None else checks.positive_scalar("period", period),
+                    plane_velocity=_prescribed("plane_velocity", plane_velocity),
+                    fixed_velocity=_prescribed("fixed_velocity", fixed_velocity))
         if scene.period is not None:
             scene.fixed_positions[:, 0] = np.mod(scene.fixed_positions[:, 0], scene.period)
             scene.wrap_positions()
-        scene.external_forces()  # validates the shape of the external force once
+        scene.external_forces()  # validates the shapes of the external force and of
+        scene.obstacle_velocities()  # the prescribed velocities once
         if check_overlaps:
             scene.check_overlaps()
         return scene
@@ -333,6 +355,45 @@ class Scene:
             force = force + value
         return force
 
+    def obstacle_velocities(self, t: float | None = None) -> np.ndarray:
+        """Prescribed velocity of every obstacle at time ``t`` (default: now).
+
+        Returns
+        -------
+        ndarray, shape (F + P, dim)
+            Fixed grains first, then planes (the global body order after the
+            free grains: body ``N + k`` is row ``k``).
+        """
+        t = self.time if t is None else t
+        parts = []
+        for name, value, count in (("fixed_velocity", self.fixed_velocity, len(self.fixed_radii)),
+                                   ("plane_velocity", self.plane_velocity, self.planes.count)):
+            shape = (count, self.dim)
+            if value is None:
+                parts.append(np.zeros(shape))
+                continue
+            value = value(t) if callable(value) else value
+            try:
+                value = np.broadcast_to(np.asarray(value, dtype=float), shape)
+            except ValueError:
+                raise ValueError(f"{name}: cannot broadcast shape {np.shape(value)} to {shape}") \
+                    from None
+            if not np.all(np.isfinite(value)):
+                raise ValueError(f"{name}: non-finite value at t={t}")
+            parts.append(value)
+        return np.vstack(parts)
+
+    def move_obstacles(self, dt: float, t: float | None = None) -> None:
+        """Advance the planes and fixed grains by ``dt`` times their velocity at time ``t``."""
+        velocity = self.obstacle_velocities(t)
+        n_fixed = len(self.fixed_radii)
+        if not np.any(velocity):
+            return
+        self.fixed_positions += dt * velocity[:n_fixed]
+        self.planes.points += dt * velocity[n_fixed:]
+        if self.period is not None and n_fixed:
+            self.fixed_positions[:, 0] = np.mod(self.fixed_positions[:, 0], self.period)
+
     def wrap_positions(self) -> None:
         """Fold the grains' x coordinates into ``[0, period)`` (no-op when not periodic)."""
         if self.period is not None:
@@ -358,4 +419,7 @@ class Scene:
                 f"{self.overlap_tolerance} x radius {smaller[c]:.3e}")
 
     def copy(self) -> "Scene":
-        return replace(self, grains=self.grains.copy(), metadata=dict(self.metadata))
+        """A copy whose arrays (grains, planes, fixed grains) are its own."""
+        planes = Planes(points=self.planes.points.copy(), normals=self.planes.normals.copy())
+        return replace(self, grains=self.grains.copy(), planes=planes,
+                       fixed_positions=self.fixed_positions.copy(), metadata=dict(self.metadata))

@@ -46,6 +46,10 @@ class StepProblem(ConicProblemMixin):
         ``s`` of the fixed point on s (zeros for the convex relaxation).
     keys : ndarray of int64, shape (nc,) or None
         Pair identities, used only to match warm starts between steps.
+    obstacle_offset : ndarray, shape (n_rows,) or None
+        What obstacles moving at a prescribed velocity ``w`` add to ``g``:
+        ``-dt (n . w, t . w)`` per contact (length); None (zeros) when every
+        obstacle is at rest.
     """
 
     mass: np.ndarray
@@ -57,6 +61,7 @@ class StepProblem(ConicProblemMixin):
     shift: np.ndarray | None = None
     keys: np.ndarray | None = None
     scaling: Scaling | None = field(default=None, repr=False)
+    obstacle_offset: np.ndarray | None = None
 
     def __post_init__(self):
         self.dt = checks.positive_scalar("dt", self.dt)
@@ -69,6 +74,8 @@ class StepProblem(ConicProblemMixin):
         if self.shift is None:
             self.shift = np.zeros(self.cones.count)
         checks.as_array("shift", self.shift, shape=(self.cones.count,))
+        if self.obstacle_offset is not None:
+            checks.as_array("obstacle_offset", self.obstacle_offset, shape=(self.cones.n_rows,))
         self.jacobian = sp.csr_matrix(self.jacobian)
 
     @property
@@ -88,9 +95,10 @@ class StepProblem(ConicProblemMixin):
 
     @property
     def constant_rows(self) -> np.ndarray:
-        """``[D + s, 0]``: the part of ``g`` that does not depend on ``v``."""
-        out = np.zeros(self.n_rows)
-        out[: self.n_contacts] = self.gaps + self.shift
+        """``[D + s, 0]`` (plus the moving obstacles' offset): the part of ``g`` that does not
+        depend on ``v``."""
+        out = np.zeros(self.n_rows) if self.obstacle_offset is None else self.obstacle_offset.copy()
+        out[: self.n_contacts] += self.gaps + self.shift
         return out
 
     @cached_property
@@ -114,8 +122,12 @@ class StepProblem(ConicProblemMixin):
         return float(0.5 * forces @ (self.gradient(forces) - self.offset) + forces @ self.offset)
 
     def gaps_after(self, velocity: np.ndarray) -> np.ndarray:
-        """Gaps after the step, ``D + dt u_n`` (without the shift), shape (nc,)."""
-        return self.gaps + self.dt * (self.jacobian[: self.n_contacts] @ velocity)
+        """Gaps after the step, ``D + dt u_n`` (without the shift; ``u_n`` relative to a moving
+        obstacle), shape (nc,)."""
+        gaps = self.gaps + self.dt * (self.jacobian[: self.n_contacts] @ velocity)
+        if self.obstacle_offset is not None:
+            gaps += self.obstacle_offset[: self.n_contacts]
+        return gaps
 
     def normalized(self) -> "StepProblem":
         """The same problem in scaled units: ``M = I``, ``dt = 1``, velocities O(1).
@@ -136,7 +148,9 @@ class StepProblem(ConicProblemMixin):
         jacobian = sp.csr_matrix(self.jacobian @ sp.diags(velocity_scale / speed))
         return StepProblem(mass=np.ones(self.n_dof), free_velocity=self.free_velocity / velocity_scale,
                            jacobian=jacobian, gaps=self.gaps / length, cones=self.cones, dt=1.0,
-                           shift=self.shift / length, keys=self.keys, scaling=scaling)
+                           shift=self.shift / length, keys=self.keys, scaling=scaling,
+                           obstacle_offset=None if self.obstacle_offset is None
+                           else self.obstacle_offset / length)
 
     def to_arrays(self) -> dict[str, np.ndarray]:
         """Plain arrays describing the problem (for ``np.savez``); see :meth:`from_arrays`."""
@@ -146,8 +160,9 @@ class StepProblem(ConicProblemMixin):
                       h_indptr=h.indptr, h_shape=np.array(h.shape), cone_kinds=self.cones.kinds,
                       cone_mu=self.cones.mu, cone_tangential=self.cones.tangential,
                       tangent_dim=np.array(self.cones.tangent_dim))
-        if self.keys is not None:
-            arrays["keys"] = self.keys
+        for name in ("keys", "obstacle_offset"):
+            if getattr(self, name) is not None:
+                arrays[name] = getattr(self, name)
         return arrays
 
     @classmethod
@@ -158,7 +173,7 @@ class StepProblem(ConicProblemMixin):
         cones = Cones(kinds=np.asarray(arrays["cone_kinds"], dtype=np.int8), mu=arrays["cone_mu"],
                       tangential=np.asarray(arrays["cone_tangential"], dtype=int),
                       tangent_dim=int(arrays["tangent_dim"]))
-        keys = arrays["keys"] if "keys" in arrays else None
+        optional = {name: arrays[name] for name in ("keys", "obstacle_offset") if name in arrays}
         return cls(mass=arrays["mass"], free_velocity=arrays["free_velocity"], jacobian=jacobian,
                    gaps=arrays["gaps"], cones=cones, dt=float(arrays["dt"]), shift=arrays["shift"],
-                   keys=keys)
+                   **optional)

@@ -218,6 +218,7 @@ class Simulation:
         # else: normal forces through the centres cannot change a spin: it is carried unchanged
         grains.positions += self.dt * grains.velocities
         state.scene.wrap_positions()
+        state.scene.move_obstacles(self.dt)                 # with the velocity the step saw
         grains.angles += self.dt * grains.spins
         state.pairs = pairs
         state.previous = PreviousStep.of(problem, result.forces, result.shift)

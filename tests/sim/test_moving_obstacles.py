@@ -1,0 +1,56 @@
+"""Obstacles with a prescribed velocity: a lifting floor, a conveyor belt, squeezing plates."""
+import numpy as np
+import pytest
+
+from lubcontact import Coulomb, Grains, Inelastic, Scene, Schedule, Simulation
+
+
+def _disk_on_floor(**scene):
+    grains = Grains.create(positions=[[0.0, 0.5]], radii=0.5, masses=1.0)
+    return Scene.create(grains, plane_points=[0.0, 0.0], plane_normals=[0.0, 1.0],
+                        gravity=[0.0, -1.0], **scene)
+
+
+def test_a_rising_floor_carries_the_disk():
+    sim = Simulation(_disk_on_floor(plane_velocity=[0.0, 1.0]), Inelastic(), dt=0.01,
+                     solver="apgd-as")
+    sim.run(100)
+    assert sim.scene.planes.points[0, 1] == pytest.approx(1.0)            # the floor moved 100 dt
+    assert sim.scene.grains.velocities[0, 1] == pytest.approx(1.0, abs=1e-9)
+    assert sim.scene.grains.positions[0, 1] == pytest.approx(1.5, abs=1e-8)
+    assert sim.trajectory.min_gap[-1] >= -1e-9
+
+
+def test_a_conveyor_belt_spins_a_disk_up_to_rolling():
+    """Belt at V = 1 under a disk at rest (mu = 0.5, g = 1, r = 0.5): friction mu m g slides it
+    until v + omega r = V at t* = V / (3 mu g); then it rolls with v = V / 3, omega = 2 V / (3 r)."""
+    belt, mu, dt = 1.0, 0.5, 4e-3
+    sim = Simulation(_disk_on_floor(plane_velocity=[belt, 0.0]), Coulomb(mu), dt=dt,
+                     solver="apgd", tol=1e-10, tol_fp=1e-10)
+    sim.run(250)                                                          # t = 1 > t* = 2/3
+    v, omega = sim.scene.grains.velocities[0, 0], sim.scene.grains.spins[0, 0]
+    assert v == pytest.approx(belt / 3, abs=2e-3)
+    assert omega == pytest.approx(2 * belt / (3 * 0.5), abs=4e-3)
+    assert v + omega * 0.5 == pytest.approx(belt, abs=1e-8)               # no slip at the belt
+    assert abs(sim.scene.grains.positions[0, 1] - 0.5) <= 1e-8            # no lift-off
+
+
+def test_a_piston_launches_the_disk_when_it_stops():
+    """The floor rises at 1 until t = 0.5 and stops; the disk leaves it with v = 1 and flies:
+    v(t) = 1 - (t - 0.5), y(t) = 1 + (t - 0.5) - (t - 0.5)^2 / 2 (g = 1)."""
+    piston = Schedule(times=(0.0, 0.5), values=([0.0, 1.0], [0.0, 0.0]))
+    sim = Simulation(_disk_on_floor(plane_velocity=piston), Inelastic(), dt=2e-3, solver="apgd-as")
+    sim.run(250)
+    assert sim.scene.planes.points[0, 1] == pytest.approx(0.5)
+    sim.run(250)
+    assert sim.scene.planes.points[0, 1] == pytest.approx(0.5)            # stopped
+    assert sim.scene.grains.velocities[0, 1] == pytest.approx(0.5, abs=2e-3)
+    assert sim.scene.grains.positions[0, 1] == pytest.approx(1.375, abs=2e-3)
+    assert sim.trajectory.contact_count[-1] == 0                          # in flight
+
+
+def test_prescribed_velocities_are_checked():
+    with pytest.raises(ValueError, match="plane_velocity: cannot broadcast"):
+        _disk_on_floor(plane_velocity=[1.0, 0.0, 0.0])
+    with pytest.raises(ValueError, match="fixed_velocity"):
+        _disk_on_floor(fixed_velocity="fast")
