@@ -38,10 +38,17 @@ FCLIB = DATA / "fclib-local"
 
 
 # -- writers of the file formats (test side) -------------------------------------------------
-def siconos_text(matrix: np.ndarray, q, mu, dim: int, storage: int = 2) -> str:
-    """A Siconos ``frictionContact_printInFile`` file (cs_print listing for storage 2)."""
+def siconos_text(matrix: np.ndarray, q, mu, dim: int, storage: int = 2,
+                 size_line: bool = False) -> str:
+    """A Siconos ``frictionContact_printInFile`` file (cs_print listing for storage 2).
+
+    For storage 0, ``size_line`` adds the ``rows\tcols`` line Siconos'
+    ``NM_write_in_file`` writes before the dense values (older files lack it).
+    """
     n = matrix.shape[0]
     lines = [str(dim), str(len(mu)), str(storage), str(n), str(n)]
+    if storage == 0 and size_line:
+        lines.append(f"{n}\t{n}")
     if storage == 2:
         csc = sp.csc_matrix(matrix)
         lines += ["2", "CSparse Version 3.1.9, May 4, 2016.  Copyright (c) Timothy A. Davis",
@@ -111,6 +118,17 @@ def test_siconos_small_problem(tmp_path, storage):
     problem = io.read_problem(path)
     check_small_2d(problem)
     assert problem.name == "two"
+
+
+def test_siconos_dense_as_siconos_writes_it(tmp_path):
+    """NM_write_in_file: storage, rows, columns, then 'rows\tcols' again, then the values."""
+    path = tmp_path / "real.dat"
+    text = siconos_text(W2, Q2, MU2, 2, storage=0, size_line=True)
+    assert text.splitlines()[5] == "4\t4"
+    path.write_text(text)
+    check_small_2d(io.read_problem(path))
+    real = io.read_problem(SICONOS.parent / "siconos-testdata" / "FC2D_SliderCrankLagrangian00000.dat")
+    assert (real.n_contacts, real.dim) == (2, 2)
 
 
 @pytest.mark.parametrize("edit, field", [
