@@ -8,10 +8,23 @@
   those forms; :func:`delassus_diagnostics` measures how far a ``W`` is from
   symmetric positive semi-definite.
 """
-from ..problem.global_form import (GlobalProblem, delassus_diagnostics, global_from_step,
-                                   global_to_local, local_from_step, step_forces_to_local)
-from .fclib import (read_fclib, read_fclib_global, read_fclib_metadata, read_fclib_solution,
-                    write_fclib, write_fclib_global, write_fclib_local)
+from ..problem.global_form import (
+                                   GlobalProblem,
+                                   delassus_diagnostics,
+                                   global_from_step,
+                                   global_to_local,
+                                   local_from_step,
+                                   step_forces_to_local,
+)
+from .fclib import (
+                                   read_fclib,
+                                   read_fclib_global,
+                                   read_fclib_metadata,
+                                   read_fclib_solution,
+                                   write_fclib,
+                                   write_fclib_global,
+                                   write_fclib_local,
+)
 from .files import save_npz
 from .readers import read_global, read_problem
 from .siconos import read_siconos, read_siconos_global, write_siconos

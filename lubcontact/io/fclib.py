@@ -29,17 +29,33 @@ written problem reads back bit for bit.
 """
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
+from typing import TYPE_CHECKING, Protocol, TypeVar, Union
 
 import numpy as np
 import scipy.sparse as sp
 
-from ..problem.global_form import (GlobalProblem, canonical_csr, global_from_step,
-                                   step_forces_to_local)
+from ..problem.global_form import GlobalProblem, canonical_csr, global_from_step, step_forces_to_local
 from ..problem.local import LocalProblem
 from ..problem.step import StepProblem
 from .files import atomic_path
 from .siconos import contact_major_delassus
+
+if TYPE_CHECKING:
+    import h5py
+
+T = TypeVar("T")
+
+
+class SolutionLike(Protocol):
+    """Anything with contact forces (a solver result)."""
+
+    forces: np.ndarray
+
+
+Solution = Union[np.ndarray, SolutionLike, None]  # noqa: UP007  (a runtime alias: | needs 3.10 types)
+"""Forces to store beside a problem: an array, a result with ``forces``, or None."""
 
 INFO_STRINGS = ("title", "description", "math_info")
 
@@ -48,13 +64,13 @@ INFO_STRINGS = ("title", "description", "math_info")
 class _Reader:
     """Reads members of an open FCLIB file; every failure is a ``ValueError`` naming file and member."""
 
-    def __init__(self, path: Path, handle):
+    def __init__(self, path: Path, handle: h5py.File) -> None:
         self.path, self.handle = path, handle
 
     def fail(self, name: str, message: str) -> ValueError:
         return ValueError(f"{self.path}: {name}: {message}")
 
-    def member(self, group, name: str):
+    def member(self, group: h5py.Group, name: str) -> h5py.Dataset | h5py.Group:
         full = f"{group.name}/{name}"
         try:
             if name not in group:
@@ -63,7 +79,7 @@ class _Reader:
         except (KeyError, OSError, RuntimeError) as exc:
             raise self.fail(full, f"unreadable ({exc})") from None
 
-    def array(self, group, name: str, kind: str) -> np.ndarray:
+    def array(self, group: h5py.Group, name: str, kind: str) -> np.ndarray:
         """A 1-D dataset of numbers (``kind`` "float" or "int"), finite."""
         import h5py
 
@@ -88,25 +104,25 @@ class _Reader:
             return data.astype(np.int64)
         return data.astype(float)
 
-    def scalar(self, group, name: str) -> int:
+    def scalar(self, group: h5py.Group, name: str) -> int:
         data = self.array(group, name, "int")
         if data.size != 1:
             raise self.fail(f"{group.name}/{name}", f"expected one integer, got {data.size} values")
         return int(data[0])
 
-    def vector(self, group, name: str, size: int | None = None) -> np.ndarray:
+    def vector(self, group: h5py.Group, name: str, size: int | None = None) -> np.ndarray:
         data = self.array(group, name, "float")
         if size is not None and data.size != size:
             raise self.fail(f"{group.name}/{name}", f"expected {size} values, got {data.size}")
         return data
 
-    def spacedim(self, group) -> int:
+    def spacedim(self, group: h5py.Group) -> int:
         value = self.scalar(group, "spacedim")
         if value not in (2, 3):
             raise self.fail(f"{group.name}/spacedim", f"must be 2 or 3, got {value}")
         return value
 
-    def matrix(self, group, name: str, shape: tuple[int, int]) -> sp.csr_matrix:
+    def matrix(self, group: h5py.Group, name: str, shape: tuple[int, int]) -> sp.csr_matrix:
         """An FCLIB matrix group (module docstring) of the expected ``shape``."""
         sub = self.member(group, name)
         where = f"{group.name}/{name}"
@@ -142,7 +158,7 @@ class _Reader:
                                        ">= 0 triplet)")
 
 
-def _open(path: str | Path, action):
+def _open(path: str | Path, action: Callable[[_Reader], T]) -> T:
     """Run ``action(reader)`` on the open file; HDF5 failures become ``ValueError`` naming it."""
     import h5py
 
@@ -189,7 +205,7 @@ def _global(reader: _Reader) -> GlobalProblem:
                                                   name=_stem(reader.path)))
 
 
-def _checked(reader: _Reader, build):
+def _checked(reader: _Reader, build: Callable[[], T]) -> T:
     try:
         return build()
     except ValueError as exc:
@@ -214,7 +230,7 @@ def read_fclib(path: str | Path) -> LocalProblem:
     ValueError
         For a file that is not HDF5 or malformed content (the message names the file and member).
     """
-    def action(reader):
+    def action(reader: _Reader) -> object:
         if _kind(reader) == "fclib_local":
             return _local(reader)
         problem = _global(reader)
@@ -224,7 +240,7 @@ def read_fclib(path: str | Path) -> LocalProblem:
 
 def read_fclib_global(path: str | Path) -> GlobalProblem:
     """Read an FCLIB ``fclib_global`` problem as a :class:`GlobalProblem`."""
-    def action(reader):
+    def action(reader: _Reader) -> object:
         if _kind(reader) != "fclib_global":
             raise ValueError(f"{reader.path}: a local problem (fclib_local), not a global one")
         return _global(reader)
@@ -233,7 +249,7 @@ def read_fclib_global(path: str | Path) -> GlobalProblem:
 
 def read_fclib_solution(path: str | Path) -> dict[str, np.ndarray] | None:
     """The ``/solution`` group (``r``, ``u``, and ``v`` if present; FCLIB layout), or None."""
-    def action(reader):
+    def action(reader: _Reader) -> object:
         if "solution" not in reader.handle:
             return None
         group = reader.handle["solution"]
@@ -243,7 +259,7 @@ def read_fclib_solution(path: str | Path) -> dict[str, np.ndarray] | None:
 
 def read_fclib_metadata(path: str | Path) -> dict:
     """The ``info`` group of the problem: its strings and its attributes, as one dict."""
-    def action(reader):
+    def action(reader: _Reader) -> object:
         info_path = f"{_kind(reader)}/info"
         if info_path not in reader.handle:
             return {}
@@ -257,7 +273,7 @@ def read_fclib_metadata(path: str | Path) -> dict:
     return _open(path, action)
 
 
-def _text(value) -> str:
+def _text(value: object) -> str:
     return value.decode() if isinstance(value, bytes) else str(value)
 
 
@@ -266,7 +282,7 @@ def _stem(path: Path) -> str:
 
 
 # -- writing --------------------------------------------------------------------------------------
-def _write_matrix(group, name: str, matrix, layout: str) -> None:
+def _write_matrix(group: h5py.Group, name: str, matrix: sp.spmatrix, layout: str) -> None:
     """An FCLIB matrix group, compressed rows (``layout="csr"``) or columns (``"csc"``)."""
     compressed = sp.csr_matrix(matrix) if layout == "csr" else sp.csc_matrix(matrix)
     compressed.sum_duplicates()
@@ -281,7 +297,7 @@ def _write_matrix(group, name: str, matrix, layout: str) -> None:
     sub.create_dataset("x", data=compressed.data.astype(float))
 
 
-def _write_info(group, metadata: dict | None, title: str) -> None:
+def _write_info(group: h5py.Group, metadata: dict | None, title: str) -> None:
     metadata = dict(metadata or {})
     metadata.setdefault("title", title)
     info = group.create_group("info")
@@ -295,7 +311,7 @@ def _write_info(group, metadata: dict | None, title: str) -> None:
             raise ValueError(f"metadata: {key!r} cannot be stored as an HDF5 attribute ({exc})") from None
 
 
-def _write_solution(handle, forces: np.ndarray, local_velocity: np.ndarray,
+def _write_solution(handle: h5py.File, forces: np.ndarray, local_velocity: np.ndarray,
                     velocity: np.ndarray | None = None) -> None:
     group = handle.create_group("solution")
     if velocity is not None:
@@ -304,12 +320,12 @@ def _write_solution(handle, forces: np.ndarray, local_velocity: np.ndarray,
     group.create_dataset("r", data=np.asarray(forces, dtype=float))
 
 
-def _forces(solution) -> np.ndarray:
+def _forces(solution: np.ndarray | SolutionLike) -> np.ndarray:
     """The force vector of ``solution``: an array, or a result with a ``forces`` attribute."""
     return np.asarray(getattr(solution, "forces", solution), dtype=float)
 
 
-def write_fclib_local(problem: LocalProblem, path: str | Path, *, solution=None,
+def write_fclib_local(problem: LocalProblem, path: str | Path, *, solution: Solution = None,
                       metadata: dict | None = None) -> Path:
     """Write a local problem as FCLIB's ``fclib_local`` (``W`` in compressed rows), atomically.
 
@@ -349,7 +365,8 @@ def write_fclib_local(problem: LocalProblem, path: str | Path, *, solution=None,
     return path
 
 
-def write_fclib_global(M, H, f, w, mu, path: str | Path, *, solution=None, dim: int | None = None,
+def write_fclib_global(M: sp.spmatrix, H: sp.spmatrix, f: np.ndarray, w: np.ndarray, mu: np.ndarray,
+                       path: str | Path, *, solution: Solution = None, dim: int | None = None,
                        metadata: dict | None = None, name: str = "") -> Path:
     """Write ``M v = H r + f``, ``u = H^T v + w`` as FCLIB's ``fclib_global``, atomically.
 
@@ -404,7 +421,7 @@ def _write_global(problem: GlobalProblem, path: str | Path, forces: np.ndarray |
 
 
 def write_fclib(problem: LocalProblem | GlobalProblem | StepProblem, path: str | Path, *,
-                solution=None, metadata: dict | None = None) -> Path:
+                solution: Solution = None, metadata: dict | None = None) -> Path:
     """Write any problem in FCLIB format: local as ``fclib_local``, global and step as ``fclib_global``.
 
     A :class:`StepProblem` is written through

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+from collections.abc import Mapping
 
 import numpy as np
 
@@ -27,7 +28,7 @@ def scene_arrays(scene: Scene) -> dict[str, np.ndarray]:
     return out
 
 
-def scene_from_arrays(data) -> Scene:
+def scene_from_arrays(data: Mapping[str, np.ndarray]) -> Scene:
     """Inverse of :func:`scene_arrays` (values restored bit for bit)."""
     densities = data["grains.densities"]
     grains = Grains.create(data["grains.positions"], data["grains.radii"],

@@ -139,7 +139,7 @@ class _Words:
             raise self.error(field, f"non-finite value {chunk[bad[0]]!r}", positions[bad[0]])
         return values
 
-    def integers(self, positions, field: str, limit: int) -> np.ndarray:
+    def integers(self, positions: np.ndarray, field: str, limit: int) -> np.ndarray:
         """The integers at word ``positions``, each in ``[0, limit)``."""
         chunk = [self.words[k] for k in positions]
         for k, word in enumerate(chunk):
@@ -307,7 +307,8 @@ def _read_triplet(words: _Words, field: str, rows: int, cols: int, nnz: int) -> 
     return sp.coo_matrix((values, (row, col)), shape=(rows, cols)).tocsr()
 
 
-def _assemble(words, field, starts, counts, nnz, shape, stride, kind) -> sp.csr_matrix:
+def _assemble(words: _Words, field: str, starts: np.ndarray, counts: np.ndarray, nnz: int,
+              shape: tuple[int, int], stride: int, kind: str) -> sp.csr_matrix:
     """Entries ``index : value`` of a compressed listing into a CSR matrix."""
     outer, inner = shape
     positions = np.repeat(starts, counts) + stride * (np.arange(nnz) -
@@ -324,7 +325,7 @@ def _assemble(words, field, starts, counts, nnz, shape, stride, kind) -> sp.csr_
     return sp.csr_matrix((values, index, pointers), shape=(outer, inner))
 
 
-def _parse(path: Path, kind: str | None):
+def _parse(path: Path, kind: str | None) -> tuple:
     """``("local", dim, W, q, mu)`` or ``("global", dim, M, H, q, b, mu)`` from a ``.dat`` file."""
     try:
         text = path.read_text()
@@ -436,7 +437,7 @@ def read_siconos_global(path: str | Path) -> GlobalProblem:
         raise _named(path, exc) from None
 
 
-def _parse_checked(path: Path, kind: str | None):
+def _parse_checked(path: Path, kind: str | None) -> tuple:
     if kind not in (None, "local", "global"):
         raise ValueError(f"kind: must be 'local', 'global' or None, got {kind!r}")
     try:
@@ -445,7 +446,7 @@ def _parse_checked(path: Path, kind: str | None):
         raise ValueError(f"{path}: malformed Siconos file ({type(exc).__name__}: {exc})") from None
 
 
-def _global(path: Path, parsed) -> GlobalProblem:
+def _global(path: Path, parsed: tuple) -> GlobalProblem:
     _, dim, mass, jacobian, q, b, mu = parsed
     return GlobalProblem(M=mass, H=jacobian, f=q, w=b, mu=mu, dim=dim, name=_stem(path))
 
@@ -455,7 +456,7 @@ def _stem(path: Path) -> str:
 
 
 # -- writing --------------------------------------------------------------------------------------
-def _numbers(values) -> str:
+def _numbers(values: np.ndarray) -> str:
     """Space-separated ``repr`` floats: the shortest text that reads back to the same doubles."""
     return " ".join(map(repr, np.asarray(values, dtype=float).tolist()))
 

@@ -127,7 +127,7 @@ class GlobalProblem:
         return self.H.T @ self.velocity(forces) + self.w
 
 
-def canonical_csr(matrix) -> sp.csr_matrix:
+def canonical_csr(matrix: sp.spmatrix | np.ndarray) -> sp.csr_matrix:
     """A CSR copy with duplicates summed, indices sorted and stored zeros dropped.
 
     Two matrices with the same entries then have the same arrays, so that a
@@ -140,7 +140,7 @@ def canonical_csr(matrix) -> sp.csr_matrix:
     return out
 
 
-def _solve(mass: sp.spmatrix, rhs) -> np.ndarray | sp.csc_matrix:
+def _solve(mass: sp.spmatrix, rhs: np.ndarray | sp.spmatrix) -> np.ndarray | sp.csc_matrix:
     """``M^-1 rhs`` (rhs dense (n, k) or sparse); ``ValueError`` naming M when it is singular."""
     mass = sp.csc_matrix(mass)
     diagonal = mass.diagonal()
@@ -289,7 +289,7 @@ def step_forces_to_local(step: StepProblem, forces: np.ndarray, *, contact_major
 
 
 # -- diagnostics ----------------------------------------------------------------------------------
-def delassus_diagnostics(problem) -> dict:
+def delassus_diagnostics(problem: LocalProblem) -> dict:
     """How far a problem's ``W`` is from symmetric positive semi-definite.
 
     Parameters
