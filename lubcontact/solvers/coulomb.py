@@ -51,6 +51,7 @@ from .. import checks
 from ..problem.cones import ConeKind
 from ..problem.conic import ConicProblem
 from ..problem.metrics import coulomb_shift
+from .compiled_apgd import joint_applies, joint_coulomb_apgd
 from .registry import solve
 from .result import CONVERGED, MAX_ITER, CoulombResult
 
@@ -128,14 +129,14 @@ def solve_coulomb(problem: ConicProblem, method: str = "clarabel", *, tol: float
     forces, inner, history = warm_start, 0, []
     joint_iterations = 0
     convex = branches.problem()
-    if joint > 0 and _joint_applies(convex):
-        forces, current, joint_iterations = _joint_phase(
+    if joint > 0 and joint_applies(convex.cones):
+        forces, current, joint_iterations = joint_coulomb_apgd(
             convex, branches.restrict(current), forces, tol,
             20000 if max_iter is None else max_iter, joint)
         inner += joint_iterations
     shift_change = force_change = np.inf
     converged = False
-    for outer in range(1, max_outer + 1):
+    for outer in range(1, max_outer + 1):  # noqa: B007  (false positive: read after the loop, as the count)
         convex = branches.problem()
         used = branches.restrict(current)
         inner_tol = tol if forcing == 0 else max(tol, forcing * min(shift_change, 1.0))
@@ -165,34 +166,6 @@ def solve_coulomb(problem: ConicProblem, method: str = "clarabel", *, tol: float
                          fixed_point_converged=converged, shift_history=np.asarray(history),
                          pulled=branches.pulled_contacts, branch_flips=branches.flips,
                          joint_iterations=joint_iterations)
-
-
-def _joint_phase(convex, shift: np.ndarray, warm_start: np.ndarray | None, tol: float,
-                 max_iter: int, every: int) -> tuple[np.ndarray, np.ndarray, int]:
-    """Coulomb's problem by APGD with the shift updated inside (``joint`` of :func:`solve_coulomb`).
-
-    Returns the forces and the shift ``mu |g_T|`` they map to (physical units)
-    and the iterations done; the outer loop checks them.
-    """
-    from .gradient import _initial, prepare, run_apgd_cones
-
-    scaled = convex.with_shift(shift).normalized()
-    data = prepare(scaled, scaling=True, operator="matrix")
-    z = _initial(data, None if warm_start is None else warm_start / scaled.scaling.force,
-                 scaled.n_rows)
-    base = scaled.offset.copy()
-    base[: scaled.n_contacts] -= scaled.shift
-    tracker, _, iterations, _ = run_apgd_cones(data, scaled.cones, z, tol, max_iter,
-                                               base=data.scale * base, every=every)
-    forces = tracker.best * data.scale * scaled.scaling.force
-    return forces, coulomb_shift(convex, forces), iterations
-
-
-def _joint_applies(convex) -> bool:
-    """The joint phase runs in the compiled 2D cone loop: 2D friction cones and numba."""
-    from .gradient import _cone_kernel, _is_cone_2d
-
-    return _is_cone_2d(convex.cones) and _cone_kernel() is not None
 
 
 def _relative_change(new: np.ndarray, old: np.ndarray) -> float:
@@ -252,7 +225,7 @@ class _Branches:
         which a gap rate counts as opening or closing.
     """
 
-    def __init__(self, problem, warm_start: np.ndarray | None, threshold: float):
+    def __init__(self, problem: ConicProblem, warm_start: np.ndarray | None, threshold: float):
         self.base = problem
         self.union = problem.cones.kinds == ConeKind.UNION
         self.pulled = np.zeros(problem.cones.count, dtype=bool)
@@ -265,11 +238,11 @@ class _Branches:
     def pulled_contacts(self) -> np.ndarray:
         return np.flatnonzero(self.pulled)
 
-    def problem(self):
+    def problem(self) -> ConicProblem:
         """The convex problem with every UNION contact on its current piece."""
         return self.on(self.base)
 
-    def on(self, problem):
+    def on(self, problem: ConicProblem) -> ConicProblem:
         """``problem`` (the base problem or its normalised form) with the current pieces."""
         if not self.union.any():
             return problem
@@ -279,7 +252,7 @@ class _Branches:
         """No shift on pulled contacts."""
         return np.where(self.pulled, 0.0, shift)
 
-    def update(self, convex, forces: np.ndarray, length: float, force_unit: float) -> bool:
+    def update(self, convex: ConicProblem, forces: np.ndarray, length: float, force_unit: float) -> bool:
         """Flip the contacts inconsistent with the union; returns whether any flipped."""
         if not self.union.any():
             return False

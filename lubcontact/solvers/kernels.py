@@ -104,7 +104,7 @@ def apgd_box(indptr, indices, values, b, lower, upper, ratio, sign, z0, tol, max
              lipschitz, stable, divergence):
     """APGD (restart, backtracking) on ``min 1/2 z.Wz + b.z, lower <= z <= upper``.
 
-    Mirrors :func:`lubcontact.solvers.gradient.run_apgd`. ``ratio`` maps the
+    Mirrors :func:`lubcontact.solvers.gradient_loops.run_apgd`. ``ratio`` maps the
     iteration variables to the Jacobi-scaled ones of the stopping measure;
     ``sign`` marks one-sided rows (+1 lower bound 0, -1 upper bound 0) for the
     active-set count; with ``stable > 0`` the loop stops with status 3 once the
@@ -203,11 +203,11 @@ def apgd_cone2d(indptr, indices, values, b, base, lower, upper, cone_n, cone_t, 
                 cone_union, ratio, z0, tol, max_iter, lipschitz, divergence, every):
     """APGD (restart, backtracking) on ``min 1/2 z.Wz + b.z, z in K`` with 2D friction cones.
 
-    Mirrors :func:`lubcontact.solvers.gradient.run_apgd` (no active-set
+    Mirrors :func:`lubcontact.solvers.gradient_loops.run_apgd` (no active-set
     bookkeeping), with :func:`project_cones` as the projection: contacts with
     ``cone_union`` are UNION contacts, projected onto the nearer piece in the
     steps and in the stopping measure alike (as the numpy loop's
-    :meth:`~lubcontact.solvers.gradient.DualData.residual`). With
+    :meth:`~lubcontact.solvers.dual_data.DualData.residual`). With
     ``every > 0`` the problem is Coulomb's, not its convex relaxation: every
     ``every`` iterations the shift is updated from the current iterate,
     ``b_n = base_n + mu |g_T|`` on the cone contacts (``base``: the offset

@@ -353,7 +353,9 @@ def gluey_problems():
 def test_compiled_and_numpy_union_apgd_loops_agree(gluey_problems, scaling):
     """The compiled loop and the numpy loop on the same data: same iterations, same forces
     to rounding, both pushed and pulled contacts in the solution."""
-    from lubcontact.solvers.gradient import prepare, run_apgd, run_apgd_cones
+    from lubcontact.solvers.compiled_apgd import run_apgd_cones
+    from lubcontact.solvers.dual_data import prepare
+    from lubcontact.solvers.gradient_loops import run_apgd
 
     for problem, _ in gluey_problems:
         scaled = problem.normalized()

@@ -1,0 +1,220 @@
+"""APGD in the compiled loops of :mod:`.kernels`: dispatch, the loops' drivers, and the joint
+Coulomb phase.
+
+The compiled loops need the assembled ``W_it`` (``S W S``) and numba; each
+loader returns None when numba is unavailable, and the numpy loop of
+:func:`.gradient_loops.run_apgd` is then used. :func:`run_apgd_box` covers boxes
+(frictionless problems, with the active-set finish of :mod:`.active_set`),
+:func:`run_apgd_cones` boxes and 2D friction cones (UNION contacts included).
+
+:func:`joint_coulomb_apgd` is the joint phase of the fixed point on ``s``
+(``joint`` of :func:`lubcontact.solvers.solve_coulomb`): one Jacobi-scaled
+APGD run in the 2D cone loop that solves Coulomb's problem itself, updating
+the shift ``mu |g_T|`` from its iterate every ``every`` iterations;
+:func:`joint_applies` says when it can run.
+"""
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+
+from ..problem.cones import Cones
+from ..problem.conic import ConicProblem
+from ..problem.metrics import coulomb_shift
+from .active_set import ActiveSetFinish
+from .dual_data import DIVERGENCE_FACTOR, DualData, ResidualTracker, initial_lipschitz, initial_point, prepare
+from .result import CONVERGED, DIVERGED, MAX_ITER
+
+_REQUEST_FINISH = 3                      # kernel status: the active set has settled
+_KERNEL_STATUS = {0: CONVERGED, 1: MAX_ITER, 2: DIVERGED}
+
+
+def box_kernel() -> Callable | None:
+    """The compiled APGD loop of :mod:`.kernels`, or None when numba is unavailable."""
+    try:
+        from .kernels import apgd_box
+    except ImportError:
+        return None
+    return apgd_box
+
+
+def cone_kernel() -> Callable | None:
+    """The compiled APGD loop with 2D friction (and UNION) cones, or None when numba is
+    unavailable."""
+    try:
+        from .kernels import apgd_cone2d
+    except ImportError:
+        return None
+    return apgd_cone2d
+
+
+def is_box(cones: Cones) -> bool:
+    """True when K is a box (no friction cone): the fused kernel applies."""
+    return all(piece[0].size == 0 for piece in cones.projector.pieces)
+
+
+def is_cone_2d(cones: Cones) -> bool:
+    """True when K is a product of a box and 2D friction cones (Coulomb or UNION contacts)."""
+    coulomb, union = cones.projector.pieces
+    return coulomb[0].size + union[0].size > 0 and cones.tangent_dim == 1
+
+
+def run_apgd_cones(data: DualData, cones: Cones, z: np.ndarray, tol: float, max_iter: int,
+                   base: np.ndarray | None = None,
+                   every: int = 0) -> tuple[ResidualTracker, str, int, np.ndarray]:
+    """APGD in the compiled kernel :func:`.kernels.apgd_cone2d` (2D friction and UNION cones).
+
+    With ``every > 0`` and ``base`` (the iteration offset without shift) it
+    solves Coulomb's problem, updating the shift every ``every`` iterations
+    (see the kernel).
+
+    Parameters
+    ----------
+    data : DualData
+        The problem (``W_it`` is assembled here if it is not yet).
+    cones : Cones
+        Its cones (:func:`is_cone_2d`).
+    z : ndarray, shape (n,)
+        Starting iterate.
+    tol : float
+        Stopping tolerance on the residual.
+    max_iter : int
+        Iteration cap.
+    base : ndarray, shape (n,), optional
+        Iteration offset without shift (with ``every > 0``).
+    every : int
+        Shift update period (0: no update, the convex problem).
+
+    Returns
+    -------
+    tracker : ResidualTracker
+        Best iterate and residual history.
+    status : str
+    iterations : int
+    offset : ndarray, shape (n,)
+        The offset ``b_it`` of the last shift.
+    """
+    kernel = cone_kernel()
+    matrix = data.assembled()
+    (cone_n, cone_t, cone_mu), (union_n, union_t, union_mu) = cones.projector.pieces
+    union = np.repeat([False, True], [cone_n.size, union_n.size])
+    lipschitz = initial_lipschitz(data, z)
+    best, best_residual, history, code, iterations, products, _, _, offset = kernel(
+        matrix.indptr, matrix.indices, matrix.data, data.offset,
+        data.offset if base is None else base, data.project.lower, data.project.upper,
+        np.concatenate([cone_n, union_n]), np.concatenate([cone_t[:, 0], union_t[:, 0]]),
+        np.concatenate([cone_mu, union_mu]), union, data.ratio, z, tol, max_iter, lipschitz,
+        DIVERGENCE_FACTOR, every)
+    data.products += products
+    tracker = ResidualTracker(data, tol)
+    tracker.history.extend(history)
+    tracker.best, tracker.best_residual = best, best_residual
+    return tracker, _KERNEL_STATUS.get(code, MAX_ITER), iterations, offset
+
+
+def run_apgd_box(data: DualData, z: np.ndarray, tol: float, max_iter: int,
+                 finish: ActiveSetFinish | None) -> tuple[ResidualTracker, str, int]:
+    """APGD in the compiled kernel :func:`.kernels.apgd_box` (K a box, :func:`is_box`);
+    returns to Python only for active-set solves.
+
+    Parameters
+    ----------
+    data : DualData
+        The problem, with ``W_it`` assembled (``data.matrix``).
+    z : ndarray, shape (n,)
+        Starting iterate.
+    tol : float
+        Stopping tolerance on the residual.
+    max_iter : int
+        Iteration cap.
+    finish : ActiveSetFinish or None
+        Exact finish tried when the kernel reports a settled active set (and every
+        ``finish.period`` iterations).
+
+    Returns
+    -------
+    tracker : ResidualTracker
+        Best iterate and residual history.
+    status : str
+    iterations : int
+    """
+    kernel = box_kernel()
+    matrix = data.matrix
+    lipschitz = initial_lipschitz(data, z)
+    sign = finish.sign if finish is not None else np.zeros(z.size)
+    stable = finish.stable_iterations if finish is not None else 0
+    chunk = finish.period if finish is not None and finish.period > 0 else max_iter
+    tracker = ResidualTracker(data, tol)
+    done = 0
+    while True:
+        best, best_residual, history, code, iterations, products, last, lipschitz = kernel(
+            matrix.indptr, matrix.indices, matrix.data, data.offset, data.project.lower,
+            data.project.upper, data.ratio, sign, z, tol, min(chunk, max_iter - done), lipschitz,
+            stable, DIVERGENCE_FACTOR)
+        done += iterations
+        data.products += products
+        tracker.history.extend(history)
+        if best_residual < tracker.best_residual:
+            tracker.best_residual, tracker.best = best_residual, best
+        if code not in (_REQUEST_FINISH, 1) or done >= max_iter or finish is None:
+            return tracker, _KERNEL_STATUS.get(code, MAX_ITER), done
+        z = last
+        gradient = data.product(last) + data.offset
+        candidate = finish.solve(finish.active(last, gradient), data.residual(last, gradient))
+        if candidate is not None:
+            status = tracker.record(candidate, data.product(candidate) + data.offset)
+            if status:
+                return tracker, status, done
+            z = candidate
+        if done >= max_iter:
+            return tracker, MAX_ITER, done
+
+
+
+def joint_coulomb_apgd(convex: ConicProblem, shift: np.ndarray, warm_start: np.ndarray | None,
+                       tol: float, max_iter: int,
+                       every: int) -> tuple[np.ndarray, np.ndarray, int]:
+    """Coulomb's problem by APGD with the shift updated inside (``joint`` of
+    :func:`lubcontact.solvers.solve_coulomb`).
+
+    Parameters
+    ----------
+    convex : ConicProblem
+        The convex problem (UNION contacts fixed on a piece), in physical units,
+        with 2D friction cones (:func:`joint_applies`).
+    shift : ndarray, shape (nc,)
+        The starting shift (physical length units).
+    warm_start : ndarray, shape (n_rows,), or None
+        Starting forces (physical units).
+    tol : float
+        Tolerance on the modified (De Saxce) natural map.
+    max_iter : int
+        Iteration cap.
+    every : int
+        Shift update period in iterations, > 0.
+
+    Returns
+    -------
+    forces : ndarray, shape (n_rows,)
+        The best iterate (physical units).
+    shift : ndarray, shape (nc,)
+        The shift ``mu |g_T|`` they map to (physical units).
+    iterations : int
+        The iterations done; the outer loop of the fixed point checks the result.
+    """
+    scaled = convex.with_shift(shift).normalized()
+    data = prepare(scaled, scaling=True, operator="matrix")
+    z = initial_point(data, None if warm_start is None else warm_start / scaled.scaling.force,
+                      scaled.n_rows)
+    base = scaled.offset.copy()
+    base[: scaled.n_contacts] -= scaled.shift
+    tracker, _, iterations, _ = run_apgd_cones(data, scaled.cones, z, tol, max_iter,
+                                               base=data.scale * base, every=every)
+    forces = tracker.best * data.scale * scaled.scaling.force
+    return forces, coulomb_shift(convex, forces), iterations
+
+
+def joint_applies(cones: Cones) -> bool:
+    """The joint phase runs in the compiled 2D cone loop: 2D friction cones and numba."""
+    return is_cone_2d(cones) and cone_kernel() is not None

@@ -1,0 +1,302 @@
+"""The dual problem ``min 1/2 x.Wx + b.x, x in K`` as the gradient methods iterate on it.
+
+:func:`prepare` builds the :class:`DualData` of a normalised problem (scaled
+operator, offset, projection); :class:`ResidualTracker` applies the stopping
+rule and keeps the best iterate; :func:`initial_point`, :func:`largest_eigenvalue`
+and :func:`initial_lipschitz` start the loops of :mod:`.gradient_loops` and
+:mod:`.compiled_apgd`.
+
+Scaling and stopping rule
+-------------------------
+Jacobi scaling: each contact gets one factor ``s_c = 1 / sqrt(mean of the
+diagonal of W over the contact's rows)`` (one per contact, so that every
+cone is mapped onto itself), and the scaled variables ``y = x / s`` see
+``W' = S W S`` with a unit diagonal (a unit mean diagonal per friction
+contact) and ``b' = S b``. ``y`` has the units of a velocity.
+
+All methods stop on the same measure, the Jacobi-scaled natural-map residual
+in rms form::
+
+    r(x) = |y - P_K(y - (W' y + b'))|_2 / sqrt(n_rows),     y = x / s
+
+which, on a normalised problem (velocities O(1)), is a velocity in units of
+the free velocity: ``r <= tol`` stops with status ``converged``. The method
+returns the iterate with the smallest ``r`` seen (the best iterate).
+A stopping rule is not an accuracy: see :mod:`.active_set` for the exact
+finish of frictionless problems.
+
+Operator
+--------
+``W x`` is applied either from the assembled sparse W (``operator="matrix"``)
+or matrix-free as ``L^T (L x)`` (``operator="factor"``). Measured on the
+10^4-grain pile (docs/benchmarks.md) both cost about the same per product
+(0.25 ms vs 0.22 ms with a CSR copy of ``L^T``). With ``"auto"`` the
+matrix-free product is used whenever the factor exists; which methods
+assemble ``S W S`` instead is said in :mod:`.gradient`.
+"""
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.sparse as sp
+
+from ..problem.conic import ConicProblem
+from .result import CONVERGED, DIVERGED
+
+DIVERGENCE_FACTOR = 1e12
+"""A residual above this factor times ``max(first residual, 1)`` stops a loop as ``diverged``."""
+
+
+@dataclass
+class DualData:
+    """The dual problem in the iteration variables ``z = x / s_it``.
+
+    Attributes
+    ----------
+    apply : callable
+        ``z -> W_it z`` with ``W_it = S_it W S_it``.
+    offset : ndarray, shape (n,)
+        ``b_it = S_it b``.
+    scale : ndarray, shape (n,)
+        ``s_it`` (ones without scaling).
+    jacobi : ndarray, shape (n,)
+        Jacobi scale ``s`` of the stopping measure.
+    project : callable
+        Projection onto K (invariant under the per-contact scaling).
+    matrix : scipy.sparse matrix or None
+        ``W_it`` when assembled (None with the matrix-free operator until
+        :meth:`assembled` is called).
+    factor : scipy.sparse matrix or None
+        ``L S_it`` (``W_it = (L S_it)^T (L S_it)``) for the matrix-free operator.
+    products : int
+        Products ``W z`` done so far.
+    ratio : ndarray, shape (n,)
+        ``s_it / s``: maps ``z`` to the Jacobi-scaled variables of the stopping measure.
+    """
+
+    apply: Callable[[np.ndarray], np.ndarray]
+    offset: np.ndarray
+    scale: np.ndarray
+    jacobi: np.ndarray
+    project: Callable
+    matrix: sp.spmatrix | None = None
+    factor: sp.spmatrix | None = None
+    products: int = 0
+    ratio: np.ndarray = field(init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        self.ratio = self.scale / self.jacobi
+        self._rms = 1.0 / np.sqrt(max(self.offset.size, 1))
+
+    def product(self, z: np.ndarray) -> np.ndarray:
+        """``W_it z``, shape (n,), counted in :attr:`products`."""
+        self.products += 1
+        return self.apply(z)
+
+    def residual(self, z: np.ndarray, gradient: np.ndarray) -> float:
+        """The stopping measure ``r`` (module docstring) at ``z`` with gradient ``W_it z + b_it``."""
+        y = z * self.ratio
+        return float(np.linalg.norm(y - self.project(y - gradient / self.ratio)) * self._rms)
+
+    def objective(self, z: np.ndarray, product: np.ndarray) -> float:
+        """``1/2 z.W_it z + b_it.z``, with ``product = W_it z``."""
+        return float(0.5 * z @ product + self.offset @ z)
+
+    def assembled(self) -> sp.csr_matrix:
+        """``W_it`` as a sparse matrix, assembled from the factor on first use."""
+        if self.matrix is None:
+            self.matrix = sp.csr_matrix(self.factor.T @ self.factor)
+        return self.matrix
+
+
+def jacobi_scale(problem: ConicProblem) -> np.ndarray:
+    """Per-row scale ``s``, constant over each contact's rows (see module docstring).
+
+    Parameters
+    ----------
+    problem : ConicProblem
+        A normalised problem (``delassus`` or ``delassus_factor``, ``cones``).
+
+    Returns
+    -------
+    ndarray, shape (n_rows,)
+        ``s = 1 / sqrt(mean diagonal of W over the contact's rows)`` (1 where that mean is 0).
+    """
+    cones = problem.cones
+    factor = problem.delassus_factor
+    diagonal = np.asarray(problem.delassus.diagonal()) if factor is None \
+        else np.asarray(factor.multiply(factor).sum(axis=0)).ravel()
+    nc = cones.count
+    total = diagonal[:nc].copy()
+    count = np.ones(nc)
+    if cones.has_friction:
+        tangent = diagonal[nc:].reshape(-1, cones.tangent_dim)
+        np.add.at(total, cones.tangential, tangent.sum(axis=1))
+        np.add.at(count, cones.tangential, cones.tangent_dim)
+    mean = total / count
+    per_contact = np.where(mean > 0, 1.0 / np.sqrt(np.where(mean > 0, mean, 1.0)), 1.0)
+    scale = np.empty(problem.n_rows)
+    scale[:nc] = per_contact
+    if cones.has_friction:
+        scale[nc:] = np.repeat(per_contact[cones.tangential], cones.tangent_dim)
+    return scale
+
+
+def prepare(problem: ConicProblem, scaling: bool, operator: str = "auto") -> DualData:
+    """Build the iteration data of a (normalised) problem.
+
+    Parameters
+    ----------
+    problem : ConicProblem
+        A normalised problem with ``n_rows`` rows.
+    scaling : bool
+        Iterate on the Jacobi-scaled problem.
+    operator : {"auto", "matrix", "factor"}
+        How ``W z`` is applied (module docstring).
+
+    Returns
+    -------
+    DualData
+        Its vectors have shape (n_rows,).
+
+    Raises
+    ------
+    ValueError
+        For an unknown ``operator``, or ``"factor"`` on a problem without ``delassus_factor``.
+    """
+    if operator not in ("auto", "matrix", "factor"):
+        raise ValueError(f"operator: must be 'auto', 'matrix' or 'factor', got {operator!r}")
+    has_factor = problem.delassus_factor is not None
+    if operator == "factor" and not has_factor:
+        raise ValueError("operator: 'factor' needs a problem with delassus_factor")
+    use_factor = has_factor and operator != "matrix"
+    jacobi = jacobi_scale(problem)
+    scale = jacobi if scaling else np.ones(problem.n_rows)
+    offset = scale * problem.offset
+    if use_factor:
+        factor = sp.csr_matrix(problem.delassus_factor @ sp.diags(scale))
+        transposed = sp.csr_matrix(factor.T)
+        return DualData(apply=lambda z: transposed @ (factor @ z), offset=offset, scale=scale,
+                        jacobi=jacobi, project=problem.cones.projector, factor=factor)
+    if has_factor:
+        factor = sp.csr_matrix(problem.delassus_factor @ sp.diags(scale))
+        matrix = sp.csr_matrix(factor.T @ factor)
+    else:
+        matrix = sp.csr_matrix(sp.diags(scale) @ problem.delassus @ sp.diags(scale))
+    return DualData(apply=matrix.dot, offset=offset, scale=scale, jacobi=jacobi,
+                    project=problem.cones.projector, matrix=matrix)
+
+
+@dataclass
+class ResidualTracker:
+    """Best iterate, residual history and the stopping decision.
+
+    Attributes
+    ----------
+    data : DualData
+        The problem iterated on (its :meth:`~DualData.residual` is the measure).
+    tol : float
+        ``converged`` once the residual is ``<= tol``.
+    best : ndarray, shape (n,), or None
+        The iterate with the smallest residual recorded (None before the first).
+    best_residual : float
+        Its residual.
+    first : float or None
+        The first residual recorded (the scale of the divergence test).
+    history : list of float
+        Every residual recorded.
+    """
+
+    data: DualData
+    tol: float
+    best: np.ndarray = None
+    best_residual: float = np.inf
+    first: float | None = None
+    history: list = field(default_factory=list)
+
+    def record(self, z: np.ndarray, gradient: np.ndarray) -> str | None:
+        """Record ``z``; return ``converged``/``diverged`` to stop, else None."""
+        residual = self.data.residual(z, gradient)
+        self.history.append(residual)
+        if self.first is None:
+            self.first = residual
+        if residual < self.best_residual:
+            self.best_residual, self.best = residual, z.copy()
+        if residual <= self.tol:
+            return CONVERGED
+        if not np.isfinite(residual) or residual > DIVERGENCE_FACTOR * max(self.first, 1.0):
+            return DIVERGED
+        return None
+
+
+def initial_point(data: DualData, warm_start: np.ndarray | None, n: int) -> np.ndarray:
+    """The starting iterate: zero, or the warm start in iteration variables, projected onto K.
+
+    Parameters
+    ----------
+    data : DualData
+    warm_start : ndarray, shape (n,), or None
+        Forces of the normalised problem.
+    n : int
+        Number of rows.
+
+    Returns
+    -------
+    ndarray, shape (n,)
+    """
+    if warm_start is None:
+        return np.zeros(n)
+    return data.project(np.asarray(warm_start, dtype=float) / data.scale)
+
+
+def largest_eigenvalue(data: DualData, n: int, iterations: int) -> float:
+    """Largest eigenvalue of ``W_it`` by power iteration (deterministic start).
+
+    Parameters
+    ----------
+    data : DualData
+        Operator of shape (n, n).
+    n : int
+        Number of rows.
+    iterations : int
+        Power iterations (products ``W_it v``).
+
+    Returns
+    -------
+    float
+        The estimate (1.0 when a product vanishes).
+    """
+    vector = np.random.default_rng(0).uniform(0.5, 1.5, n)
+    value = 1.0
+    for _ in range(iterations):
+        image = data.product(vector)
+        value = float(np.linalg.norm(image))
+        if value == 0.0:
+            return 1.0
+        vector = image / value
+    return value
+
+
+def initial_lipschitz(data: DualData, z: np.ndarray, product: np.ndarray | None = None) -> float:
+    """Starting Lipschitz estimate of the APGD loops: ``|W d| / |d|`` for a
+    deterministic random ``d`` (the loops' backtracking corrects it).
+
+    Parameters
+    ----------
+    data : DualData
+    z : ndarray, shape (n,)
+        The starting iterate.
+    product : ndarray, shape (n,), optional
+        ``W_it z`` when already computed.
+
+    Returns
+    -------
+    float
+        The estimate, at least 1e-12.
+    """
+    product = data.product(z) if product is None else product
+    probe = z + np.random.default_rng(0).uniform(-1.0, 1.0, z.size)
+    return max(float(np.linalg.norm(data.product(probe) - product) /
+                     np.linalg.norm(probe - z)), 1e-12)
