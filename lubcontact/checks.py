@@ -6,17 +6,18 @@ shows the offending value, so that a user can find the mistake in their input.
 from __future__ import annotations
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 
-def _show(value: np.ndarray | float) -> str:
+def _show(value: ArrayLike) -> str:
     arr = np.asarray(value)
     if arr.size <= 6:
         return np.array2string(arr, precision=6) if arr.ndim else repr(float(arr))
     return f"array of shape {arr.shape}"
 
 
-def as_array(field: str, value, shape: tuple[int | None, ...] | None = None,
-             dtype=float) -> np.ndarray:
+def as_array(field: str, value: ArrayLike, shape: tuple[int | None, ...] | None = None,
+             dtype: type = float) -> np.ndarray:
     """Convert ``value`` to an array, checking its shape and finiteness.
 
     Parameters
@@ -46,7 +47,7 @@ def as_array(field: str, value, shape: tuple[int | None, ...] | None = None,
     return arr
 
 
-def positive(field: str, value, shape: tuple[int | None, ...] | None = None) -> np.ndarray:
+def positive(field: str, value: ArrayLike, shape: tuple[int | None, ...] | None = None) -> np.ndarray:
     """Like :func:`as_array` and require every entry to be strictly positive."""
     arr = as_array(field, value, shape)
     if np.any(arr <= 0):
@@ -55,7 +56,7 @@ def positive(field: str, value, shape: tuple[int | None, ...] | None = None) -> 
     return arr
 
 
-def per_item(field: str, value, count: int) -> np.ndarray:
+def per_item(field: str, value: ArrayLike, count: int) -> np.ndarray:
     """One value for each of ``count`` items: a scalar is repeated, an array must have shape (count,).
 
     Returns a new float array of shape (count,); finiteness is checked as in :func:`as_array`.
@@ -68,19 +69,19 @@ def per_item(field: str, value, count: int) -> np.ndarray:
     return as_array(field, arr, shape=(count,)).copy()
 
 
-def integer(field: str, value, minimum: int = 0) -> int:
+def integer(field: str, value: float, minimum: int = 0) -> int:
     """An integer (an integral float such as 3.0 is accepted) >= ``minimum``."""
     ok = np.ndim(value) == 0 and np.isfinite(value) and float(value) == int(value)
     require(bool(ok) and int(value) >= minimum, field, f"must be an integer >= {minimum}", value)
     return int(value)
 
 
-def positive_scalar(field: str, value) -> float:
+def positive_scalar(field: str, value: float) -> float:
     """A finite, strictly positive float."""
     return float(positive(field, value, shape=()))
 
 
-def nonnegative(field: str, value, shape: tuple[int | None, ...] | None = None) -> np.ndarray:
+def nonnegative(field: str, value: ArrayLike, shape: tuple[int | None, ...] | None = None) -> np.ndarray:
     """Like :func:`as_array` and require every entry to be >= 0."""
     arr = as_array(field, value, shape)
     if np.any(arr < 0):
@@ -89,7 +90,7 @@ def nonnegative(field: str, value, shape: tuple[int | None, ...] | None = None) 
     return arr
 
 
-def require(condition: bool, field: str, message: str, value=None) -> None:
+def require(condition: bool, field: str, message: str, value: ArrayLike | None = None) -> None:
     """Raise ``ValueError`` naming ``field`` unless ``condition`` holds."""
     if not condition:
         shown = "" if value is None else f", got {_show(value)}"

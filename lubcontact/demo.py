@@ -15,10 +15,11 @@ from pathlib import Path
 import numpy as np
 
 from . import scenes
-from .sim.simulation import Simulation
-from .model.laws import GlueyLubrication
 from .bench.harness import compare_methods
 from .bench.tables import format_table
+from .model.laws import GlueyLubrication
+from .sim.simulation import Simulation
+from .sim.trajectory import StepReport
 from .solvers import methods
 
 
@@ -44,7 +45,8 @@ def push_pull_section(out: Path, dt: float = 1e-2) -> str:
         f"  plot: {out / 'push_pull.png'}"])
 
 
-def _plot_push_pull(path, times, gap, gamma, exact_gap, exact_gamma):
+def _plot_push_pull(path: Path, times: np.ndarray, gap: np.ndarray, gamma: np.ndarray,
+                    exact_gap: np.ndarray, exact_gamma: np.ndarray) -> None:
     import matplotlib.pyplot as plt
 
     fig, axes = plt.subplots(2, 1, figsize=(7, 6), sharex=True)
@@ -87,7 +89,7 @@ def pile_section(out: Path, n_grains: int = 200, steps: int = 80) -> str:
         table])
 
 
-def _plot_pile(path: Path, sim: Simulation, report) -> None:
+def _plot_pile(path: Path, sim: Simulation, report: StepReport) -> None:
     """The pile with its grain-grain contacts: unglued in grey, glued coloured by ``log10 |gamma|``.
 
     A linear scale drawn to the deepest glue (gamma near -100) painted the common glued
@@ -117,7 +119,8 @@ def _plot_pile(path: Path, sim: Simulation, report) -> None:
                                norm=LogNorm(vmin=(-gamma[glued]).min(), vmax=(-gamma[glued]).max()),
                                label=f"glued (gamma < 0): {np.count_nonzero(glued)}")
         ax.add_collection(lines)
-        fig.colorbar(lines, ax=ax, label=r"glue depth $|\gamma|$ (impulse; units $\rho = g = d = 1$; log scale)")
+        fig.colorbar(lines, ax=ax,
+                     label=r"glue depth $|\gamma|$ (impulse; units $\rho = g = d = 1$; log scale)")
     ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.1), ncol=2, fontsize=8)
     ax.set_xlim(0, sim.scene.metadata["width"])
     ax.set_ylim(0, grains.positions[:, 1].max() + 1)

@@ -28,16 +28,17 @@ from __future__ import annotations
 
 import importlib
 import os
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable
+from types import ModuleType
 
 import numpy as np
 
-from ..model.laws import Coulomb, GlueyLubrication, Inelastic, Law
-from ..problem.step import StepProblem
-from ..model.scene import Scene
 from ..model.assemble import assemble
+from ..model.laws import Coulomb, GlueyLubrication, Inelastic, Law
+from ..model.scene import Scene
+from ..problem.step import StepProblem
 
 PACKAGE_DATA = Path(__file__).resolve().parent / "data"
 DATA_DIR_ENV = "LUBCONTACT_DATA_DIR"
@@ -183,7 +184,7 @@ class ProblemSet:
 
 
 # -- lazy sources ------------------------------------------------------------------------------
-def _import(module: str, what: str):
+def _import(module: str, what: str) -> ModuleType:
     """Import ``module`` or raise SetUnavailable."""
     try:
         return importlib.import_module(module)
@@ -385,8 +386,8 @@ SETS: dict[str, ProblemSet] = {s.name: s for s in [
                "cold against warm-started solves", build_sequences, seeds={"settling_pile": 3}),
     ProblemSet("flows", "inclined flows at 25 degrees, 60 disks: dry Coulomb and gluey + Coulomb, "
                "3 consecutive steps", build_flows, seeds={"sedimentation": 2}),
-    ProblemSet("hard", "the hard-case suite (lubcontact/bench/cases/hard.py, docs/records/hard_cases.md): one solve "
-               "each, errors against the exact velocities where known", build_hard),
+    ProblemSet("hard", "the hard-case suite (lubcontact/bench/cases/hard.py, docs/records/hard_cases.md): "
+               "one solve each, errors against the exact velocities where known", build_hard),
     ProblemSet("siconos-fc2d", "Siconos 2D granular flow on a wall (667, 2020, 7002 contacts)",
                build_siconos, reads_data=True),
     ProblemSet("fclib", "FCLIB 3D local problems (48 to 286 contacts)", build_fclib,

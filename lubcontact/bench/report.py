@@ -40,7 +40,8 @@ def environment() -> dict:
         except metadata.PackageNotFoundError:
             versions[name] = "absent"
     try:
-        commit = subprocess.run(["git", "describe", "--always", "--dirty"], cwd=Path(__file__).resolve().parent,
+        commit = subprocess.run(["git", "describe", "--always", "--dirty"],
+                                cwd=Path(__file__).resolve().parent,
                                 capture_output=True, text=True, timeout=10).stdout.strip()
     except (OSError, subprocess.SubprocessError):
         commit = ""

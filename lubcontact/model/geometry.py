@@ -96,7 +96,12 @@ def close_pairs(centres: np.ndarray, radii: np.ndarray, n_free: int, d_max: floa
     return a[order], b[order], keys[order], gaps[order], normals[order], radius_a[order]
 
 
-def _grain_pairs(centres, radii, n_free, d_max, period=None):
+_Pairs = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+"""body_a, body_b, gaps, normals, radius_a of some pairs (unsorted)."""
+
+
+def _grain_pairs(centres: np.ndarray, radii: np.ndarray, n_free: int, d_max: float,
+                 period: float | None = None) -> _Pairs:
     dim = centres.shape[1]
     empty = (np.zeros(0, int), np.zeros(0, int), np.zeros(0), np.zeros((0, dim)), np.zeros(0))
     if len(radii) < 2 or n_free == 0:
@@ -127,7 +132,8 @@ def _grain_pairs(centres, radii, n_free, d_max, period=None):
     return a, b, gaps, normals, radii[a]
 
 
-def _with_ghosts(centres, reach, period):
+def _with_ghosts(centres: np.ndarray, reach: float,
+                 period: float | None) -> tuple[np.ndarray, np.ndarray]:
     """Centres plus their periodic images near the ends of ``[0, period)``, and the owner of each.
 
     Raises
@@ -152,7 +158,8 @@ def _with_ghosts(centres, reach, period):
     return points, np.concatenate([owner, near_start, near_end])
 
 
-def _plane_pairs(centres, radii, plane_points, plane_normals, first_plane_id, d_max):
+def _plane_pairs(centres: np.ndarray, radii: np.ndarray, plane_points: np.ndarray,
+                 plane_normals: np.ndarray, first_plane_id: int, d_max: float) -> _Pairs:
     offsets = np.einsum("pd,pd->p", plane_points, plane_normals)
     gaps = centres @ plane_normals.T - offsets[None, :] - radii[:, None]
     b, p = np.nonzero(gaps < d_max)

@@ -19,8 +19,8 @@ a pair that leaves the candidate list forgets its gamma.
 """
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Callable, Union
 
 import numpy as np
 
@@ -41,14 +41,14 @@ class PairState:
         return lookup_by_key(self.keys, self.gamma, np.asarray(keys))
 
     @classmethod
-    def from_contacts(cls, keys: np.ndarray, gamma: np.ndarray) -> "PairState":
+    def from_contacts(cls, keys: np.ndarray, gamma: np.ndarray) -> PairState:
         """Store the non-zero gammas of the current contacts (keys sorted)."""
         glued = gamma != 0
         order = np.argsort(keys[glued], kind="stable")
         return cls(keys=keys[glued][order].astype(np.int64), gamma=gamma[glued][order])
 
 
-FrictionLike = Union[float, Callable[[Contacts], np.ndarray]]
+FrictionLike = float | Callable[[Contacts], np.ndarray]
 
 
 class Law:

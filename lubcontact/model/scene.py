@@ -10,10 +10,12 @@ dimensionless). Forces are per unit depth in 2D.
 """
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
-from typing import Callable, Union
+from typing import Union
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .. import checks
 from .geometry import close_pairs, smaller_radius
@@ -102,8 +104,9 @@ class Grains:
     densities: np.ndarray | None = None
 
     @classmethod
-    def create(cls, positions, radii, *, masses=None, densities=None, velocities=None,
-               spins=None, inertias=None) -> "Grains":
+    def create(cls, positions: ArrayLike, radii: ArrayLike, *, masses: ArrayLike | None = None,
+               densities: ArrayLike | None = None, velocities: ArrayLike | None = None,
+               spins: ArrayLike | None = None, inertias: ArrayLike | None = None) -> Grains:
         """Build and validate grains; masses come from ``masses`` or ``densities``.
 
         Raises
@@ -146,7 +149,7 @@ class Grains:
     def dim(self) -> int:
         return self.positions.shape[1]
 
-    def copy(self) -> "Grains":
+    def copy(self) -> Grains:
         return replace(self, **{k: (None if v is None else v.copy())
                                 for k, v in vars(self).items()})
 
@@ -167,7 +170,7 @@ class Planes:
     normals: np.ndarray
 
     @classmethod
-    def create(cls, points, normals, dim: int) -> "Planes":
+    def create(cls, points: ArrayLike, normals: ArrayLike, dim: int) -> Planes:
         """Validate planes given as one vector each (or a single vector for one plane).
 
         Raises
@@ -199,7 +202,7 @@ def _prescribed(field: str, value: ForceLike) -> ForceLike:
     return value
 
 
-def _vectors(field: str, value, dim: int) -> np.ndarray:
+def _vectors(field: str, value: ArrayLike, dim: int) -> np.ndarray:
     """Vectors of dimension ``dim`` as an array of shape (count, dim); one vector may be flat."""
     arr = np.asarray(value, dtype=float)
     if arr.size == 0:
@@ -275,12 +278,13 @@ class Scene:
     fixed_velocity: ForceLike = None
 
     @classmethod
-    def create(cls, grains: Grains, *, plane_points=(), plane_normals=(), fixed_positions=None,
-               fixed_radii=None, gravity=None, fluid_density: float = 0.0,
+    def create(cls, grains: Grains, *, plane_points: ArrayLike = (), plane_normals: ArrayLike = (),
+               fixed_positions: ArrayLike | None = None, fixed_radii: ArrayLike | None = None,
+               gravity: ArrayLike | None = None, fluid_density: float = 0.0,
                external_force: ForceLike = None, time: float = 0.0,
                overlap_tolerance: float = 1e-6, check_overlaps: bool = True,
                metadata: dict | None = None, period: float | None = None,
-               plane_velocity: ForceLike = None, fixed_velocity: ForceLike = None) -> "Scene":
+               plane_velocity: ForceLike = None, fixed_velocity: ForceLike = None) -> Scene:
         """Validate and assemble a scene.
 
         Raises
@@ -418,7 +422,7 @@ class Scene:
                 f"{a[c]} and grain {b[c]} exceeds overlap_tolerance "
                 f"{self.overlap_tolerance} x radius {smaller[c]:.3e}")
 
-    def copy(self) -> "Scene":
+    def copy(self) -> Scene:
         """A copy whose arrays (grains, planes, fixed grains) are its own."""
         planes = Planes(points=self.planes.points.copy(), normals=self.planes.normals.copy())
         return replace(self, grains=self.grains.copy(), planes=planes,

@@ -23,8 +23,13 @@ from __future__ import annotations
 from dataclasses import dataclass
 from enum import IntEnum
 from functools import cached_property
+from types import ModuleType
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:                       # cvxpy is imported lazily, by the cvxpy methods only
+    from cvxpy import Constraint, Expression
 
 
 class ConeKind(IntEnum):
@@ -35,7 +40,8 @@ class ConeKind(IntEnum):
     UNION = 4
 
 
-def project_friction_cone(normal: np.ndarray, tangential: np.ndarray, mu: np.ndarray):
+def project_friction_cone(normal: np.ndarray, tangential: np.ndarray,
+                          mu: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Euclidean projection onto ``{|t| <= mu n}``, vectorised.
 
     Parameters
@@ -60,7 +66,8 @@ def project_friction_cone(normal: np.ndarray, tangential: np.ndarray, mu: np.nda
     return new_n, new_t
 
 
-def project_dual_friction_cone(normal: np.ndarray, tangential: np.ndarray, mu: np.ndarray):
+def project_dual_friction_cone(normal: np.ndarray, tangential: np.ndarray,
+                               mu: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Euclidean projection onto the dual cone ``{mu |t| <= n}``, vectorised.
 
     Same arguments as :func:`project_friction_cone`; ``mu = 0`` gives the
@@ -99,7 +106,7 @@ class Cones:
     tangent_dim: int
 
     @classmethod
-    def frictionless(cls, kinds: np.ndarray, tangent_dim: int) -> "Cones":
+    def frictionless(cls, kinds: np.ndarray, tangent_dim: int) -> Cones:
         kinds = np.asarray(kinds, dtype=np.int8)
         return cls(kinds=kinds, mu=np.zeros(len(kinds)), tangential=np.zeros(0, dtype=int),
                    tangent_dim=tangent_dim)
@@ -123,7 +130,7 @@ class Cones:
     def mask(self, kind: ConeKind) -> np.ndarray:
         return self.kinds == kind
 
-    def split(self, forces: np.ndarray):
+    def split(self, forces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Normal part (nc,) and tangential part (nt, tangent_dim) of a force vector."""
         nc = self.count
         return forces[:nc], forces[nc:].reshape(-1, self.tangent_dim)
@@ -135,7 +142,7 @@ class Cones:
         """The UNION contacts whose force lies on the pulled piece (``lam_n < 0``), shape (nc,)."""
         return (self.kinds == ConeKind.UNION) & (forces[: self.count] < 0)
 
-    def with_branches(self, pulled: np.ndarray) -> "Cones":
+    def with_branches(self, pulled: np.ndarray) -> Cones:
         """Convex cones with each UNION contact replaced by one of its pieces.
 
         Parameters
@@ -150,7 +157,7 @@ class Cones:
         return Cones(kinds=kinds, mu=self.mu, tangential=self.tangential, tangent_dim=self.tangent_dim)
 
     @cached_property
-    def projector(self) -> "ConeProjector":
+    def projector(self) -> ConeProjector:
         """The projection with its index arrays prepared once (for iterative solvers)."""
         return ConeProjector(self)
 
@@ -213,7 +220,8 @@ class Cones:
         return violation
 
     # -- cvxpy ------------------------------------------------------------------------------
-    def cvxpy_force_constraints(self, normal, tangential, polyhedral: bool = False) -> list:
+    def cvxpy_force_constraints(self, normal: Expression, tangential: Expression | None,
+                                polyhedral: bool = False) -> list[Constraint]:
         """cvxpy constraints ``lam_c in K_c`` on expressions of the force components.
 
         Parameters
@@ -238,8 +246,8 @@ class Cones:
             cone_contacts = self.tangential[coulomb]
             if cone_contacts.size:
                 t_rows = self._tangent_rows(np.flatnonzero(coulomb))
-                constraints += _cone_constraints(cp, cp.multiply(self.mu[cone_contacts], normal[cone_contacts]),
-                                                 tangential, t_rows, self.tangent_dim, polyhedral)
+                bound = cp.multiply(self.mu[cone_contacts], normal[cone_contacts])
+                constraints += _cone_constraints(cp, bound, tangential, t_rows, self.tangent_dim, polyhedral)
                 # with mu = 0 the cone only says lam_T = 0: lam_n >= 0 must be explicit
                 degenerate = cone_contacts[self.mu[cone_contacts] == 0]
                 if degenerate.size:
@@ -249,7 +257,8 @@ class Cones:
                 constraints.append(tangential[zero_rows.ravel()] == 0)
         return constraints
 
-    def cvxpy_velocity_constraints(self, normal, tangential, polyhedral: bool = False) -> list:
+    def cvxpy_velocity_constraints(self, normal: Expression, tangential: Expression | None,
+                                   polyhedral: bool = False) -> list[Constraint]:
         """cvxpy constraints ``g_c in K_c*`` on the primal's constraint expressions.
 
         Returns the constraints in the order ``[NONNEG, FREE, NONPOS, COULOMB]``
@@ -316,7 +325,9 @@ class Cones:
                              "with Cones.with_branches")
 
 
-def _cone_constraints(cp, bound, tangential, t_rows, tangent_dim, polyhedral, scale=None):
+def _cone_constraints(cp: ModuleType, bound: Expression, tangential: Expression, t_rows: np.ndarray,
+                      tangent_dim: int, polyhedral: bool,
+                      scale: np.ndarray | None = None) -> list[Constraint]:
     """``|scale * x_T| <= bound`` for each contact, as SOC or (2D) as two half-planes."""
     t_expr = tangential[t_rows.ravel()]
     if scale is not None:

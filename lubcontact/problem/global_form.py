@@ -246,8 +246,7 @@ def global_from_step(step: StepProblem, name: str = "") -> GlobalProblem:
     dim = step.cones.tangent_dim + 1
     mass = sp.diags(step.mass).tocsr()
     jacobian = sp.csr_matrix(step.dt * (expansion @ step.jacobian).T)
-    constant = np.zeros(step.n_rows)
-    constant[: step.n_contacts] = step.gaps
+    constant = step.with_shift(np.zeros(step.n_contacts)).constant_rows   # [D, 0] + moving walls
     return GlobalProblem(M=mass, H=jacobian, f=step.mass * step.free_velocity,
                          w=expansion @ constant, mu=mu, dim=dim, name=name)
 
@@ -267,8 +266,7 @@ def local_from_step(step: StepProblem, name: str = "") -> LocalProblem:
     expansion, mu = _step_expansion(step)
     nc, dim = step.n_contacts, step.cones.tangent_dim + 1
     ours = sp.csr_matrix(expansion[contact_major_permutation(nc, dim)])
-    constant = np.zeros(step.n_rows)
-    constant[: step.n_contacts] = step.gaps
+    constant = step.with_shift(np.zeros(step.n_contacts)).constant_rows   # [D, 0] + moving walls
     offset = constant + step.dt * (step.jacobian @ step.free_velocity)
     cones = Cones(kinds=np.full(nc, ConeKind.COULOMB, dtype=np.int8), mu=mu,
                   tangential=np.arange(nc), tangent_dim=dim - 1)

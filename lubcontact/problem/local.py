@@ -26,6 +26,7 @@ from functools import cached_property
 
 import numpy as np
 import scipy.sparse as sp
+from numpy.typing import ArrayLike
 
 from .. import checks
 from .cones import ConeKind, Cones
@@ -88,7 +89,8 @@ class LocalProblem(ConicProblemMixin):
         self.shift = checks.as_array("shift", self.shift, shape=(self.cones.count,))
 
     @classmethod
-    def from_contact_major(cls, delassus, free_velocity, mu, dim: int, name: str = "") -> "LocalProblem":
+    def from_contact_major(cls, delassus: sp.spmatrix | sp.sparray | np.ndarray, free_velocity: ArrayLike,
+                           mu: ArrayLike, dim: int, name: str = "") -> LocalProblem:
         """Build from FCLIB/Siconos arrays (normal component first per contact).
 
         Parameters
@@ -142,7 +144,7 @@ class LocalProblem(ConicProblemMixin):
     def dual_objective(self, forces: np.ndarray) -> float:
         return float(0.5 * forces @ (self.delassus @ forces) + forces @ self.offset)
 
-    def normalized(self) -> "LocalProblem":
+    def normalized(self) -> LocalProblem:
         """The same problem with ``W`` of unit mean diagonal and ``q`` of unit rms.
 
         Velocities are divided by ``V = rms(q)`` and forces by

@@ -23,7 +23,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from .cones import ConeKind
+from .cones import ConeKind, Cones
 from .conic import ConicProblem
 from .step import StepProblem
 
@@ -179,7 +179,7 @@ def solution_properties(problem: StepProblem, forces: np.ndarray,
     return out
 
 
-def _per_contact_dot(cones, forces: np.ndarray, g: np.ndarray) -> np.ndarray:
+def _per_contact_dot(cones: Cones, forces: np.ndarray, g: np.ndarray) -> np.ndarray:
     """``lam_c . g_c`` per contact (normal plus tangential components), shape (nc,)."""
     normal_f, tangential_f = cones.split(forces)
     normal_g, tangential_g = cones.split(g)

@@ -14,6 +14,7 @@ Dual, over contact forces ``lam`` (n_rows,)::
 """
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from functools import cached_property
 
@@ -21,8 +22,9 @@ import numpy as np
 import scipy.sparse as sp
 
 from .. import checks
-from .conic import ConicProblemMixin, Scaling
 from .cones import Cones
+from .conic import ConicProblemMixin, Scaling
+
 
 @dataclass
 class StepProblem(ConicProblemMixin):
@@ -129,7 +131,7 @@ class StepProblem(ConicProblemMixin):
             gaps += self.obstacle_offset[: self.n_contacts]
         return gaps
 
-    def normalized(self) -> "StepProblem":
+    def normalized(self) -> StepProblem:
         """The same problem in scaled units: ``M = I``, ``dt = 1``, velocities O(1).
 
         With a velocity scale ``V`` (the mass-weighted rms of ``U``), each
@@ -166,7 +168,7 @@ class StepProblem(ConicProblemMixin):
         return arrays
 
     @classmethod
-    def from_arrays(cls, arrays) -> "StepProblem":
+    def from_arrays(cls, arrays: Mapping[str, np.ndarray]) -> StepProblem:
         """Rebuild a problem written by :meth:`to_arrays` (a dict or an ``NpzFile``)."""
         jacobian = sp.csr_matrix((arrays["h_data"], arrays["h_indices"], arrays["h_indptr"]),
                                  shape=tuple(arrays["h_shape"]))

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 import cvxpy as cp
 import numpy as np
 
+from .conic import ConicProblem
 from .step import StepProblem
 
 
@@ -36,7 +37,7 @@ class SymbolicForm:
         return np.asarray(self.variable.value, dtype=float)
 
 
-def _half_quadratic(step, forces: cp.Variable):
+def _half_quadratic(step: ConicProblem, forces: cp.Variable) -> cp.Expression:
     """``1/2 lam^T W lam``: through the factor ``W = L^T L`` when the problem has one,
     else with ``W`` itself (its symmetric part; a local problem read from a file)."""
     factor = step.delassus_factor
@@ -46,7 +47,7 @@ def _half_quadratic(step, forces: cp.Variable):
     return 0.5 * cp.quad_form(forces, symmetric, assume_PSD=True)
 
 
-def dual_form(step, polyhedral: bool = False) -> SymbolicForm:
+def dual_form(step: ConicProblem, polyhedral: bool = False) -> SymbolicForm:
     """``min 1/2 lam^T W lam + b^T lam  s.t. lam_c in K_c``.
 
     ``step`` is a :class:`~lubcontact.problem.StepProblem` (``W`` through its

@@ -22,8 +22,8 @@ vertical strip.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 
@@ -34,7 +34,7 @@ from ..model.scene import Grains, Scene
 _MAX_MOVES = 1000
 
 
-def _check_pile(n_grains, radius, polydispersity):
+def _check_pile(n_grains: int, radius: float, polydispersity: float) -> tuple[int, float]:
     if int(n_grains) < 1:
         raise ValueError(f"n_grains: must be >= 1, got {n_grains}")
     if not 0.0 <= polydispersity < 1.0:
@@ -147,7 +147,7 @@ def _place(centres: np.ndarray, radii: np.ndarray, r: float, x0: float, width: f
     raise RuntimeError(f"deposit_pile: a disk found no rest after {_MAX_MOVES} moves")
 
 
-def _fall(centres, radii, r, position, exclude: int) -> int:
+def _fall(centres: np.ndarray, radii: np.ndarray, r: float, position: np.ndarray, exclude: int) -> int:
     """Drop vertically from ``position`` (in place); return the support (-1: floor)."""
     x = position[0]
     reach = r + radii
@@ -166,7 +166,8 @@ def _fall(centres, radii, r, position, exclude: int) -> int:
     return best
 
 
-def _roll(centres, radii, r, position, support, direction, width):
+def _roll(centres: np.ndarray, radii: np.ndarray, r: float, position: np.ndarray, support: int,
+          direction: float, width: float) -> tuple[str, np.ndarray]:
     """Roll on ``support`` towards ``direction`` until the first obstacle or the equator.
 
     Returns ``(hit, position)`` with hit ``"floor"``, ``"wall"``, ``"fall"``
@@ -178,7 +179,7 @@ def _roll(centres, radii, r, position, support, direction, width):
     start = np.arctan2(position[1] - c[1], position[0] - c[0])
     end = 0.0 if direction > 0 else np.pi
     # progress along the path: 0 at start, grows while rolling down
-    def progress(theta):
+    def progress(theta: float) -> float:
         return direction * (start - theta)
     limit = progress(end)
     best_s, best_hit = limit, "fall"
@@ -300,13 +301,13 @@ def settle_pile(n_grains: int, seed: int = 0, *, tiles: int = 1, dt: float = 0.0
     return _settle(scene, path, f"settle_pile N={n_grains}", progress, **settling)
 
 
-def _settle(scene: Scene, path: Path | None, label: str, progress, *, dt: float,
-            speed_tol: float, max_steps: int, solver: str, max_iter: int,
+def _settle(scene: Scene, path: Path | None, label: str, progress: Callable[[str], None] | None, *,
+            dt: float, speed_tol: float, max_steps: int, solver: str, max_iter: int,
             fallback_solver: str, switch_speed: float) -> tuple[Scene, dict]:
     """Step ``scene`` until at rest (see :func:`settle_pile`), cached at ``path``."""
+    from ..model.laws import Inelastic
     from ..sim.simulation import Simulation
     from ..solvers import SolveSettings
-    from ..model.laws import Inelastic
 
     if path is not None and path.exists():
         with np.load(path) as stored:

@@ -1,4 +1,5 @@
-"""Small built-in scenes: the exact-solution cases of docs/guide/model.md section 7 and a settling pile (dimensionless units)."""
+"""Small built-in scenes: the exact-solution cases of docs/guide/model.md section 7 and a settling pile
+(dimensionless units)."""
 from __future__ import annotations
 
 import numpy as np

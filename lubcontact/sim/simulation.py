@@ -12,8 +12,9 @@ say, and the state a step takes and returns is a :class:`SimulationState`.
 from __future__ import annotations
 
 import warnings
+from collections.abc import Callable
 from dataclasses import replace
-from typing import Callable
+from pathlib import Path
 
 import numpy as np
 
@@ -26,6 +27,7 @@ from ..problem.step import StepProblem
 from ..solvers import SolverWarning, SolveSettings, check_status, methods
 from ..solvers.result import CoulombResult
 from ..solvers.verify import verify
+from .export import StepExporter
 from .state import PreviousStep, SimulationState
 from .trajectory import StepReport, Trajectory
 
@@ -88,6 +90,14 @@ class Simulation:
         The reference method of the verification (default ``clarabel``).
     verify_tol : float
         Tolerance of the verification verdict (normalised units).
+    export_every : int
+        Every ``export_every`` steps (0: never), write the step's problem with
+        the applied solution, the reference solution and the scene to
+        ``export_dir`` (:class:`~lubcontact.sim.export.StepExporter`: a
+        ``.npz`` always, FCLIB HDF5 when no contact is glued), for other
+        solvers and ``lubcontact verify``.
+    export_dir : str or Path, optional
+        Folder of the exported steps (required with ``export_every``).
 
     Attributes
     ----------
@@ -104,7 +114,8 @@ class Simulation:
                  on_failure: str = "raise", warm_start: bool = True, fixed_point: bool = True,
                  tol_fp: float = 1e-8, max_outer: int = 50, fallback_solver: str = "clarabel",
                  keep_trajectory: bool = True, verify_every: int = 0,
-                 verify_with: str = "clarabel", verify_tol: float = 1e-6):
+                 verify_with: str = "clarabel", verify_tol: float = 1e-6,
+                 export_every: int = 0, export_dir: str | Path | None = None):
         checks.require(isinstance(law, Law), "law", "must be a Law (Inelastic(), "
                        f"GlueyLubrication(...), Coulomb(mu), GlueyCoulomb(mu, ...)), got {law!r}")
         self.law = law
@@ -126,6 +137,10 @@ class Simulation:
                        f"must be a registered method ({', '.join(methods())}), got {verify_with!r}")
         self.verify_with = verify_with
         self.verify_tol = checks.positive_scalar("verify_tol", verify_tol)
+        self.export_every = checks.integer("export_every", export_every)
+        checks.require(not self.export_every or export_dir is not None, "export_dir",
+                       "required with export_every")
+        self.exporter = None if not self.export_every else StepExporter(Path(export_dir))
         self.warm_start = warm_start
         self.keep_trajectory = keep_trajectory
         scene = scene.copy()
@@ -185,6 +200,8 @@ class Simulation:
         check_status(result, "raise" if self.on_failure == "fallback" else self.on_failure)
         if self.verify_every and (self.steps_done + 1) % self.verify_every == 0:
             self._verify(problem, result)
+        if self.export_every and (self.steps_done + 1) % self.export_every == 0:
+            self.exporter.export(self.steps_done + 1, problem, result, self.scene)
         normal, _ = problem.cones.split(result.forces)
         new_gamma = self.law.update_gamma(contacts, gamma, normal, self.dt, result.force_scale)
         self._advance(problem, result, PairState.from_contacts(contacts.keys, new_gamma))

@@ -9,6 +9,7 @@ count.
 """
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -107,7 +108,7 @@ class SimulationState:
         return out
 
     @classmethod
-    def from_arrays(cls, data, scene: Scene | None = None) -> SimulationState:
+    def from_arrays(cls, data: Mapping[str, np.ndarray], scene: Scene | None = None) -> SimulationState:
         """Inverse of :meth:`to_arrays` (a dict or an ``NpzFile``).
 
         Parameters

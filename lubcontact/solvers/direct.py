@@ -27,15 +27,17 @@ import ctypes
 import os
 import sys
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
 
 from ..problem.cones import ConeKind
+from ..problem.conic import ConicProblem
+from .polish import polish as polish_active_set
 from .registry import CONVEX_CONES, FIRST_ORDER, INTERIOR_POINT, QP, register
 from .result import CONVERGED, FAILED, INACCURATE, MAX_ITER, MethodOutput
-from .polish import polish as polish_active_set
 
 
 @dataclass
@@ -56,7 +58,7 @@ class ConicForm:
     soc_size: int
 
 
-def conic_form(problem, polyhedral: bool | None = None) -> ConicForm:
+def conic_form(problem: ConicProblem, polyhedral: bool | None = None) -> ConicForm:
     """The conic data of a (normalised) convex problem.
 
     Parameters
@@ -115,7 +117,8 @@ def _rows(columns: np.ndarray, value: float, n: int, values: np.ndarray | None =
     return sp.csr_matrix((data, (np.arange(columns.size), columns)), shape=(columns.size, n))
 
 
-def _combine(normal_rows, normal_values, tangent_rows, tangent_value, n) -> sp.csr_matrix:
+def _combine(normal_rows: np.ndarray, normal_values: np.ndarray, tangent_rows: np.ndarray,
+             tangent_value: float, n: int) -> sp.csr_matrix:
     m = normal_rows.size
     rows = np.concatenate([np.arange(m), np.arange(m)])
     cols = np.concatenate([normal_rows, tangent_rows])
@@ -125,7 +128,8 @@ def _combine(normal_rows, normal_values, tangent_rows, tangent_value, n) -> sp.c
 
 @register("clarabel-direct", kind=INTERIOR_POINT, cones=CONVEX_CONES, warm_start=False,
           polishing=True)
-def clarabel_direct(problem, *, tol: float = 1e-10, max_iter: int = 200, warm_start=None,
+def clarabel_direct(problem: ConicProblem, *, tol: float = 1e-10, max_iter: int = 200,
+                    warm_start: np.ndarray | None = None,
                     polyhedral: bool | None = None, polish: bool = True) -> MethodOutput:
     """Clarabel on :func:`conic_form` (``warm_start`` is ignored: interior point).
 
@@ -166,7 +170,7 @@ def clarabel_direct(problem, *, tol: float = 1e-10, max_iter: int = 200, warm_st
 
 
 @contextlib.contextmanager
-def _silenced_stdout():
+def _silenced_stdout() -> Iterator[None]:
     """Send what C code writes to file descriptor 1 to ``/dev/null`` for the block
     (a no-op where standard output has no descriptor, e.g. some notebooks)."""
     try:
@@ -197,8 +201,8 @@ def _flush_c_streams() -> None:
 
 
 @register("osqp", kind=QP, cones=CONVEX_CONES, second_order=False)
-def osqp_method(problem, *, tol: float = 1e-10, max_iter: int = 100000, warm_start=None,
-                polish: bool = True) -> MethodOutput:
+def osqp_method(problem: ConicProblem, *, tol: float = 1e-10, max_iter: int = 100000,
+                warm_start: np.ndarray | None = None, polish: bool = True) -> MethodOutput:
     """OSQP on the polyhedral :func:`conic_form` (raises ValueError for 3D friction)."""
     import osqp
 
@@ -223,8 +227,8 @@ def osqp_method(problem, *, tol: float = 1e-10, max_iter: int = 100000, warm_sta
 
 
 @register("scs", kind=FIRST_ORDER, cones=CONVEX_CONES)
-def scs_method(problem, *, tol: float = 1e-10, max_iter: int = 100000, warm_start=None,
-               polyhedral: bool | None = None) -> MethodOutput:
+def scs_method(problem: ConicProblem, *, tol: float = 1e-10, max_iter: int = 100000,
+               warm_start: np.ndarray | None = None, polyhedral: bool | None = None) -> MethodOutput:
     """SCS on :func:`conic_form` (``warm_start`` seeds the primal variable).
 
     The returned forces are projected onto their cones (SCS's iterates satisfy

@@ -49,8 +49,8 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from ..problem.cones import ConeKind
-from ..problem.step import StepProblem
+from ..problem.cones import ConeKind, Cones
+from ..problem.conic import ConicProblem
 
 OPEN, HELD, STICK, SLIDE = 0, 1, 2, 3
 #: relative size of the rounding allowed in the velocity conditions (per row, ``1 + |b|``)
@@ -72,7 +72,7 @@ class _Layout:
     mu: np.ndarray
 
     @classmethod
-    def of(cls, cones) -> "_Layout":
+    def of(cls, cones: Cones) -> _Layout:
         nc, dim = cones.count, cones.tangent_dim
         kinds = cones.kinds
         sign = np.where(kinds == ConeKind.NONPOS, -1.0, np.where(kinds == ConeKind.FREE, 0.0, 1.0))
@@ -86,13 +86,13 @@ class _Layout:
         return cls(sign=sign, friction=friction, t_rows=t_rows, mu=np.asarray(cones.mu, float))
 
 
-def polish(problem: StepProblem, forces: np.ndarray, threshold: float = 1e-7,
+def polish(problem: ConicProblem, forces: np.ndarray, threshold: float = 1e-7,
            max_rounds: int = 8) -> tuple[np.ndarray, bool]:
     """Refine ``forces`` of a convex normalised problem on their active set.
 
     Parameters
     ----------
-    problem : StepProblem
+    problem : ConicProblem
         Normalised problem with convex cones (UNION contacts: branch fixed first).
     forces : ndarray, shape (n_rows,)
         A near-optimal solution (scaled units).
@@ -137,13 +137,15 @@ def polish(problem: StepProblem, forces: np.ndarray, threshold: float = 1e-7,
     return forces, False
 
 
-def _components(problem: StepProblem, layout: _Layout, vector: np.ndarray):
+def _components(problem: ConicProblem, layout: _Layout,
+                vector: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Normal part (nc,) and tangential part (nc, tangent_dim; zeros where none) of a row vector."""
     tangential = np.where(layout.t_rows >= 0, vector[np.maximum(layout.t_rows, 0)], 0.0)
     return vector[: problem.n_contacts], tangential
 
 
-def _initial_states(problem, layout, forces, threshold):
+def _initial_states(problem: ConicProblem, layout: _Layout, forces: np.ndarray,
+                    threshold: float) -> tuple[np.ndarray, np.ndarray]:
     """States read from a near-optimal solution: open below ``threshold x max(max |lam|, 1)``;
     a friction contact sticks when its force is farther inside the cone than its slip.
 
@@ -171,7 +173,8 @@ def _unit(vectors: np.ndarray, fallback: np.ndarray) -> np.ndarray:
     return np.divide(chosen, norm, out=np.zeros_like(chosen), where=norm > 0)
 
 
-def _active_basis(problem, layout, forces, state, direction):
+def _active_basis(problem: ConicProblem, layout: _Layout, forces: np.ndarray, state: np.ndarray,
+                  direction: np.ndarray) -> tuple[sp.csc_matrix, np.ndarray]:
     """``P`` (n_rows x k) and the coordinates ``y`` of ``forces`` in it (module docstring)."""
     closed = np.flatnonzero(state != OPEN)
     stick = np.flatnonzero(state == STICK)
@@ -190,7 +193,8 @@ def _active_basis(problem, layout, forces, state, direction):
     return basis, coordinates
 
 
-def _solve_on(problem, layout, forces, state, direction, refinements: int = 4) -> np.ndarray:
+def _solve_on(problem: ConicProblem, layout: _Layout, forces: np.ndarray, state: np.ndarray,
+              direction: np.ndarray, refinements: int = 4) -> np.ndarray:
     """Forces of the active set that make every active condition hold (module docstring).
 
     ``G = (L P)^T (L P)`` plus ``delta = 1e-12 max diag G`` is factorised once
@@ -219,7 +223,7 @@ def _solve_on(problem, layout, forces, state, direction, refinements: int = 4) -
     return basis @ coordinates
 
 
-def _active_gram(problem, basis: sp.spmatrix) -> sp.spmatrix:
+def _active_gram(problem: ConicProblem, basis: sp.spmatrix) -> sp.spmatrix:
     """``P^T W P``: as ``(L P)^T (L P)`` where a factor ``W = L^T L`` exists, else from ``W``
     (local problems: :class:`~lubcontact.problem.local.LocalProblem` has no factor)."""
     factor = problem.delassus_factor
@@ -229,7 +233,8 @@ def _active_gram(problem, basis: sp.spmatrix) -> sp.spmatrix:
     return scaled.T @ scaled
 
 
-def _corrected(problem, layout, candidate, state, direction):
+def _corrected(problem: ConicProblem, layout: _Layout, candidate: np.ndarray, state: np.ndarray,
+               direction: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool]:
     """The states after one solve (module docstring) and whether any changed."""
     normal, tangential = _components(problem, layout, candidate)
     g_n, g_t = _components(problem, layout, problem.gradient(candidate))
@@ -257,7 +262,8 @@ def _corrected(problem, layout, candidate, state, direction):
     return new_state, new_direction, changed
 
 
-def _slide_newton(problem, layout, forces, state, direction, iterations: int = 20):
+def _slide_newton(problem: ConicProblem, layout: _Layout, forces: np.ndarray, state: np.ndarray,
+                  direction: np.ndarray, iterations: int = 20) -> tuple[np.ndarray, np.ndarray]:
     """3D sliding contacts: Newton's method on the exact conditions of the active set.
 
     Unknowns: the forces of the active rows (every row of a sticking or
@@ -289,7 +295,7 @@ def _slide_newton(problem, layout, forces, state, direction, iterations: int = 2
     slip = -np.sum(direction[slide] * problem.gradient(lam)[slide_t], axis=1)
     kappa = np.maximum(slip, 0.0) / np.maximum(np.linalg.norm(lam[slide_t], axis=1), 1e-300)
 
-    def conditions(lam, kappa):
+    def conditions(lam: np.ndarray, kappa: np.ndarray) -> np.ndarray:
         g = problem.gradient(lam)
         g[slide_t] += kappa[:, None] * lam[slide_t]
         g[slide] -= mu**2 * kappa * lam[slide]
@@ -316,7 +322,9 @@ def _slide_newton(problem, layout, forces, state, direction, iterations: int = 2
     return lam, new_direction
 
 
-def _newton_matrix(delassus, delta, position, slide, slide_t, mu, lam, kappa) -> sp.csc_matrix:
+def _newton_matrix(delassus: sp.csr_matrix, delta: float, position: np.ndarray, slide: np.ndarray,
+                   slide_t: np.ndarray, mu: np.ndarray, lam: np.ndarray,
+                   kappa: np.ndarray) -> sp.csc_matrix:
     """Jacobian of :func:`_slide_newton`'s conditions (forces block, then kappa)."""
     n_active, count, dim = delassus.shape[0], slide.size, slide_t.shape[1]
     diagonal = np.full(n_active, delta)

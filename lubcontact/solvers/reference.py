@@ -24,7 +24,8 @@ bounds velocities to about ``sqrt(tol)`` (worse at the friction-cone apex), so
 solutions are then polished on their active set
 (:mod:`lubcontact.solvers.polish`: frictionless, frictional, mixed and 3D
 problems, 3D sliding directions by Newton's method; a result whose active set
-does not settle is left as it is) to reach velocities accurate to about 1e-12. ``info["polished"]`` says whether it was.
+does not settle is left as it is) to reach velocities accurate to about 1e-12.
+``info["polished"]`` says whether it was.
 """
 from __future__ import annotations
 
@@ -35,11 +36,11 @@ import cvxpy as cp
 import numpy as np
 
 from ..problem import symbolic
-from ..problem.step import StepProblem
 from ..problem.cones import ConeKind
+from ..problem.step import StepProblem
+from .polish import polish as polish_active_set
 from .registry import INTERIOR_POINT, register
 from .result import CONVERGED, FAILED, INACCURATE, MAX_ITER, MethodOutput
-from .polish import polish as polish_active_set
 
 _STATUS = {cp.OPTIMAL: CONVERGED, cp.OPTIMAL_INACCURATE: INACCURATE,
            cp.USER_LIMIT: MAX_ITER}
@@ -150,7 +151,7 @@ def _solve(step: StepProblem, form: str, tol: float, max_iter: int, polyhedral: 
 
 @register("clarabel-dual", kind=INTERIOR_POINT, warm_start=False, polishing=True)
 def clarabel_dual(step: StepProblem, *, tol: float = 1e-10, max_iter: int = 200,
-                  warm_start=None, polyhedral: bool = False,
+                  warm_start: np.ndarray | None = None, polyhedral: bool = False,
                   max_branch_rounds: int = 8) -> MethodOutput:
     """Clarabel on the symbolic dual form.
 
@@ -161,7 +162,7 @@ def clarabel_dual(step: StepProblem, *, tol: float = 1e-10, max_iter: int = 200,
 
 @register("clarabel", kind=INTERIOR_POINT, warm_start=False, polishing=True, step_only=True)
 def clarabel_primal(step: StepProblem, *, tol: float = 1e-10, max_iter: int = 200,
-                    warm_start=None, polyhedral: bool = False,
+                    warm_start: np.ndarray | None = None, polyhedral: bool = False,
                     max_branch_rounds: int = 8) -> MethodOutput:
     """Clarabel on the symbolic primal form (``warm_start`` as for ``clarabel-dual``)."""
     return _solve(step, "primal", tol, max_iter, polyhedral, warm_start, max_branch_rounds)

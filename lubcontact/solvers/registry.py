@@ -23,8 +23,8 @@ Adding a solver (see ``docs/guide/adding-a-solver.md``)::
 from __future__ import annotations
 
 import time
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
-from typing import Callable
 
 import numpy as np
 
@@ -32,8 +32,7 @@ from .. import checks
 from ..problem.cones import ConeKind
 from ..problem.conic import ConicProblem
 from ..problem.step import StepProblem
-from .result import (CONVERGED, DIVERGED, FAILED, INACCURATE, SUSPICIOUS_RESIDUAL, MethodOutput,
-                     SolveResult)
+from .result import CONVERGED, DIVERGED, FAILED, INACCURATE, SUSPICIOUS_RESIDUAL, MethodOutput, SolveResult
 
 FIRST_ORDER = "first-order"
 INTERIOR_POINT = "interior-point"
@@ -102,9 +101,9 @@ class SolverInfo:
 _REGISTRY: dict[str, SolverInfo] = {}
 
 
-def register(name: str, *, kind: str = FIRST_ORDER, cones=ALL_CONES, second_order: bool = True,
-             warm_start: bool = True, polishing: bool = False, step_only: bool = False,
-             description: str = "") -> Callable[[Method], Method]:
+def register(name: str, *, kind: str = FIRST_ORDER, cones: Iterable[ConeKind] = ALL_CONES,
+             second_order: bool = True, warm_start: bool = True, polishing: bool = False,
+             step_only: bool = False, description: str = "") -> Callable[[Method], Method]:
     """Decorator registering a method under ``name`` with its capabilities.
 
     Parameters

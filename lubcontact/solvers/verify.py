@@ -30,7 +30,7 @@ from dataclasses import asdict, dataclass, field, replace
 import numpy as np
 import scipy.sparse as sp
 
-from ..problem.cones import ConeKind
+from ..problem.cones import ConeKind, Cones
 from ..problem.conic import ConicProblem
 from ..problem.metrics import coulomb_error, coulomb_shift, relative_error
 from ..problem.step import StepProblem
@@ -116,7 +116,7 @@ class VerificationReport:
 
     def to_json(self) -> str:
         """The report as JSON (no NaN: non-finite numbers become null)."""
-        def clean(value):
+        def clean(value: object) -> object:          # any part of the asdict tree
             if isinstance(value, float) and not np.isfinite(value):
                 return None
             if isinstance(value, dict):
@@ -227,7 +227,8 @@ def verify(problem: ConicProblem, forces: np.ndarray | None = None,
         n_contacts=problem.n_contacts, failed=failed, forces_recovered=recovered)
 
 
-def _candidate(problem: ConicProblem, forces, velocities) -> tuple[np.ndarray, float]:
+def _candidate(problem: ConicProblem, forces: np.ndarray | None,
+               velocities: np.ndarray | None) -> tuple[np.ndarray, float]:
     """Forces (given, or recovered from velocities) and the forces/velocities misfit."""
     if forces is None and velocities is None:
         raise ValueError("forces, velocities: give at least one")
@@ -292,7 +293,7 @@ def _velocity_violation(problem: ConicProblem, scaled: ConicProblem, velocities:
     return pieces.velocity_violation(g)
 
 
-def _per_contact(cones, forces: np.ndarray, corrected: np.ndarray) -> dict[str, np.ndarray]:
+def _per_contact(cones: Cones, forces: np.ndarray, corrected: np.ndarray) -> dict[str, np.ndarray]:
     """Each condition's violation at each contact, shape (nc,) each."""
     pieces = cones if cones.is_convex else cones.with_branches(cones.pulled(forces))
     gap = pieces.velocity_violation(corrected)
@@ -307,7 +308,7 @@ def _per_contact(cones, forces: np.ndarray, corrected: np.ndarray) -> dict[str, 
     return dict(penetration=gap, cone=cone, complementarity=np.abs(dot), residual=residual)
 
 
-def _contact_norms(cones, vector: np.ndarray) -> np.ndarray:
+def _contact_norms(cones: Cones, vector: np.ndarray) -> np.ndarray:
     """Euclidean norm of each contact's rows (normal and tangential), shape (nc,)."""
     normal, tangential = cones.split(vector)
     squares = normal**2
@@ -316,7 +317,7 @@ def _contact_norms(cones, vector: np.ndarray) -> np.ndarray:
     return np.sqrt(squares)
 
 
-def _worst(cones, per_contact: dict[str, np.ndarray], count: int) -> list[ContactViolation]:
+def _worst(cones: Cones, per_contact: dict[str, np.ndarray], count: int) -> list[ContactViolation]:
     """The ``count`` contacts with the largest violation, each with its worst condition."""
     if cones.count == 0 or count <= 0:
         return []

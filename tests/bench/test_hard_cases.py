@@ -13,21 +13,40 @@ from __future__ import annotations
 import ctypes
 import time
 import warnings
-from functools import lru_cache
+from functools import cache
 
 import numpy as np
 import pytest
 
-from lubcontact import (GlueyLubrication, Grains, Inelastic, Scene, Simulation, find_contacts, methods,
-                        solve)
-from lubcontact.bench.hard import (CRASH, FLAGGED, OK, REJECTED, WRONG, Cell, expected_for, judge,
-                                   load_cases, main, matrix, run_case, solve_case)
-from lubcontact.problem.metrics import scaled_velocity_error
-from lubcontact.solvers import CONVERGED, SolverError, SolverWarning
-from lubcontact.solvers import STATUSES, MethodOutput, register, unregister
-from lubcontact.model.laws import Coulomb, GlueyCoulomb, PairState
+from lubcontact import GlueyLubrication, Grains, Inelastic, Scene, Simulation, find_contacts, methods, solve
 from lubcontact.bench.cases.builders import floor_scene, hexagonal_box
 from lubcontact.bench.cases.hard import GAMMA_MIN, GAMMA_NEAR, GAMMA_STATES
+from lubcontact.bench.hard import (
+    CRASH,
+    FLAGGED,
+    OK,
+    REJECTED,
+    WRONG,
+    Cell,
+    expected_for,
+    judge,
+    load_cases,
+    main,
+    matrix,
+    run_case,
+    solve_case,
+)
+from lubcontact.model.laws import Coulomb, GlueyCoulomb, PairState
+from lubcontact.problem.metrics import scaled_velocity_error
+from lubcontact.solvers import (
+    CONVERGED,
+    STATUSES,
+    MethodOutput,
+    SolverError,
+    SolverWarning,
+    register,
+    unregister,
+)
 
 CASES = load_cases()
 
@@ -45,7 +64,7 @@ def _outside_domain(problem, method: str) -> bool:
     return method == "osqp" and cones.has_friction and cones.tangent_dim > 1
 
 
-@lru_cache(maxsize=None)
+@cache
 def _expected(name: str, fixed_point: bool = False):
     return expected_for(CASES[name], CASES[name].problem, fixed_point)
 

@@ -351,7 +351,8 @@ def test_data_dir_honours_the_environment_and_the_override(tmp_path, monkeypatch
     fclib = problem_sets.SETS["fclib"]
     assert [i.name for i in fclib.instances()] == [name.removesuffix(".hdf5")]
     assert [i.name for i in fclib.instances(data=explicit)] == ["local_problem_test"]
-    with pytest.raises(problem_sets.SetUnavailable, match=r"no problem files \(\*\.dat\) in benchmark folder 'siconos-fc2d'"):
+    missing = r"no problem files \(\*\.dat\) in benchmark folder 'siconos-fc2d'"
+    with pytest.raises(problem_sets.SetUnavailable, match=missing):
         problem_sets.SETS["siconos-fc2d"].instances()
     with pytest.raises(problem_sets.SetUnavailable, match=r"'siconos-fc2d' has no file 'x\.dat'"):
         problem_sets.benchmark_file("siconos-fc2d", "x.dat")

@@ -19,10 +19,10 @@ import scipy.sparse as sp
 from lubcontact import io
 from lubcontact.bench import problem_sets
 from lubcontact.bench.cases.builders import floor_scene, pyramid, scene_problem
+from lubcontact.io.siconos import contact_major_delassus
 from lubcontact.model.laws import Coulomb, Inelastic
 from lubcontact.problem import ConeKind, Cones, LocalProblem
 from lubcontact.problem.metrics import coulomb_error
-from lubcontact.io.siconos import contact_major_delassus
 from lubcontact.solvers.coulomb import solve_coulomb
 
 DATA = problem_sets.data_dir()

@@ -2,8 +2,8 @@
 import numpy as np
 import pytest
 
-from lubcontact.sim import simulation as integrator
 from lubcontact.scenes.packing import settle_pile
+from lubcontact.sim import simulation as integrator
 
 
 def test_interrupted_settling_resumes_to_the_same_pile(tmp_path, monkeypatch):

@@ -1,11 +1,10 @@
 """Exact solutions of docs/guide/model.md section 7, frictionless laws, stepped with Clarabel."""
-from functools import lru_cache
+from functools import cache
 
 import numpy as np
 import pytest
 
-from lubcontact import GlueyLubrication, Inelastic, Simulation
-from lubcontact import scenes
+from lubcontact import GlueyLubrication, Inelastic, Simulation, scenes
 
 
 def run_recording_gamma(scene, law, dt, t_end, d_max=0.02):
@@ -25,7 +24,7 @@ def unglue_time(times, gamma, after):
     return step_end[np.argmax(free)]
 
 
-@lru_cache(maxsize=None)
+@cache
 def push_pull(dt):
     return run_recording_gamma(scenes.push_pull(), GlueyLubrication(), dt, t_end=5.0)
 

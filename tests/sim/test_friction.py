@@ -3,12 +3,12 @@ import numpy as np
 import pytest
 
 from lubcontact import Grains, Scene, Schedule, Simulation, find_contacts, scenes, solvers
-from lubcontact.problem.metrics import coulomb_error, velocity_error
-from lubcontact.problem.cones import ConeKind
-from lubcontact.solvers.coulomb import solve_coulomb
-from lubcontact.model.laws import Coulomb, GlueyCoulomb
-from lubcontact.solvers.reference import union_violation
 from lubcontact.model.assemble import assemble
+from lubcontact.model.laws import Coulomb, GlueyCoulomb
+from lubcontact.problem.cones import ConeKind
+from lubcontact.problem.metrics import coulomb_error, velocity_error
+from lubcontact.solvers.coulomb import solve_coulomb
+from lubcontact.solvers.reference import union_violation
 
 FAST = "apgd"
 
@@ -60,7 +60,7 @@ def test_gluey_coulomb_cones_follow_the_glue_state():
     assert not GlueyCoulomb(0.5).has_friction              # no roughness cap: never at gamma_min
 
 
-# -- exact Coulomb solutions (docs/guide/model.md section 7) --------------------------------------------------
+# -- exact Coulomb solutions (docs/guide/model.md section 7) -------------------------------------------------
 @pytest.mark.parametrize("mu, angle", [(0.5, np.pi / 4), (0.1, np.pi / 3)], ids=["rolling", "sliding"])
 def test_disk_on_incline_matches_closed_form(mu, angle):
     dt, g, r, height = 1e-2, 1.0, 1.0, 0.05
@@ -127,7 +127,8 @@ def test_fixed_point_reports_non_convergence():
                          gravity=[0.0, -1.0])
     sim = Simulation(scene, Coulomb(0.5), 1e-2, d_max=0.05)
     contacts = find_contacts(sim.scene, 0.05)
-    problem = assemble(sim.scene, contacts, sim.law.cones(contacts, np.zeros(contacts.count)), sim.dt, rotations=sim.law.needs_rotation)
+    problem = assemble(sim.scene, contacts, sim.law.cones(contacts, np.zeros(contacts.count)), sim.dt,
+                       rotations=sim.law.needs_rotation)
     capped = solve_coulomb(problem, "clarabel", max_outer=1)
     assert capped.status == solvers.MAX_ITER and not capped.fixed_point_converged
     assert capped.outer_iterations == 1 and capped.shift_change > 1e-3
@@ -139,7 +140,8 @@ def test_fixed_point_reports_non_convergence():
 
 # -- gluey + friction ------------------------------------------------------------------------------
 def gluey_friction_closed_form(t, angle, mu, gamma_min, t_inv, g=1.0, r=1.0):
-    """Velocity (downhill, normal) and spin of docs/guide/model.md section 7's gluey + friction disk (unit mass)."""
+    """Velocity (downhill, normal) and spin of docs/guide/model.md section 7's gluey + friction disk
+    (unit mass)."""
     sin, cos = np.sin(angle), np.cos(angle)
     t_friction = -gamma_min / (g * cos)
     t_unstick = t_inv - gamma_min / (g * cos)
@@ -179,7 +181,8 @@ def test_branch_rule_flips_a_pulled_contact():
                          external_force=[0.0, 1.0])                              # pulls away
     sim = Simulation(scene, GlueyCoulomb(0.5, gamma_min=-1.0), 1e-2, d_max=0.05)
     contacts = find_contacts(sim.scene, 0.05)
-    problem = assemble(sim.scene, contacts, sim.law.cones(contacts, np.array([-1.0])), sim.dt, rotations=sim.law.needs_rotation)
+    problem = assemble(sim.scene, contacts, sim.law.cones(contacts, np.array([-1.0])), sim.dt,
+                       rotations=sim.law.needs_rotation)
     assert problem.cones.kinds[0] == ConeKind.UNION
     pushed_guess = np.array([1.0, 0.0])
     reference = solvers.solve(problem, "clarabel", tol=1e-10, warm_start=pushed_guess)
@@ -220,7 +223,8 @@ def settling_step():
                      tol=1e-8, tol_fp=1e-6, on_failure="ignore")
     sim.run(30)
     contacts = find_contacts(sim.scene, sim.d_max)
-    problem = assemble(sim.scene, contacts, sim.law.cones(contacts, sim.state.pairs.lookup(contacts.keys)), sim.dt, rotations=sim.law.needs_rotation)
+    cones = sim.law.cones(contacts, sim.state.pairs.lookup(contacts.keys))
+    problem = assemble(sim.scene, contacts, cones, sim.dt, rotations=sim.law.needs_rotation)
     reference = solve_coulomb(problem, "clarabel", tol=1e-10, tol_fp=1e-10, max_outer=500)
     assert reference.success and problem.n_contacts >= 30
     return problem, reference

@@ -1,5 +1,4 @@
 """Obstacles with a prescribed velocity: a lifting floor, a conveyor belt, squeezing plates."""
-import numpy as np
 import pytest
 
 from lubcontact import Coulomb, Grains, Inelastic, Scene, Schedule, Simulation

@@ -2,8 +2,7 @@
 import numpy as np
 import pytest
 
-from lubcontact import GlueyLubrication, Inelastic, Simulation, solve
-from lubcontact import scenes
+from lubcontact import GlueyLubrication, Inelastic, Simulation, scenes, solve
 
 
 @pytest.mark.parametrize("law", [Inelastic(), GlueyLubrication()], ids=["inelastic", "gluey"])

@@ -2,9 +2,17 @@
 import numpy as np
 import pytest
 
-from lubcontact import (Coulomb, GlueyLubrication, Grains, Inelastic, Scene, Simulation,
-                        SolverWarning,
-                        SimulationState, scenes)
+from lubcontact import (
+    Coulomb,
+    GlueyLubrication,
+    Grains,
+    Inelastic,
+    Scene,
+    Simulation,
+    SimulationState,
+    SolverWarning,
+    scenes,
+)
 
 
 def _simulation():

@@ -3,18 +3,18 @@ import numpy as np
 import pytest
 
 from lubcontact import GlueyLubrication, Inelastic, Simulation, scenes
-from lubcontact.bench.pile_problems import matched_forces, next_step_problem, pile_cases
-from lubcontact.problem.metrics import active_condition, scaled_velocity_error, velocity_error
-from lubcontact.problem.cones import ConeKind, Cones
-from lubcontact.model.contacts import find_contacts
+from lubcontact.bench.cases.reference import CASES as REFERENCE_CASES
+from lubcontact.bench.cases.reference import load as load_reference
 from lubcontact.bench.hard import expected_for, load_cases
+from lubcontact.bench.pile_problems import matched_forces, next_step_problem, pile_cases
+from lubcontact.model.assemble import assemble
+from lubcontact.model.contacts import find_contacts
 from lubcontact.model.laws import Law
+from lubcontact.problem.cones import ConeKind, Cones
+from lubcontact.problem.metrics import active_condition, scaled_velocity_error, velocity_error
 from lubcontact.scenes.packing import deposit_pile, settle_pile
 from lubcontact.solvers import methods, solve
 from lubcontact.solvers.direct import conic_form
-from lubcontact.bench.cases.reference import CASES as REFERENCE_CASES
-from lubcontact.bench.cases.reference import load as load_reference
-from lubcontact.model.assemble import assemble
 
 FAST = ["pgd", "apgd", "bb", "apgd-jacobi", "apgd-as"]
 DIRECT = ["clarabel-direct", "osqp", "scs"]
@@ -152,7 +152,9 @@ def frictional():
     scene = deposit_pile(60, seed=5)
     simulation = Simulation(scene, _DryFriction(0.3), 0.01)
     contacts = find_contacts(simulation.scene, simulation.d_max)
-    problem = assemble(simulation.scene, contacts, simulation.law.cones(contacts, np.zeros(contacts.count)), simulation.dt, rotations=simulation.law.needs_rotation)
+    cones = simulation.law.cones(contacts, np.zeros(contacts.count))
+    problem = assemble(simulation.scene, contacts, cones, simulation.dt,
+                       rotations=simulation.law.needs_rotation)
     return problem, solve(problem, "clarabel", tol=1e-10)
 
 
@@ -231,7 +233,8 @@ def settled():
     simulation = Simulation(scene, Inelastic(), 0.01)
     contacts = find_contacts(simulation.scene, simulation.d_max)
     problem = assemble(simulation.scene, contacts, Cones.frictionless(
-        np.full(contacts.count, ConeKind.NONNEG), contacts.dim - 1), simulation.dt, rotations=simulation.law.needs_rotation)
+        np.full(contacts.count, ConeKind.NONNEG), contacts.dim - 1), simulation.dt,
+        rotations=simulation.law.needs_rotation)
     return scene, info, problem, solve(problem, "clarabel", tol=1e-10)
 
 
@@ -344,7 +347,8 @@ def gluey_problems():
                             tol=1e-8, on_failure="ignore")
     simulation.run(30)
     contacts = find_contacts(simulation.scene, simulation.d_max)
-    pile = assemble(simulation.scene, contacts, law.cones(contacts, law.gamma_min(contacts)), simulation.dt, rotations=simulation.law.needs_rotation)
+    pile = assemble(simulation.scene, contacts, law.cones(contacts, law.gamma_min(contacts)),
+                    simulation.dt, rotations=simulation.law.needs_rotation)
     problems = [load_cases()["gamma_states_gluey_coulomb"].problem, pile]
     return [(problem, solve(problem, "clarabel", tol=1e-10)) for problem in problems]
 

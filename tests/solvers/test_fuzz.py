@@ -18,11 +18,11 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from lubcontact import GlueyLubrication, Inelastic, methods, solve
-from lubcontact.bench.hard import CONE_TOL, ENERGY_TOL, ERROR_TOL, FRICTION_ERROR_TOL, properties
-from lubcontact.problem.metrics import PROPERTY_TOL, scaled_velocity_error
-from lubcontact.model.laws import Coulomb, GlueyCoulomb
-from lubcontact.solvers import CONVERGED
 from lubcontact.bench.cases.builders import floor_scene, pyramid, scene_problem
+from lubcontact.bench.hard import CONE_TOL, ENERGY_TOL, ERROR_TOL, FRICTION_ERROR_TOL, properties
+from lubcontact.model.laws import Coulomb, GlueyCoulomb
+from lubcontact.problem.metrics import PROPERTY_TOL, scaled_velocity_error
+from lubcontact.solvers import CONVERGED
 
 FAST = next(m for m in ("apgd-as", "apgd-jacobi", "apgd") if m in methods())
 GAMMA_MIN = -1.0

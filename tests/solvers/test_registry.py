@@ -8,9 +8,21 @@ from lubcontact.model.assemble import assemble
 from lubcontact.model.contacts import find_contacts
 from lubcontact.problem import ConeKind, ConicProblem
 from lubcontact.problem.metrics import velocity_error
-from lubcontact.solvers import (CONVERGED, FIRST_ORDER, INTERIOR_POINT, KINDS, QP, CoulombResult,
-                                MethodOutput, SolveSettings, capable_methods, methods, register,
-                                solver_info, unregister)
+from lubcontact.solvers import (
+    CONVERGED,
+    FIRST_ORDER,
+    INTERIOR_POINT,
+    KINDS,
+    QP,
+    CoulombResult,
+    MethodOutput,
+    SolveSettings,
+    capable_methods,
+    methods,
+    register,
+    solver_info,
+    unregister,
+)
 
 
 def test_every_method_has_a_kind_and_the_kinds_partition_the_registry():
@@ -67,8 +79,8 @@ def test_bad_max_iter_is_rejected_naming_the_field(value):
 
 
 def test_both_problem_kinds_satisfy_the_protocol():
-    from lubcontact.io import read_problem
     from lubcontact.bench.problem_sets import data_dir
+    from lubcontact.io import read_problem
 
     step = CASES["wedge_planes"].problem
     local = read_problem(data_dir() / "fclib-local" / "local_problem_test.hdf5")

@@ -9,9 +9,21 @@ radius ``r = 0.5`` unless said otherwise, ``g = 1``, natural time
 from __future__ import annotations
 
 import numpy as np
+from numpy.typing import ArrayLike
 
-from lubcontact import Cones, ConeKind, Grains, Law, Scene, Simulation, StepProblem, find_contacts
+from lubcontact import (
+    ConeKind,
+    Cones,
+    Contacts,
+    Grains,
+    Law,
+    Scene,
+    Simulation,
+    StepProblem,
+    find_contacts,
+)
 from lubcontact.model.assemble import assemble
+from lubcontact.model.scene import ForceLike
 
 
 class ExplicitFriction(Law):
@@ -27,7 +39,7 @@ class ExplicitFriction(Law):
     def __init__(self, mu: float):
         self.mu = float(mu)
 
-    def cones(self, contacts, gamma) -> Cones:
+    def cones(self, contacts: Contacts, gamma: np.ndarray) -> Cones:
         nc = contacts.count
         return Cones(kinds=np.full(nc, ConeKind.COULOMB, dtype=np.int8), mu=np.full(nc, self.mu),
                      tangential=np.arange(nc), tangent_dim=contacts.dim - 1)
@@ -49,9 +61,10 @@ def scene_problem(scene: Scene, law: Law, dt: float, *, d_max: float | None = No
                     rotations=law.needs_rotation)
 
 
-def floor_scene(positions, radii, *, masses=None, densities=None, velocities=None, gravity=1.0,
-                walls: tuple[float, float] | None = None, lid: float | None = None,
-                external_force=None) -> Scene:
+def floor_scene(positions: ArrayLike, radii: ArrayLike, *, masses: ArrayLike | None = None,
+                densities: ArrayLike | None = None, velocities: ArrayLike | None = None,
+                gravity: float = 1.0, walls: tuple[float, float] | None = None, lid: float | None = None,
+                external_force: ForceLike = None) -> Scene:
     """Grains above the floor ``y = 0``; optional side walls ``x = walls`` and a lid ``y = lid``."""
     positions = np.asarray(positions, dtype=float)
     dim = positions.shape[1]

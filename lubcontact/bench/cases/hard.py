@@ -8,19 +8,19 @@ said otherwise, natural time ``sqrt(r / g)``). ``lubcontact check-hard`` and
 """
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from functools import cached_property
-from typing import Callable
 
 import numpy as np
+from numpy.typing import ArrayLike
 
-from lubcontact import Grains, GlueyLubrication, Inelastic, Scene, StepProblem, solve
-from lubcontact.problem.metrics import coulomb_shift
+from lubcontact import GlueyLubrication, Grains, Inelastic, Law, Scene, StepProblem, solve
 from lubcontact.model.laws import GlueyCoulomb
 from lubcontact.model.scene import inclined_plane_normal
+from lubcontact.problem.metrics import coulomb_shift
 
-from .builders import (ExplicitFriction, floor_scene, hexagonal_box, loose_pile, pyramid,
-                       scene_problem)
+from .builders import ExplicitFriction, floor_scene, hexagonal_box, loose_pile, pyramid, scene_problem
 
 NATURAL_TIME = np.sqrt(0.5)         # sqrt(r / g) for r = 0.5, g = 1
 
@@ -67,7 +67,7 @@ def _at_rest(problem: StepProblem) -> np.ndarray:
     return np.zeros(problem.n_dof)
 
 
-def _translations(values, rotations: int = 0) -> Callable[[StepProblem], np.ndarray]:
+def _translations(values: ArrayLike, rotations: int = 0) -> Callable[[StepProblem], np.ndarray]:
     """Exact answer given per grain (translations), with ``rotations`` zero spins per grain."""
     values = np.asarray(values, dtype=float)
     return lambda problem: np.concatenate([values.ravel(), np.zeros(values.shape[0] * rotations)])
@@ -86,7 +86,7 @@ def _mass_ratio_sandwich() -> StepProblem:
     return scene_problem(scene, Inelastic(), 0.01 * NATURAL_TIME)
 
 
-def _pebble_on_boulder(law) -> StepProblem:
+def _pebble_on_boulder(law: Law) -> StepProblem:
     boulder, pebble, angle = 1.0, 0.01, np.radians(20.0)
     centre = np.array([0.0, boulder])
     on_top = centre + (boulder + pebble) * np.array([np.sin(angle), np.cos(angle)])
@@ -116,13 +116,13 @@ def _frictionless_pyramid_answer(problem: StepProblem) -> np.ndarray:
 
 
 # -- over-constrained packings and wedges ---------------------------------------------------------
-def _hexagonal_box(law, lid: bool) -> StepProblem:
+def _hexagonal_box(law: Law, lid: bool) -> StepProblem:
     centres, width, top = hexagonal_box(6, 6)
     scene = floor_scene(centres, 0.5, masses=1.0, walls=(0.0, width), lid=top if lid else None)
     return scene_problem(scene, law, 0.01 * NATURAL_TIME)
 
 
-def _wedge_planes(law, half_angle: float = 1e-3) -> StepProblem:
+def _wedge_planes(law: Law, half_angle: float = 1e-3) -> StepProblem:
     radius = 1.0
     normals = [[np.cos(half_angle), np.sin(half_angle)], [-np.cos(half_angle), np.sin(half_angle)]]
     grains = Grains.create([[0.0, radius / np.sin(half_angle)]], radius, masses=1.0)
@@ -182,7 +182,7 @@ GAMMA_STATES = [
 ]
 
 
-def _gamma_states(law) -> StepProblem:
+def _gamma_states(law: Law) -> StepProblem:
     count = len(GAMMA_STATES)
     positions = np.stack([2.0 * np.arange(count), np.full(count, 0.5)], axis=1)
     velocities = [v for _, v in GAMMA_STATES]
@@ -226,7 +226,7 @@ def _cone_apex_exact(dim: int) -> Callable[[StepProblem], np.ndarray]:
 
 
 # -- time steps, contact counts, overlap --------------------------------------------------------------
-def _loose_pile(dt_over_natural: float, law) -> StepProblem:
+def _loose_pile(dt_over_natural: float, law: Law) -> StepProblem:
     centres, radii, velocities = loose_pile(15, seed=4)
     scene = floor_scene(centres, radii, densities=1.0, velocities=velocities)
     return scene_problem(scene, law, dt_over_natural * NATURAL_TIME)

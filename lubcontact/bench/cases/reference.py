@@ -11,9 +11,9 @@ Analytic results (exact solutions of docs/guide/model.md section 7) live in ``AN
 """
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 
