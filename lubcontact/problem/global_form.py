@@ -361,3 +361,42 @@ def _count_below(matrix: sp.csc_matrix) -> int:
     factor = spla.splu(matrix, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
                        options=dict(SymmetricMode=True))
     return int(np.count_nonzero(factor.U.diagonal() < 0))
+
+
+REPAIR_TOL = 1e-14
+"""Relative asymmetry or negative eigenvalue above which :func:`convexified` changes ``W``."""
+
+
+def convexified(problem: LocalProblem) -> tuple[LocalProblem, dict]:
+    """The problem with ``W`` made symmetric positive semi-definite, and what was changed.
+
+    Real data is not always what the Coulomb problem assumes: the Capsules files
+    store a ``W`` non-symmetric by 1e-4 to 2e-3 (relative), and rounding made the
+    stored ``W`` of the 2020- and 7002-contact granular files indefinite. A conic
+    solver needs a symmetric positive semi-definite quadratic form, so ``W`` is
+    replaced by ``(W + W^T) / 2 + delta I`` with ``delta = max(0, -lambda_min)``
+    (lambda_min of the symmetric part, :func:`delassus_diagnostics`). A solution of
+    the repaired problem is judged on the ORIGINAL data by its FCLIB error.
+
+    Returns
+    -------
+    (LocalProblem, dict)
+        The repaired problem (``problem`` itself when nothing needed repair) and
+        the diagnostics with ``repaired`` (bool), ``shift`` (``delta``) and
+        ``perturbation`` ``= |W' - W|_F / |W|_F``.
+    """
+    report = delassus_diagnostics(problem)
+    low = report["min_eigenvalue"] if np.isfinite(report["min_eigenvalue"]) else 0.0
+    negative = report["relative_min_eigenvalue"] < -REPAIR_TOL and low < 0
+    report.update(repaired=False, shift=0.0, perturbation=0.0)
+    if report["asymmetry"] <= REPAIR_TOL and not negative:
+        return problem, report
+    matrix = sp.csr_matrix(problem.delassus)
+    shift = -low if negative else 0.0
+    repaired = sp.csr_matrix((matrix + matrix.T) * 0.5 + shift * sp.identity(matrix.shape[0]))
+    norm = float(spla.norm(matrix))
+    report.update(repaired=True, shift=shift,
+                  perturbation=float(spla.norm(repaired - matrix)) / norm if norm else 0.0)
+    fixed = LocalProblem(delassus=repaired, free_velocity=problem.free_velocity, cones=problem.cones,
+                         shift=problem.shift, name=problem.name, scaling=problem.scaling)
+    return fixed, report

@@ -13,6 +13,7 @@ import cvxpy as cp
 import numpy as np
 
 from .conic import ConicProblem
+from .global_form import convexified
 from .step import StepProblem
 
 
@@ -39,12 +40,13 @@ class SymbolicForm:
 
 def _half_quadratic(step: ConicProblem, forces: cp.Variable) -> cp.Expression:
     """``1/2 lam^T W lam``: through the factor ``W = L^T L`` when the problem has one,
-    else with ``W`` itself (its symmetric part; a local problem read from a file)."""
+    else with ``W`` itself made symmetric positive semi-definite (a local problem read from a
+    file: :func:`~lubcontact.problem.global_form.convexified`)."""
     factor = step.delassus_factor
     if factor is not None:
         return 0.5 * cp.sum_squares(factor @ forces)
-    symmetric = 0.5 * (step.delassus + step.delassus.T)
-    return 0.5 * cp.quad_form(forces, symmetric, assume_PSD=True)
+    repaired, _ = convexified(step)           # a W read from a file: symmetric PSD part
+    return 0.5 * cp.quad_form(forces, repaired.delassus, assume_PSD=True)
 
 
 def dual_form(step: ConicProblem, polyhedral: bool = False) -> SymbolicForm:

@@ -35,6 +35,7 @@ import scipy.sparse as sp
 
 from ..problem.cones import ConeKind
 from ..problem.conic import ConicProblem
+from ..problem.global_form import convexified
 from .polish import polish as polish_active_set
 from .registry import CONVEX_CONES, FIRST_ORDER, INTERIOR_POINT, QP, register
 from .result import CONVERGED, FAILED, INACCURATE, MAX_ITER, MethodOutput
@@ -46,6 +47,9 @@ class ConicForm:
 
     ``P`` is the upper triangle of W (CSC); rows of ``A`` are ordered zero
     cone, nonnegative cone, then the second-order cones of size ``soc_size``.
+    ``repair`` describes what was done to a ``W`` read from a file that is not
+    symmetric positive semi-definite (:func:`~lubcontact.problem.global_form.convexified`;
+    empty for a step problem, whose ``W = L^T L``).
     """
 
     P: sp.csc_matrix
@@ -56,6 +60,12 @@ class ConicForm:
     nonneg: int
     soc_count: int
     soc_size: int
+    repair: dict
+
+
+def _repair_info(form: ConicForm) -> dict:
+    """``{"data_repair": ...}`` when the solver saw a repaired ``W``, else nothing."""
+    return {"data_repair": form.repair} if form.repair.get("repaired") else {}
 
 
 def conic_form(problem: ConicProblem, polyhedral: bool | None = None) -> ConicForm:
@@ -71,6 +81,9 @@ def conic_form(problem: ConicProblem, polyhedral: bool | None = None) -> ConicFo
     ValueError
         For UNION contacts, or ``polyhedral=True`` with ``tangent_dim != 1``.
     """
+    repair = {}
+    if problem.delassus_factor is None:          # W given by a file: symmetric PSD for the solver
+        problem, repair = convexified(problem)
     cones = problem.cones
     cones._require_convex()
     dim_t, nc, n = cones.tangent_dim, cones.count, problem.n_rows
@@ -108,7 +121,7 @@ def conic_form(problem: ConicProblem, polyhedral: bool | None = None) -> ConicFo
     A = sp.csc_matrix(sp.vstack(parts))
     return ConicForm(P=sp.triu(problem.delassus, format="csc"), q=np.asarray(problem.offset, float),
                      A=A, c=np.zeros(A.shape[0]), zero=zero.shape[0], nonneg=nonneg.shape[0],
-                     soc_count=soc_count, soc_size=dim_t + 1)
+                     soc_count=soc_count, soc_size=dim_t + 1, repair=repair)
 
 
 def _rows(columns: np.ndarray, value: float, n: int, values: np.ndarray | None = None) -> sp.csr_matrix:
@@ -166,7 +179,8 @@ def clarabel_direct(problem: ConicProblem, *, tol: float = 1e-10, max_iter: int 
     polish_time = time.perf_counter() - done
     return MethodOutput(forces=forces, status=status, iterations=int(solution.iterations),
                         setup_time=built - start, solve_time=done - built + polish_time,
-                        info={"raw_status": raw, "polished": polished, "polish_time": polish_time})
+                        info={"raw_status": raw, "polished": polished, "polish_time": polish_time,
+                              **_repair_info(form)})
 
 
 @contextlib.contextmanager
@@ -223,7 +237,8 @@ def osqp_method(problem: ConicProblem, *, tol: float = 1e-10, max_iter: int = 10
         MAX_ITER if "maximum iterations" in raw else FAILED
     forces = np.asarray(result.x, dtype=float) if status != FAILED else np.full(problem.n_rows, np.nan)
     return MethodOutput(forces=forces, status=status, iterations=int(result.info.iter),
-                        setup_time=built - start, solve_time=done - built, info={"raw_status": raw})
+                        setup_time=built - start, solve_time=done - built,
+                        info={"raw_status": raw, **_repair_info(form)})
 
 
 @register("scs", kind=FIRST_ORDER, cones=CONVEX_CONES)
@@ -258,4 +273,5 @@ def scs_method(problem: ConicProblem, *, tol: float = 1e-10, max_iter: int = 100
     if status != FAILED:                 # SCS leaves forces up to ~1e-10 outside their cones
         forces = problem.cones.project(np.asarray(result["x"], dtype=float))
     return MethodOutput(forces=forces, status=status, iterations=int(result["info"]["iter"]),
-                        setup_time=built - start, solve_time=done - built, info={"raw_status": raw})
+                        setup_time=built - start, solve_time=done - built,
+                        info={"raw_status": raw, **_repair_info(form)})
