@@ -353,17 +353,26 @@ def build_hard() -> list[Instance]:
 
 def _files(folder: str, patterns: tuple[str, ...], group: str,
            root: str | Path | None = None) -> list[Instance]:
+    """Every problem file of ``folder`` (global ones in their local form); empty ones left out."""
     io = _import("lubcontact.io.readers", "external benchmark problems")
     instances = []
     for path in _benchmark_files(folder, patterns, root):
         problem = io.read_problem(path)
-        instances.append(Instance(path.stem, problem, COULOMB, group=group))
+        if problem.n_contacts:
+            instances.append(Instance(path.name.removesuffix(".dat").removesuffix(".hdf5"),
+                                      problem, COULOMB, group=group))
     return sorted(instances, key=lambda instance: instance.n_contacts)
 
 
 def build_siconos(data: str | Path | None = None) -> list[Instance]:
     """Siconos 2D frictional problems (``siconos-fc2d/*.dat`` under :func:`data_dir`)."""
     return _files("siconos-fc2d", ("*.dat",), "siconos-fc2d", data)
+
+
+def build_siconos_testdata(data: str | Path | None = None) -> list[Instance]:
+    """Siconos' friction-contact test problems (``siconos-testdata/``: 2D and 3D, local and
+    global ``.dat``, FCLIB ``.hdf5``; global ones in their local form, empty ones left out)."""
+    return _files("siconos-testdata", ("*.dat", "*.hdf5"), "siconos-testdata", data)
 
 
 def build_fclib(data: str | Path | None = None) -> list[Instance]:
@@ -391,5 +400,8 @@ SETS: dict[str, ProblemSet] = {s.name: s for s in [
     ProblemSet("siconos-fc2d", "Siconos 2D granular flow on a wall (667, 2020, 7002 contacts)",
                build_siconos, reads_data=True),
     ProblemSet("fclib", "FCLIB 3D local problems (48 to 286 contacts)", build_fclib,
+               reads_data=True),
+    ProblemSet("siconos-testdata", "Siconos' friction-contact test problems: 2D and 3D, local and "
+               "global (in local form), 1 to 376 contacts", build_siconos_testdata,
                reads_data=True),
 ]}
