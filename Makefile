@@ -26,6 +26,7 @@ demo: $(VENV)/.installed-demo
 	$(BIN)/lubcontact demo --out out
 
 test: $(VENV)/.installed-test
+	$(BIN)/ruff check lubcontact tests examples
 	$(BIN)/python -m pytest -q
 
 clean:
