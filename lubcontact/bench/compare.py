@@ -45,7 +45,7 @@ from ..solvers import methods as registered
 from ..solvers import reference_method
 from . import problem_sets
 from .options import check_methods, data_folder
-from .problem_sets import ProblemSet, SetUnavailable
+from .problem_sets import PACKAGE_DATA, ProblemSet, SetUnavailable
 from .report import environment, replot, write_outputs
 from .runs import MAX_OUTER, REFERENCE_TOL, SUCCESS_SLACK, run_set, variants
 from .statistics import summary_rows
@@ -143,7 +143,7 @@ def compare_set(problem_set: ProblemSet, methods: list[str], tolerances: list[fl
                 reference=dict(methods=sorted({reference_method(i.problem) for i in instances}),
                                tol=REFERENCE_TOL, max_outer=MAX_OUTER),
                 max_iter=max_iter, left_out=left_out,
-                data_dir=str(data_folder(data)) if problem_set.reads_data else None)
+                data_dir=_shown(data_folder(data)) if problem_set.reads_data else None)
     path = write_outputs(out_dir / problem_set.name, problem_set, rows, references, labels,
                          tolerances, meta)
     print(f"set {problem_set.name}: report written to {path}\n"
@@ -151,6 +151,11 @@ def compare_set(problem_set: ProblemSet, methods: list[str], tolerances: list[fl
           format_table(summary_rows(rows, labels, headline),
                        ["solver", "success", "time_sgm_rel", "median_error", "median_iterations"]))
     return path
+
+
+def _shown(folder: Path) -> str:
+    """The data folder as a report shows it: the package's own by name, a user's in full."""
+    return "the package data (lubcontact/bench/data)" if folder == PACKAGE_DATA else str(folder)
 
 
 def main(argv: list[str] | None = None) -> int:
