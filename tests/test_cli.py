@@ -1,0 +1,33 @@
+"""The command line: a light --help, --version, outside solver modules; the lazy public face."""
+import subprocess
+import sys
+
+import pytest
+
+import lubcontact
+from lubcontact.cli import main
+
+
+def test_help_imports_neither_cvxpy_nor_numba():
+    script = ("import sys; from lubcontact.cli import main; main(['--help']); "
+              "print('cvxpy' in sys.modules, 'numba' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                         check=True).stdout
+    assert out.strip().splitlines()[-1] == "False False"
+
+
+def test_every_public_name_resolves():
+    for name in lubcontact.__all__:
+        assert getattr(lubcontact, name) is not None, name
+    assert set(lubcontact.__all__) <= set(dir(lubcontact))
+    with pytest.raises(AttributeError, match="no attribute 'Nope'"):
+        lubcontact.Nope  # noqa: B018
+
+
+def test_version_and_bad_solver_module(capsys):
+    assert main(["--version"]) == 0
+    assert capsys.readouterr().out.strip() == f"lubcontact {lubcontact.__version__}"
+    assert main(["--solver-module", "no_such_module_here", "verify", "a", "b"]) == 2
+    assert "--solver-module: cannot import 'no_such_module_here'" in capsys.readouterr().err
+    assert main(["--solver-module"]) == 2
+    assert main(["nope"]) == 2
