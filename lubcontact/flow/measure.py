@@ -307,8 +307,9 @@ class BagnoldFit:
 EXPONENT_BOUNDS = (0.2, 5.0)
 
 
-def _bagnold_linear_part(depth: np.ndarray, u: np.ndarray, exponent: float):
-    """Best ``(u_s, A)`` for a given exponent (linear least squares) and the residual."""
+def _bagnold_linear_part(depth: np.ndarray, u: np.ndarray, exponent: float
+                         ) -> tuple[np.ndarray, np.ndarray]:
+    """Best ``(u_s, A)`` for a given exponent (linear least squares) and the residual vector."""
     design = np.stack([np.ones_like(depth), -depth**exponent], axis=1)
     coefficients = np.linalg.lstsq(design, u, rcond=None)[0]
     return coefficients, u - design @ coefficients

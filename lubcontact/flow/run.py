@@ -23,7 +23,7 @@ import json
 import pathlib
 import time
 from dataclasses import replace
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -34,6 +34,9 @@ from ..sim import Simulation, SimulationState, StepReport
 from ..solvers import CONVERGED, solve
 from . import measure
 from .config import RunConfig
+
+if TYPE_CHECKING:
+    from tqdm import tqdm
 
 SERIES = ("step", "time", "kinetic_energy", "flow_rate", "contacts", "unglued", "glued",
           "frictional", "residual", "iterations", "converged")
@@ -413,7 +416,7 @@ def cross_check(report: StepReport) -> float:
     return float(np.max(np.abs(result.velocities - reference.velocities)) / scale)
 
 
-def _progress_bar(total: int, enabled: bool, config: RunConfig):
+def _progress_bar(total: int, enabled: bool, config: RunConfig) -> tqdm | None:
     """A tqdm bar over ``total`` steps, or None when disabled or there is nothing to do."""
     if not enabled or total <= 0:
         return None
