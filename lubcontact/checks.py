@@ -1,4 +1,4 @@
-"""Input validation shared by every public constructor.
+"""Input validation used by every public constructor.
 
 Every failure raises ``ValueError`` with a message that names the field and
 shows the offending value, so that a user can find the mistake in their input.

@@ -1,4 +1,4 @@
-"""Command-line values shared by the benchmark commands: name lists, methods, the data folder."""
+"""Command-line values common to the benchmark commands: name lists, methods, the data folder."""
 from __future__ import annotations
 
 from pathlib import Path

@@ -1,4 +1,4 @@
-"""Fixed-width text tables, shared by the demo, the benchmarks and the reports."""
+"""Fixed-width text tables for the demo, the benchmarks and the reports."""
 from __future__ import annotations
 
 from collections.abc import Iterable, Mapping, Sequence

@@ -116,7 +116,7 @@ class LocalProblem(ConicProblemMixin):
         return cls(delassus=delassus[order][:, order].tocsr(), free_velocity=q[order], cones=cones,
                    name=name)
 
-    # -- protocol shared with StepProblem (the common members: ConicProblemMixin) ---------------
+    # -- protocol in common with StepProblem (the common members: ConicProblemMixin) ---------------
     @property
     def delassus_factor(self) -> None:
         """No factor ``W = L^T L`` is known for a problem given by ``W``."""

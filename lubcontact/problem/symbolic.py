@@ -3,7 +3,7 @@
 Both builders take a :class:`~lubcontact.problem.StepProblem` (normally its
 normalised form) and return the cvxpy problem and the handles needed to read
 the solution back. The force sets come from :class:`~lubcontact.problem.cones.Cones`,
-the single description shared with the projections and the residuals.
+the single description also used by the projections and the residuals.
 """
 from __future__ import annotations
 

@@ -122,7 +122,7 @@ def solve_coulomb(problem: ConicProblem, method: str = "clarabel", *, tol: float
                        warm_start=warm_start, **options)
         return CoulombResult.single(result)
     normalized = problem.normalized()           # set up once: only the shift changes below
-    normalized.delassus  # noqa: B018  (assembled here once, shared by every inner solve)
+    normalized.delassus  # noqa: B018  (assembled here once, used by every inner solve)
     length, force_unit = normalized.scaling.length, normalized.scaling.force
     accelerator = _Anderson(anderson)
     branches = _Branches(problem, warm_start, threshold=max(1e3 * tol, 1e-7))

@@ -26,7 +26,7 @@ Every method only uses the problem protocol: ``delassus`` (sparse W),
 ``offset`` (b), ``cones``, ``n_rows`` and, when present, ``delassus_factor``
 (L, ``W = L^T L``). This module sets a method up, picks its loop and
 finishes its result: the data they iterate on, the Jacobi scaling and the
-stopping rule shared by all of them are in :mod:`.dual_data`, the numpy loops
+stopping rule common to all of them are in :mod:`.dual_data`, the numpy loops
 in :mod:`.gradient_loops`, the compiled APGD loops in :mod:`.compiled_apgd`;
 every ``converged`` result on a frictionless problem is finished exactly
 (:func:`.active_set.finish_exactly`).

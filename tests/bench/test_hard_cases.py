@@ -116,7 +116,7 @@ def _check(case, solver: str, fixed_point: bool) -> None:
 
 
 def _run(case, solver: str, fixed_point: bool) -> Cell:
-    """One solve judged against the cached expectation (the reference solve is shared)."""
+    """One solve judged against the cached expectation (the reference solve is cached)."""
     problem = case.problem
     start = time.perf_counter()
     try:

@@ -12,7 +12,7 @@ import pytest
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
 GALLERY = ["single_contact", "push_pull_and_incline", "coulomb_incline", "gluey_friction",
-           "work_precision", "hard_case", "flow_animation", "shear_cell", "squeeze"]
+           "solver_work_precision", "hard_case", "flow_animation", "shear_cell", "squeeze"]
 
 
 def quick(name, out):
@@ -56,7 +56,7 @@ def test_gluey_friction_regimes_switch_on_time(tmp_path):
 
 
 def test_work_precision_reports_every_method(tmp_path):
-    checks = quick("work_precision", tmp_path)
+    checks = quick("solver_work_precision", tmp_path)
     assert checks["frictionless_tightest_error"] < 1e-6 and checks["friction_tightest_error"] < 1e-5
     assert checks["friction_not_converged"] > 0           # tol 1e-2 is flagged, not hidden
 

@@ -224,7 +224,7 @@ def test_run_command_writes_files_and_resumes(tmp_path):
     assert flow_cli.run_main(argv(6)) == 0
     summary = json.loads((out / "summary.json").read_text())
     assert summary["steps"] == 6
-    # stepping cost: wall and processor time (the latter is what a shared machine cannot inflate)
+    # stepping cost: wall and processor time (the latter is what a busy machine cannot inflate)
     assert 0 < summary["cpu_time"] and summary["steps_per_cpu_second"] == pytest.approx(
         6 / summary["cpu_time"])
     for name in ("checkpoint.npz", "measurements.npz", "snapshot.png", "profile.png", "bed.npz"):

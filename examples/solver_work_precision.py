@@ -17,7 +17,7 @@ at 1e-2). With friction the gradient methods follow their tolerance (apgd: 3e-5 
 4e-9 at 1e-10), ``pgd`` stops at its 20 000-iteration cap from tol 1e-6 (``max_iter``, error
 3e-4), and tol 1e-2 gives ``inaccurate`` for every method.
 
-Run: ``python examples/work_precision.py [--quick] [--out DIR]`` (about 30 s; quick 8 s).
+Run: ``python examples/solver_work_precision.py [--quick] [--out DIR]`` (about 30 s; quick 8 s).
 """
 import argparse
 import time
@@ -57,7 +57,7 @@ def sweep(problem: StepProblem, tolerances: list[float], repeats: int) -> list[d
 
 
 def main(quick: bool = False, out: Path = Path("out/gallery")) -> dict[str, float]:
-    """Settle the pile, sweep both laws, print the tables, draw ``work_precision.png``."""
+    """Settle the pile, sweep both laws, print the tables, draw ``solver_work_precision.png``."""
     tolerances, repeats = ([1e-2, 1e-5, 1e-8], 1) if quick else ([1e-2, 1e-4, 1e-6, 1e-8, 1e-10], 3)
     pile = Simulation(scenes.settling_pile(60, seed=1), Inelastic(), dt=0.05, solver="apgd-as")
     pile.run(100)
@@ -86,7 +86,7 @@ def main(quick: bool = False, out: Path = Path("out/gallery")) -> dict[str, floa
         checks[f"{name}_worst_converged_error"] = max(row["error"] for row in converged)
         checks[f"{name}_not_converged"] = len(rows) - len(converged)
     out.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out / "work_precision.png", dpi=100, bbox_inches="tight")
+    fig.savefig(out / "solver_work_precision.png", dpi=100, bbox_inches="tight")
     plt.close(fig)
     print(format_table([checks], list(checks)))
     return checks
