@@ -43,6 +43,7 @@ from typing import TextIO
 
 from ..solvers import methods as registered
 from ..solvers import reference_method
+from ..solvers.siconos_peer import available_methods, register_siconos, siconos_status
 from . import problem_sets
 from .options import check_methods, data_folder
 from .problem_sets import PACKAGE_DATA, ProblemSet, SetUnavailable
@@ -143,7 +144,8 @@ def compare_set(problem_set: ProblemSet, methods: list[str], tolerances: list[fl
                 reference=dict(methods=sorted({reference_method(i.problem) for i in instances}),
                                tol=REFERENCE_TOL, max_outer=MAX_OUTER),
                 max_iter=max_iter, left_out=left_out,
-                data_dir=_shown(data_folder(data)) if problem_set.reads_data else None)
+                data_dir=_shown(data_folder(data)) if problem_set.reads_data else None,
+                peers=_peers())
     path = write_outputs(out_dir / problem_set.name, problem_set, rows, references, labels,
                          tolerances, meta)
     print(f"set {problem_set.name}: report written to {path}\n"
@@ -158,6 +160,14 @@ def _shown(folder: Path) -> str:
     return "the package data (lubcontact/bench/data)" if folder == PACKAGE_DATA else str(folder)
 
 
+def _peers() -> str:
+    """The optional peers, as the report states them: present (with methods) or absent (why)."""
+    status = siconos_status()
+    if status.available:
+        return f"Siconos numerics {status.siconos_version}: {', '.join(available_methods(status))}"
+    return f"Siconos numerics absent ({status.reason}); docs/guide/siconos-peer.md installs it"
+
+
 def main(argv: list[str] | None = None) -> int:
     """``lubcontact compare``: 0 on success, 1 when a set was skipped, 2 for bad arguments."""
     argv = sys.argv[1:] if argv is None else list(argv)
@@ -170,6 +180,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"report rewritten: {replot(args.replot)}")
         return 0
     args.sets = args.sets or ["piles"]
+    register_siconos()                   # the field's reference library, when installed
     args.solvers = args.solvers or registered()
     try:
         _check_args(args)

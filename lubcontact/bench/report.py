@@ -87,6 +87,7 @@ def report_text(problem_set: ProblemSet, rows: Sequence[Measurement],
              "- threads: " + ", ".join(f"{k}={v}" for k, v in env["threads"].items()),
              f"- seeds: {problem_set.seeds or 'none (deterministic or read from files)'}",
              *([f"- problems read from: {meta['data_dir']}"] if meta.get("data_dir") else []),
+             *([f"- peers: {meta['peers']}"] if meta.get("peers") else []),
              f"- instances left out (--max-contacts): {', '.join(meta.get('left_out') or []) or 'none'}",
              f"- solvers: {', '.join(labels)}; tolerances: "
              f"{', '.join(f'{t:.0e}' for t in tolerances)}; {meta['repeats']} timed repeats per "

@@ -52,8 +52,8 @@ from ..problem.cones import ConeKind
 from ..problem.conic import ConicProblem
 from ..problem.metrics import coulomb_shift
 from .compiled_apgd import joint_applies, joint_coulomb_apgd
-from .registry import solve
-from .result import CONVERGED, MAX_ITER, CoulombResult
+from .registry import solve, solver_info
+from .result import CONVERGED, FAILED, MAX_ITER, CoulombResult
 
 
 def solve_coulomb(problem: ConicProblem, method: str = "clarabel", *, tol: float = 1e-9, tol_fp: float = 1e-8,
@@ -113,6 +113,9 @@ def solve_coulomb(problem: ConicProblem, method: str = "clarabel", *, tol: float
         inner solve failed). The problem is normalised once: outer iterations
         change only the shift of the prepared problem (``W`` is not rebuilt).
     """
+    if solver_info(method).native_coulomb and problem.cones.has_friction:
+        return solve_native_coulomb(problem, method, tol=tol, max_iter=max_iter,
+                                    warm_start=warm_start, **options)
     tol_fp = checks.positive_scalar("tol_fp", tol_fp)
     max_outer = int(checks.positive("max_outer", max_outer, shape=()))
     nc = problem.cones.count
@@ -166,6 +169,45 @@ def solve_coulomb(problem: ConicProblem, method: str = "clarabel", *, tol: float
                          fixed_point_converged=converged, shift_history=np.asarray(history),
                          pulled=branches.pulled_contacts, branch_flips=branches.flips,
                          joint_iterations=joint_iterations)
+
+
+def solve_native_coulomb(problem: ConicProblem, method: str, *, tol: float = 1e-9,
+                         max_iter: int | None = None, warm_start: np.ndarray | None = None,
+                         **options) -> CoulombResult:
+    """Exact Coulomb by one solve of a method that solves it natively (``native_coulomb``).
+
+    The method solves the Coulomb problem of ``problem`` (``q = b`` without
+    the shift) once, giving ``r*``; its forces then go through
+    :func:`~lubcontact.solvers.solve` at the shift ``s* = mu |u_T(r*)|`` (the
+    method's ``replay`` option hands them over without solving again), so that
+    the usual checks apply where the convex problem's natural residual is
+    Coulomb's. ``s*`` is a fixed point of ``s -> mu |g_T(s)|`` by construction
+    (``g_T`` does not depend on ``s``): one outer iteration, shift change 0.
+
+    Returns
+    -------
+    CoulombResult
+        ``converged`` only when the method converged and the check passed.
+    """
+    unshifted = problem.with_shift(np.zeros(problem.cones.count))
+    scaled = unshifted.normalized()
+    force, length = scaled.scaling.force, scaled.scaling.length
+    start = None
+    if warm_start is not None:
+        start = checks.as_array("warm_start", warm_start, shape=(problem.n_rows,)) / force
+    kwargs = dict(options, tol=checks.positive_scalar("tol", tol), warm_start=start)
+    if max_iter is not None:
+        kwargs["max_iter"] = max_iter
+    out = solver_info(method).function(scaled, **kwargs)
+    shift = np.zeros(problem.cones.count)
+    if out.status != FAILED and np.all(np.isfinite(out.forces)):
+        shift = coulomb_shift(unshifted, out.forces * force)
+    result = solve(problem.with_shift(shift), method, tol=tol, max_iter=max_iter,
+                   normalized=scaled.with_shift(shift / length), replay=out, **options)
+    return CoulombResult(**vars(result), outer_iterations=1, shift_change=0.0,
+                         inner_status=result.status,
+                         fixed_point_converged=result.status == CONVERGED,
+                         shift_history=np.zeros(1))
 
 
 def _relative_change(new: np.ndarray, old: np.ndarray) -> float:

@@ -70,6 +70,14 @@ class SolverInfo:
     step_only : bool
         Whether it needs a :class:`~lubcontact.problem.StepProblem` (a primal
         form over velocities and masses; a local problem has neither).
+    native_coulomb : bool
+        Whether it solves exact Coulomb friction itself (reading its input as
+        the Coulomb problem with ``q = b - [s, 0]``, e.g. Siconos):
+        :func:`~lubcontact.solvers.solve_coulomb` then runs it once and checks
+        its forces at their own shift instead of iterating on ``s``
+        (:func:`~lubcontact.solvers.coulomb.solve_native_coulomb`). Such a
+        method accepts a ``replay`` option (a :class:`MethodOutput` to return
+        as is).
     description : str
         One line for tables and ``--help``.
     """
@@ -82,6 +90,7 @@ class SolverInfo:
     warm_start: bool
     polishing: bool
     step_only: bool
+    native_coulomb: bool
     description: str
 
     def rejection(self, problem: ConicProblem) -> str | None:
@@ -103,7 +112,8 @@ _REGISTRY: dict[str, SolverInfo] = {}
 
 def register(name: str, *, kind: str = FIRST_ORDER, cones: Iterable[ConeKind] = ALL_CONES,
              second_order: bool = True, warm_start: bool = True, polishing: bool = False,
-             step_only: bool = False, description: str = "") -> Callable[[Method], Method]:
+             step_only: bool = False, native_coulomb: bool = False,
+             description: str = "") -> Callable[[Method], Method]:
     """Decorator registering a method under ``name`` with its capabilities.
 
     Parameters
@@ -114,7 +124,7 @@ def register(name: str, *, kind: str = FIRST_ORDER, cones: Iterable[ConeKind] = 
         One of :data:`KINDS`.
     cones : iterable of ConeKind
         Force sets the method accepts (default: all, the non-convex union included).
-    second_order, warm_start, polishing, step_only, description
+    second_order, warm_start, polishing, step_only, native_coulomb, description
         See :class:`SolverInfo`.
 
     Raises
@@ -133,6 +143,7 @@ def register(name: str, *, kind: str = FIRST_ORDER, cones: Iterable[ConeKind] = 
                                      cones=frozenset(ConeKind(k) for k in cones),
                                      second_order=second_order, warm_start=warm_start,
                                      polishing=polishing, step_only=step_only,
+                                     native_coulomb=native_coulomb,
                                      description=description or (doc[0] if doc else ""))
         return function
 
