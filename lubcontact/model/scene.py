@@ -405,18 +405,28 @@ class Scene:
             x[:] = np.mod(x, self.period)
             x[x >= self.period] = 0.0       # mod of a tiny negative number can round up to L
 
-    def check_overlaps(self) -> None:
-        """Raise ``ValueError`` if any initial overlap exceeds the tolerance."""
-        a, b, _, gaps, _, radius_a = close_pairs(
+    def deep_overlaps(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Pairs overlapping by more than ``overlap_tolerance`` x the smaller radius.
+
+        Returns
+        -------
+        body_a, body_b, keys, gaps, smaller : ndarray, shape (k,) each
+            The pairs (global body numbers and pair keys, as contacts number
+            them), their (negative) gaps and smaller radii.
+        """
+        a, b, keys, gaps, _, radius_a = close_pairs(
             np.vstack([self.grains.positions, self.fixed_positions]),
             np.concatenate([self.grains.radii, self.fixed_radii]), self.grains.count, 0.0,
             self.period, self.planes.points, self.planes.normals)
-        if gaps.size == 0:
-            return
         smaller = smaller_radius(radius_a, self.grains.radii[b])
-        deep = np.flatnonzero(gaps < -self.overlap_tolerance * smaller)
-        if deep.size:
-            c = deep[np.argmin(gaps[deep])]
+        deep = gaps < -self.overlap_tolerance * smaller
+        return a[deep], b[deep], keys[deep], gaps[deep], smaller[deep]
+
+    def check_overlaps(self) -> None:
+        """Raise ``ValueError`` if any initial overlap exceeds the tolerance."""
+        a, b, _, gaps, smaller = self.deep_overlaps()
+        if gaps.size:
+            c = int(np.argmin(gaps))
             raise ValueError(
                 f"positions: initial overlap {-gaps[c]:.3e} between body "
                 f"{a[c]} and grain {b[c]} exceeds overlap_tolerance "

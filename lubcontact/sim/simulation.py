@@ -204,13 +204,42 @@ class Simulation:
             self.exporter.export(self.steps_done + 1, problem, result, self.scene)
         normal, _ = problem.cones.split(result.forces)
         new_gamma = self.law.update_gamma(contacts, gamma, normal, self.dt, result.force_scale)
+        speed = float(np.max(np.linalg.norm(self.scene.grains.velocities, axis=1), initial=0.0))
         self._advance(problem, result, PairState.from_contacts(contacts.keys, new_gamma))
+        self._check_missed_contacts(contacts, speed)
         report = StepReport(contacts=contacts, problem=problem, result=result, gamma=new_gamma,
                             gaps_after=problem.gaps_after(result.velocities))
         if self.keep_trajectory:
             self.trajectory.record_state(self.scene)
             self.trajectory.record_step(report)
         return report
+
+    def _check_missed_contacts(self, contacts: Contacts, speed_before: float) -> None:
+        """Warn when the step let two bodies overlap that were not candidate contacts.
+
+        A pair farther apart than ``d_max`` is not a candidate; it can only
+        overlap after the step if the two moved towards each other by more
+        than ``d_max``: by at most ``dt`` times the sum of their speeds. Below
+        that bound (the usual case) nothing is searched; above it, the new
+        positions are searched for overlaps the step could not see.
+        """
+        scene = self.scene
+        grains = scene.grains
+        speed = max(speed_before, float(np.max(np.linalg.norm(grains.velocities, axis=1),
+                                               initial=0.0)))
+        obstacle = float(np.max(np.linalg.norm(scene.obstacle_velocities(), axis=1), initial=0.0))
+        if self.dt * (2.0 * speed + obstacle) < self.d_max:
+            return
+        a, b, keys, gaps, smaller = scene.deep_overlaps()
+        missed = ~np.isin(keys, contacts.keys)
+        if missed.any():
+            worst = int(np.argmin(np.where(missed, gaps, np.inf)))
+            self.trajectory.missed_contacts.append(
+                (self.steps_done, int(np.count_nonzero(missed)), float(-gaps[worst] / smaller[worst])))
+            warnings.warn(       # one text, so that a long run warns once: details in the trajectory
+                f"pairs overlapped that were not candidate contacts: grains moved more than d_max = "
+                f"{self.d_max:.3g} in one step; raise d_max or lower dt (trajectory.missed_contacts "
+                f"lists the steps)", SolverWarning, stacklevel=3)
 
     def _verify(self, problem: StepProblem, result: CoulombResult) -> None:
         """Check the step's solution against the reference; keep the report, warn on failure."""

@@ -41,7 +41,10 @@ class Trajectory:
     ``times[k]``, ``positions[k]`` and ``velocities[k]`` describe the state
     after step ``k`` (index 0 is the initial state); the other fields have one
     entry per step, except ``verifications``: ``(step, VerificationReport)``
-    for each verified step (``Simulation(verify_every=k)``).
+    for each verified step (``Simulation(verify_every=k)``), and
+    ``missed_contacts``: ``(step, count, worst overlap / smaller radius)``
+    for each step that let bodies overlap that were not candidate contacts
+    (a warning was issued).
     """
 
     times: list = field(default_factory=list)
@@ -58,6 +61,7 @@ class Trajectory:
     outer_iterations: list = field(default_factory=list)
     min_gap: list = field(default_factory=list)
     verifications: list = field(default_factory=list)
+    missed_contacts: list = field(default_factory=list)
 
     def record_state(self, scene: Scene) -> None:
         """Append the scene's time, positions, velocities and spins."""
@@ -83,4 +87,4 @@ class Trajectory:
     def arrays(self) -> dict[str, np.ndarray]:
         """All fields as numpy arrays."""
         return {name: np.asarray(value) for name, value in vars(self).items()
-                if name != "verifications"}
+                if name not in ("verifications", "missed_contacts")}

@@ -6,6 +6,14 @@ import pytest
 
 from lubcontact.bench import compare, problem_sets, runs, statistics
 from lubcontact.solvers import STATUSES, methods
+from lubcontact.solvers.siconos_peer import unregister_siconos
+
+
+@pytest.fixture(autouse=True)
+def _no_peer_left_registered():
+    """compare registers the Siconos peer when installed: leave the registry as it was."""
+    yield
+    unregister_siconos()
 
 PNG = b"\x89PNG\r\n\x1a\n"
 

@@ -1,7 +1,7 @@
 """Obstacles with a prescribed velocity: a lifting floor, a conveyor belt, squeezing plates."""
 import pytest
 
-from lubcontact import Coulomb, Grains, Inelastic, Scene, Schedule, Simulation
+from lubcontact import Coulomb, Grains, Inelastic, Scene, Schedule, Simulation, SolverWarning
 
 
 def _disk_on_floor(**scene):
@@ -53,3 +53,19 @@ def test_prescribed_velocities_are_checked():
         _disk_on_floor(plane_velocity=[1.0, 0.0, 0.0])
     with pytest.raises(ValueError, match="fixed_velocity"):
         _disk_on_floor(fixed_velocity="fast")
+
+
+def test_a_fast_grain_passing_the_detection_distance_is_reported():
+    """A grain at speed 20 moves 1.0 per step (dt = 0.05) against d_max = 0.05: it reaches its
+    neighbour without ever being a candidate contact. The step says so instead of staying silent."""
+    grains = Grains.create(positions=[[0.0, 0.5], [1.6, 0.5]], radii=0.5, masses=1.0,
+                           velocities=[[20.0, 0.0], [0.0, 0.0]])
+    scene = Scene.create(grains)
+    sim = Simulation(scene, Inelastic(), dt=0.05, d_max=0.05, solver="apgd-as")
+    with pytest.warns(SolverWarning, match="pairs overlapped that were not candidate contacts"):
+        sim.step()
+    (step, count, depth), = sim.trajectory.missed_contacts
+    assert (step, count) == (1, 1) and depth == pytest.approx(0.8)   # 1.0 - 0.1 - 0.1 gap, r 0.5
+    calm = Simulation(scene, Inelastic(), dt=0.05, d_max=1.2, solver="apgd-as")
+    calm.step()                                   # detected: no overlap, no warning
+    assert calm.trajectory.missed_contacts == [] and calm.trajectory.min_gap[-1] >= -1e-9

@@ -55,6 +55,7 @@ def small_problem(dim: int = 3) -> LocalProblem:
 
 # -- without Siconos ---------------------------------------------------------------------------
 def test_missing_interpreter_means_unavailable_with_a_reason_and_nothing_registered(interpreter, tmp_path):
+    peer.unregister_siconos()        # another test's command (compare) may have registered them
     interpreter(str(tmp_path / "no-such-python"))
     status = peer.siconos_status()
     assert not peer.siconos_available()
