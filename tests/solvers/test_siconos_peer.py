@@ -24,7 +24,7 @@ from lubcontact.problem import ConeKind
 from lubcontact.problem.cones import Cones
 from lubcontact.problem.local import LocalProblem
 from lubcontact.problem.metrics import coulomb_error, coulomb_shift, relative_error, scaled_coulomb_error
-from lubcontact.solvers import CONVERGED, FAILED, INACCURATE, methods, solve, solve_coulomb, solver_info
+from lubcontact.solvers import CONVERGED, FAILED, methods, solve, solve_coulomb, solver_info
 from lubcontact.solvers import siconos_peer as peer
 
 DATA = Path(__file__).resolve().parents[2] / "lubcontact" / "bench" / "data"
