@@ -143,7 +143,7 @@ def flow_section(out: Path) -> str:
         return ""
     summary = flow_demo.demo(out / "flow")
     lines = [f"Inclined flow (see {out / 'flow'}):"]
-    lines += [f"  {key}: {value}" for key, value in dict(summary or {}).items()]
+    lines += flow_demo.summary_lines(dict(summary or {}))
     return "\n".join(lines)
 
 

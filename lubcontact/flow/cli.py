@@ -1,32 +1,53 @@
 """The commands ``lubcontact run`` (:func:`run_main`) and ``lubcontact sweep`` (:func:`sweep_main`).
 
 ``lubcontact run SCENE`` steps one scene (``sedimentation`` or
-``inclined_flow``) with a progress bar, writes the files of
+``inclined_flow``) with a progress bar (on a terminal), writes the files of
 :mod:`lubcontact.flow.run` in its output folder, a snapshot and the profiles,
-and prints the summary; ``--resume`` continues from the folder's checkpoint.
+and prints the summary. ``--resume`` continues the run of the folder's
+checkpoint to its stored total (``--steps`` changes the total); options that
+define the scene or the physics cannot change on resume.
 
 ``lubcontact sweep`` settles one bed, then runs the inclined flow for each
 model and angle (:mod:`lubcontact.flow.sweep`, each run resumable), and writes
 ``sweep.csv`` with Q(theta) and the contact-state fractions, plus plots.
+
+Parsing imports neither the solvers nor the scenes nor matplotlib, so that
+``--help`` is instant: the options' defaults are ``None`` (that is how an option
+given explicitly is told from a default) and :func:`_fill_defaults` puts the
+real ones, shown in ``--help``, afterwards. A bad value is a one-line error
+naming the option (exit status 2). Ctrl-C (SIGINT) or SIGTERM stop a run
+between two steps with a checkpoint, one line on stderr, exit status 130.
 """
 from __future__ import annotations
 
 import argparse
-import json
 import pathlib
-from typing import Any
+import shlex
+import sys
+from collections.abc import Callable
+from dataclasses import fields
+from typing import TYPE_CHECKING, Any, NoReturn
 
-import numpy as np
+from . import interrupt
+from .config import DEFINING_FIELDS, DT_UNIT, MODEL_NAMES, PRESET_NAMES, Q_UNIT, SCENES, RunConfig
 
-from ..scenes import inclined
-from ..solvers import methods
-from .bed import initial_scene
-from .config import SCENES, RunConfig
-from .run import FlowRun
-from .sweep import sweep
+if TYPE_CHECKING:
+    from .run import FlowRun
+
+FLAGS = {"scene": "SCENE", "n_grains": "--n", "preset": "--preset", "model": "--model",
+         "angle": "--angle", "steps": "--steps", "dt_fraction": "--dt", "solver": "--solver",
+         "tol": "--tol", "fixed_point": "--fixed-point", "tol_fp": "--tol-fp",
+         "max_outer": "--max-outer", "joint": "--joint", "friction": "--mu",
+         "checkpoint_every": "--checkpoint-every", "sample_every": "--sample-every",
+         "frame_every": "--frame-every", "cross_check_every": "--cross-check-every",
+         "settle_steps": "--settle-steps", "settle_model": "--settle-model", "bed": "--bed",
+         "width": "--width", "seed": "--seed"}
+"""The option of each :class:`RunConfig` field (the name used in error messages)."""
+DEFAULTS = {f.name: f.default for f in fields(RunConfig) if f.name in FLAGS and f.name != "solver"}
+"""Real defaults of the config options (``solver``: :func:`~lubcontact.flow.config.default_solver`)."""
 
 
-def parse_angles(text: str) -> np.ndarray:
+def parse_angles(text: str) -> Any:
     """Angles from ``"15:28:1"`` (start:stop:step, stop included) or ``"15,20,25"``.
 
     Parameters
@@ -44,6 +65,8 @@ def parse_angles(text: str) -> np.ndarray:
     ValueError
         If ``text`` is neither form, or the step is not positive.
     """
+    import numpy as np
+
     try:
         if ":" in text:
             start, stop, step = (float(v) for v in text.split(":"))
@@ -56,51 +79,247 @@ def parse_angles(text: str) -> np.ndarray:
                          f"got {text!r}") from None
 
 
-def _add_common(parser: argparse.ArgumentParser) -> None:
-    """The options ``run`` and ``sweep`` share (defaults: :class:`RunConfig`)."""
-    defaults = RunConfig()
-    parser.add_argument("--n", dest="n_grains", type=int, default=defaults.n_grains,
-                        help="number of free grains")
-    parser.add_argument("--preset", choices=tuple(inclined.PRESETS), default=defaults.preset)
-    parser.add_argument("--steps", type=int, default=defaults.steps, help="total steps per run")
-    parser.add_argument("--dt", dest="dt_fraction", type=float, default=defaults.dt_fraction,
-                        help="time step as a fraction of sqrt(d/g')")
-    parser.add_argument("--solver", default=defaults.solver, help=f"one of {methods()}")
-    parser.add_argument("--tol", type=float, default=defaults.tol)
-    parser.add_argument("--fixed-point", action="store_true",
-                        help="exact Coulomb friction by the fixed point on s (default: relaxation)")
-    parser.add_argument("--tol-fp", type=float, default=defaults.tol_fp,
-                        help="tolerance of the fixed point on s")
-    parser.add_argument("--max-outer", type=int, default=defaults.max_outer,
-                        help="outer-iteration cap of the fixed point on s")
-    parser.add_argument("--joint", type=int, default=defaults.joint,
-                        help="fixed point: update the shift inside APGD every that many iterations")
-    parser.add_argument("--mu", dest="friction", type=float, default=None,
-                        help="Coulomb coefficient (default: the preset's)")
-    parser.add_argument("--checkpoint-every", type=int, default=defaults.checkpoint_every)
-    parser.add_argument("--sample-every", type=int, default=defaults.sample_every)
-    parser.add_argument("--cross-check-every", type=int, default=defaults.cross_check_every,
-                        help="re-solve a step with Clarabel every that many steps (0: never)")
-    parser.add_argument("--settle-steps", type=int, default=defaults.settle_steps)
-    parser.add_argument("--settle-model", choices=inclined.MODELS, default=defaults.settle_model)
-    parser.add_argument("--bed", default="", help="settled bed (.npz) to tilt")
-    parser.add_argument("--width", type=float, default=defaults.width, help="period in radii")
-    parser.add_argument("--seed", type=int, default=defaults.seed)
-    parser.add_argument("--no-progress", dest="progress", action="store_false")
+class _Parser(argparse.ArgumentParser):
+    """An argument parser whose errors are one line: ``prog: error: message (see prog --help)``."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 
-def _config(args: argparse.Namespace, **overrides: Any) -> RunConfig:
-    """The :class:`RunConfig` of parsed arguments (their config fields), with ``overrides``."""
+def _number(kind: type, low: float | None = None, *, above: bool = False,
+            high: float | None = None) -> Callable[[str], float]:
+    """An argparse type: ``kind`` (int or float) >= ``low`` (> with ``above``), < ``high``."""
+    def parse(text: str) -> float:
+        try:
+            value = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(
+                f"expected {'an integer' if kind is int else 'a number'}, got {text!r}") from None
+        if kind is float and value != value:
+            raise argparse.ArgumentTypeError(f"expected a number, got {text!r}")
+        if low is not None and (value <= low if above else value < low):
+            raise argparse.ArgumentTypeError(f"must be {'>' if above else '>='} {low:g}, "
+                                             f"got {text}")
+        if high is not None and not value < high:
+            raise argparse.ArgumentTypeError(f"must be < {high:g}, got {text}")
+        return value
+    return parse
+
+
+def _angle(text: str) -> float:
+    value = _number(float)(text)
+    if not -90 < value < 90:
+        raise argparse.ArgumentTypeError(f"must be in (-90, 90) degrees, got {text}")
+    return value
+
+
+def _default(name: str) -> str:
+    """``(default: X)`` for the help of a config option."""
+    return f"(default: {DEFAULTS[name]:g})" if isinstance(DEFAULTS[name], float) else \
+        f"(default: {DEFAULTS[name]})"
+
+
+def _add_common(parser: argparse.ArgumentParser, resume: bool) -> None:
+    """The options ``run`` and ``sweep`` share (defaults: :class:`RunConfig`, filled after parsing).
+
+    ``resume``: the parser has ``--resume`` (the help says what it does to ``--steps`` and ``--mu``).
+    """
+    add = parser.add_argument
+    add("--n", dest="n_grains", type=_number(int, 1), default=None, metavar="N",
+        help=f"number of free grains {_default('n_grains')}")
+    add("--preset", choices=PRESET_NAMES, default=None,
+        help="physical parameters: poster (SI units, r = 1 mm, water-like fluid) or "
+             f"dimensionless (r = g' = rho_p = 1) {_default('preset')}")
+    add("--steps", type=_number(int, 1), default=None,
+        help=(f"total steps of the run {_default('steps')}; with --resume: the new total "
+              "(default there: the checkpoint's)") if resume else
+             f"total steps of each run {_default('steps')}")
+    add("--dt", "--dt-fraction", dest="dt_fraction", type=_number(float, 0, above=True),
+        default=None, metavar="FRACTION",
+        help=f"time step in units of {DT_UNIT}, d the mean grain diameter and g' the reduced "
+             f"gravity g (1 - rho_f/rho_p) {_default('dt_fraction')}")
+    add("--solver", default=None,
+        help="step solver, a registered method name (an unknown name lists them) "
+             "(default: apgd when registered, else clarabel)")
+    add("--tol", type=_number(float, 0, above=True), default=None,
+        help=f"solver tolerance (normalised residual) {_default('tol')}")
+    add("--fixed-point", action=argparse.BooleanOptionalAction, default=None,
+        help="exact Coulomb friction by the fixed point on s; --no-fixed-point: the convex "
+             "relaxation, one solve per step (default: the relaxation)")
+    add("--tol-fp", type=_number(float, 0, above=True), default=None,
+        help=f"tolerance of the fixed point on s {_default('tol_fp')}")
+    add("--max-outer", type=_number(int, 1), default=None,
+        help=f"outer-iteration cap of the fixed point on s {_default('max_outer')}")
+    add("--joint", type=_number(int, 0), default=None,
+        help="fixed point: update the shift inside APGD every that many iterations, 0: never "
+             f"{_default('joint')}")
+    add("--mu", dest="friction", type=_number(float, 0), default=None,
+        help="Coulomb friction coefficient" + ("; may change on --resume" if resume else "")
+             + " (default: the preset's, 0.3)")
+    add("--checkpoint-every", type=_number(int, 1), default=None, metavar="STEPS",
+        help=f"write checkpoint.npz every that many steps {_default('checkpoint_every')}")
+    add("--sample-every", type=_number(int, 1), default=None, metavar="STEPS",
+        help=f"record the time series every that many steps {_default('sample_every')}")
+    add("--cross-check-every", type=_number(int, 0), default=None, metavar="STEPS",
+        help="re-solve a step with Clarabel every that many steps, 0: never "
+             f"{_default('cross_check_every')}")
+    add("--settle-steps", type=_number(int, 0), default=None, metavar="STEPS",
+        help="sedimentation steps that settle the bed before it is tilted (inclined_flow "
+             f"without --bed and without OUT/bed.npz) {_default('settle_steps')}")
+    add("--settle-model", choices=MODEL_NAMES, default=None,
+        help=f"contact model of that sedimentation {_default('settle_model')}")
+    add("--bed", default=None, metavar="NPZ",
+        help="settled bed to tilt: a bed.npz or a sedimentation checkpoint (default: OUT/bed.npz "
+             "when it exists, else one settled first and saved there)")
+    add("--width", type=_number(float, 0, above=True), default=None, metavar="RADII",
+        help=f"period along x in mean grain radii {_default('width')}")
+    add("--seed", type=_number(int, 0), default=None,
+        help=f"seed of the grain sizes, the bed and the initial jitter {_default('seed')}")
+    add("--no-progress", dest="progress", action="store_false",
+        help="no progress bar (default: a bar when stderr is a terminal, none otherwise)")
+
+
+def run_parser() -> argparse.ArgumentParser:
+    """The parser of ``lubcontact run`` (its options' defaults are None: see the module)."""
+    parser = _Parser(
+        prog="lubcontact run",
+        description="One run of the flow experiment with checkpoints: sedimentation (grains "
+                    "settle on a rough bed) or inclined_flow (a settled bed tilted by --angle). "
+                    "Writes checkpoint.npz, measurements.npz, summary.json and figures in OUT; "
+                    "--resume continues the run stored there. Ctrl-C stops it with a checkpoint. "
+                    f"Flow rates are given in units of {Q_UNIT}, the time step in {DT_UNIT} "
+                    "(d: mean grain diameter, g': reduced gravity).")
+    parser.add_argument("scene", nargs="?", choices=SCENES, default=None,
+                        help="the scene: sedimentation or inclined_flow (default: none; with "
+                             "--resume the checkpoint's)")
+    parser.add_argument("--model", choices=MODEL_NAMES, default=None,
+                        help="contact model: dry (Coulomb friction), gluey (gluey lubrication + "
+                             "Coulomb friction) or frictionless " + _default("model"))
+    parser.add_argument("--angle", type=_angle, default=None, metavar="DEGREES",
+                        help="incline angle of inclined_flow (not for sedimentation) "
+                             + _default("angle"))
+    parser.add_argument("--frame-every", type=_number(int, 0), default=None, metavar="STEPS",
+                        help="write frames/frame_<step>.npz every that many steps, 0: none "
+                             + _default("frame_every"))
+    parser.add_argument("--out", type=pathlib.Path, default=pathlib.Path("out/run"),
+                        help="output folder (default: out/run)")
+    parser.add_argument("--resume", action="store_true",
+                        help="continue the run of OUT/checkpoint.npz to its stored total; "
+                             "--steps, the solver options, --mu and the output periods may "
+                             "change, the options that define the scene or the physics may not "
+                             "(default: off, a new run)")
+    _add_common(parser, resume=True)
+    return parser
+
+
+def sweep_parser() -> argparse.ArgumentParser:
+    """The parser of ``lubcontact sweep`` (its options' defaults are None: see the module)."""
+    parser = _Parser(
+        prog="lubcontact sweep",
+        description="Q(theta) and the contact states of inclined flows, for each model and "
+                    "angle, all tilted from one settled bed; each run is resumable (run the same "
+                    "command again). Writes sweep.csv and figures in OUT. "
+                    f"Flow rates Q are given in units of {Q_UNIT} (d: mean grain diameter, "
+                    "g': reduced gravity).")
+    parser.add_argument("--angles", default="15:28:1",
+                        help="incline angles in degrees: start:stop:step (stop included) or a "
+                             "comma list (default: 15:28:1)")
+    parser.add_argument("--models", default="dry,gluey",
+                        help="comma list of contact models among dry, gluey, frictionless "
+                             "(default: dry,gluey)")
+    parser.add_argument("--out", type=pathlib.Path, default=pathlib.Path("out/sweep"),
+                        help="output folder (default: out/sweep)")
+    _add_common(parser, resume=False)
+    return parser
+
+
+def _given(args: argparse.Namespace) -> set[str]:
+    """The config options given on the command line (those not left at None)."""
+    return {name for name in FLAGS if getattr(args, name, None) is not None}
+
+
+def _fill_defaults(args: argparse.Namespace, parser: argparse.ArgumentParser) -> None:
+    """Replace the None of options not given by their real defaults; check ``--solver``."""
+    for name, value in DEFAULTS.items():
+        if hasattr(args, name) and getattr(args, name) is None and name != "friction":
+            setattr(args, name, value)
+    from ..solvers import methods
+    from .config import default_solver
+
+    if args.solver is None:
+        args.solver = default_solver()
+    elif args.solver not in methods():
+        parser.error(f"argument --solver: unknown solver {args.solver!r}; registered: "
+                     f"{', '.join(methods())}")
+
+
+def _config(args: argparse.Namespace, parser: argparse.ArgumentParser,
+            **overrides: Any) -> RunConfig:
+    """The :class:`RunConfig` of parsed arguments, with ``overrides``; a bad value is a usage error."""
     names = RunConfig.field_names()
     values = {k: v for k, v in vars(args).items() if k in names}
     values.update(overrides)
-    return RunConfig(**values)
+    try:
+        return RunConfig(**values)
+    except ValueError as exc:
+        field, _, message = str(exc).partition(": ")
+        parser.error(f"argument {FLAGS.get(field, field)}: {message}")
 
 
-RUN_DESCRIPTION = ("``lubcontact run SCENE [options]``: one run with checkpoints "
-                   "(``--resume`` continues).")
-SWEEP_DESCRIPTION = ("``lubcontact sweep --angles 15:28:1``: Q(theta) and contact states "
-                     "for both models.")
+def _show(name: str, value: Any) -> str:
+    """``--flag value`` as a user would type it."""
+    flag = FLAGS[name]
+    if isinstance(value, bool):
+        return flag if value else f"--no-{flag[2:]}"
+    if value is None:
+        return f"{flag} (its default)"
+    shown = f"{value:g}" if isinstance(value, float) else str(value)
+    return shown if flag == "SCENE" else f"{flag} {shown}"
+
+
+def _resume(args: argparse.Namespace, parser: argparse.ArgumentParser, given: set[str]
+            ) -> FlowRun:
+    """The run of ``OUT/checkpoint.npz``, continued as the given options say (usage errors else)."""
+    from .run import FlowRun
+    from .sweep import stored_config
+
+    checkpoint = args.out / "checkpoint.npz"
+    if not checkpoint.exists():
+        parser.error(f"--resume: no checkpoint at {checkpoint} (start the run without --resume)")
+    stored = stored_config(checkpoint)
+    conflicts = [name for name in DEFINING_FIELDS if name in given
+                 and getattr(args, name) != getattr(stored, name)]
+    if conflicts:
+        parser.error("--resume: " + ", ".join(_show(n, getattr(args, n)) for n in conflicts)
+                     + " differ from the checkpoint's run ("
+                     + ", ".join(_show(n, getattr(stored, n)) for n in conflicts)
+                     + "); options that define the scene or the physics cannot change on resume: "
+                       "drop them, or start a new run in another --out")
+    changes = {name: getattr(args, name) for name in given - set(DEFINING_FIELDS) - {"steps"}
+               if getattr(args, name) != getattr(stored, name)}
+    steps = args.steps if "steps" in given else None
+    try:
+        run = FlowRun.resume(checkpoint, args.out, steps=steps, **changes)
+    except ValueError as exc:
+        field, _, message = str(exc).partition(": ")
+        parser.error(f"argument {FLAGS.get(field, field)}: {message}")
+    complete = " (complete: its summary is written again)" if run.steps_done >= run.config.steps \
+        else ""
+    print(f"resuming {checkpoint} at step {run.steps_done} of {run.config.steps}{complete}")
+    if steps is not None and steps != stored.steps:
+        print(f"--steps {steps}: the run's total changes from {stored.steps} to {steps} steps")
+    for name, value in sorted(changes.items()):
+        print(f"continuing with {_show(name, value)} (the checkpoint's run had "
+              f"{_show(name, getattr(stored, name))})")
+    return run
+
+
+def _interrupted_line(exc: interrupt.Interrupted, resume: str) -> str:
+    """The one line printed when a run is stopped by a signal."""
+    if exc.checkpoint is None:
+        return (f"interrupted at step {exc.step} ({exc.what}), before any checkpoint of the run: "
+                f"nothing to resume; run the command again")
+    return f"interrupted at step {exc.step} ({exc.what}); resume with: {resume}"
 
 
 def run_main(argv: list[str] | None = None) -> int:
@@ -114,37 +333,60 @@ def run_main(argv: list[str] | None = None) -> int:
     Returns
     -------
     int
-        Exit status (0).
+        Exit status: 0, or 130 when stopped by SIGINT / SIGTERM (a checkpoint
+        is written and one line printed on stderr). Usage errors exit with 2.
     """
-    parser = argparse.ArgumentParser(prog="lubcontact run", description=RUN_DESCRIPTION)
-    parser.add_argument("scene", choices=SCENES)
-    parser.add_argument("--model", choices=inclined.MODELS, default="gluey")
-    parser.add_argument("--angle", type=float, default=RunConfig.angle, help="degrees")
-    parser.add_argument("--frame-every", type=int, default=0)
-    parser.add_argument("--out", type=pathlib.Path, default=pathlib.Path("out/run"))
-    parser.add_argument("--resume", action="store_true",
-                        help="continue from OUT/checkpoint.npz (with --mu or --fixed-point: "
-                             "continue with that friction)")
-    _add_common(parser)
+    parser = run_parser()
     args = parser.parse_args(argv)
-    checkpoint = args.out / "checkpoint.npz"
-    if args.resume and checkpoint.exists():
-        changes = {"friction": args.friction} if args.friction is not None else {}
-        if args.fixed_point:
-            changes.update(fixed_point=True, tol_fp=args.tol_fp, max_outer=args.max_outer,
-                           joint=args.joint)
-        run = FlowRun.resume(checkpoint, args.out, steps=args.steps, **changes)
-        print(f"resuming {checkpoint} at step {run.steps_done}")
+    given = _given(args)
+    if args.resume:
+        stored_scene = None
+        checkpoint = args.out / "checkpoint.npz"
+        if checkpoint.exists():
+            from .sweep import stored_config
+
+            stored_scene = stored_config(checkpoint).scene
+        args.scene = args.scene or stored_scene or "inclined_flow"
+        given.add("scene")
+    elif args.scene is None:
+        parser.error("the scene is required: sedimentation or inclined_flow (or --resume)")
+    if args.scene == "sedimentation" and "angle" in given:
+        parser.error("argument --angle: a sedimentation has no incline angle")
+    _fill_defaults(args, parser)
+    if args.scene == "sedimentation":
+        args.angle = None
+    progress = args.progress and sys.stderr.isatty()
+    from .bed import initial_scene
+    from .run import FlowRun, summary_json
+
+    run = None
+    if args.resume:
+        run = _resume(args, parser, given)
     else:
-        config = _config(args)
-        run = FlowRun(config, initial_scene(config, args.out, args.progress), args.out)
-    summary = run.finish(args.progress)
+        config = _config(args, parser)
+    resume = f"lubcontact run --out {shlex.quote(str(args.out))} --resume"
+    try:
+        with interrupt.stop_on_signals():
+            if run is None:
+                run = FlowRun(config, initial_scene(config, args.out, progress), args.out)
+            summary = run.finish(progress)
+    except interrupt.Interrupted as exc:
+        print(_interrupted_line(exc, resume), file=sys.stderr)
+        return interrupt.EXIT_STATUS
+    except KeyboardInterrupt:
+        step = "" if run is None else f" at step {run.steps_done}"
+        print(f"interrupted again{step}: stopped at once; the last checkpoint resumes: {resume}",
+              file=sys.stderr)
+        return interrupt.EXIT_STATUS
     from . import plots
 
+    incline = run.config.scene == "inclined_flow"
+    label = (f"{run.config.model} {run.config.angle:g} deg" if incline
+             else f"{run.config.model} sedimentation")
     plots.snapshot(run.sim, run.last_report, args.out / "snapshot.png")
-    plots.profiles([(f"{run.config.model} {run.config.angle:g} deg", run.profiles.profile())],
-                   args.out / "profile.png", run.params)
-    print(json.dumps(summary, indent=2))
+    plots.profiles([(label, run.profiles.profile())], args.out / "profile.png", run.params,
+                   incline=incline)
+    print(summary_json(summary))
     return 0
 
 
@@ -159,26 +401,62 @@ def sweep_main(argv: list[str] | None = None) -> int:
     Returns
     -------
     int
-        Exit status (0).
-
-    Raises
-    ------
-    ValueError
-        For malformed ``--angles`` or an unknown model in ``--models``.
+        Exit status: 0, or 130 when stopped by SIGINT / SIGTERM (the run under
+        way is checkpointed; the same command continues the sweep). Usage
+        errors (malformed ``--angles``, an unknown model, a folder holding
+        another sweep) exit with 2.
     """
-    parser = argparse.ArgumentParser(prog="lubcontact sweep", description=SWEEP_DESCRIPTION)
-    parser.add_argument("--angles", default="15:28:1", help="start:stop:step or a comma list")
-    parser.add_argument("--models", default="dry,gluey", help="comma list of dry, gluey")
-    parser.add_argument("--out", type=pathlib.Path, default=pathlib.Path("out/sweep"))
-    _add_common(parser)
+    argv = sys.argv[2:] if argv is None else list(argv)
+    parser = sweep_parser()
     args = parser.parse_args(argv)
-    angles = parse_angles(args.angles)
+    try:
+        angles = parse_angles(args.angles)
+    except ValueError as exc:
+        parser.error(f"argument --angles: {str(exc).partition(': ')[2]}")
     models = [m.strip() for m in args.models.split(",") if m.strip()]
-    for model in models:
-        if model not in inclined.MODELS:
-            raise ValueError(f"models: unknown model {model!r}; choose from {inclined.MODELS}")
-    config = _config(args, scene="inclined_flow")
-    rows = sweep(config, angles, models, args.out, args.progress)
+    unknown = [m for m in models if m not in MODEL_NAMES]
+    if unknown or not models:
+        parser.error(f"argument --models: unknown model(s) {', '.join(unknown) or '(none given)'}; "
+                     f"choose from {', '.join(MODEL_NAMES)}")
+    if angles.size == 0:
+        parser.error(f"argument --angles: no angle in {args.angles!r}")
+    for angle in angles:
+        if not -90 < angle < 90:
+            parser.error(f"argument --angles: {angle:g} is not in (-90, 90) degrees")
+    _fill_defaults(args, parser)
+    config = _config(args, parser, scene="inclined_flow", model=models[0],
+                     angle=float(angles[0]))
+    progress = args.progress and sys.stderr.isatty()
+    from dataclasses import replace
+
+    from .sweep import folder_conflicts, run_folder, stored_steps, sweep
+
+    for model in models:                # a folder of another sweep: refused before any work
+        for angle in angles:
+            run_dir = run_folder(args.out, model, angle)
+            changed = folder_conflicts(run_dir, replace(config, model=model, angle=float(angle)))
+            done = stored_steps(run_dir / "checkpoint.npz")
+            if done > config.steps and not (run_dir / "summary.json").exists():
+                parser.error(f"argument --steps: {config.steps} is below the step {done} that "
+                             f"the unfinished run in {run_dir} has reached")
+            if changed:
+                parser.error(f"argument --out: {run_dir} holds a run made with "
+                             + ", ".join(_show(name, old) for name, (old, _) in changed.items())
+                             + " (here: " + ", ".join(_show(name, new) for name, (_, new)
+                                                      in changed.items())
+                             + "): use another --out")
+
+    resume = "lubcontact sweep " + shlex.join(argv)
+    try:
+        with interrupt.stop_on_signals():
+            rows = sweep(config, angles, models, args.out, progress)
+    except interrupt.Interrupted as exc:
+        print(_interrupted_line(exc, resume), file=sys.stderr)
+        return interrupt.EXIT_STATUS
+    except KeyboardInterrupt:
+        print(f"interrupted again: stopped at once; the last checkpoints resume: {resume}",
+              file=sys.stderr)
+        return interrupt.EXIT_STATUS
     from . import plots
 
     plots.sweep_figures(rows, args.out, config.preset)

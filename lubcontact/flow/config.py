@@ -1,17 +1,42 @@
-"""What defines a run of the flow experiment: :class:`RunConfig`, its checks and its JSON form."""
+"""What defines a run of the flow experiment: :class:`RunConfig`, its checks and its JSON form.
+
+This module imports neither the scenes nor the solvers at import time (the
+command line parses its options without them; see :mod:`lubcontact.flow.cli`).
+"""
 from __future__ import annotations
 
 import json
 from dataclasses import asdict, dataclass, field, fields, replace
+from typing import TYPE_CHECKING
 
-from ..scenes import inclined
-from ..solvers import FIRST_ORDER, methods
+if TYPE_CHECKING:
+    from ..scenes.inclined import FlowParameters
 
 SCENES = ("sedimentation", "inclined_flow")
+PRESET_NAMES = ("poster", "dimensionless")
+"""Keys of :data:`lubcontact.scenes.inclined.PRESETS` (known here without importing the scenes)."""
+MODEL_NAMES = ("dry", "gluey", "frictionless")
+""":data:`lubcontact.scenes.inclined.MODELS` (known here without importing the scenes)."""
 DEFAULT_FAST_SOLVER = "apgd"
 """The solver runs use by default when it is registered as a first-order method."""
 REFERENCE_SOLVER = "clarabel"
 """The default otherwise (always registered)."""
+
+DEFINING_FIELDS = ("scene", "n_grains", "preset", "model", "angle", "dt_fraction", "width", "seed",
+                   "bed", "settle_steps", "settle_model", "bins_per_radius")
+"""Fields that define a run's scene or physics: a resumed run keeps its checkpoint's.
+
+The state in a checkpoint was made by them (the grains, the bed, the tilt, the
+contact law and its gluey state, the time ``steps_done x dt``); continuing it
+with other values would mix two runs. The other fields (``steps``, the solver
+settings, ``friction``, the output periods, ``average_from``) may change when a
+run is resumed.
+"""
+
+Q_UNIT = "d sqrt(g' d)"
+"""Unit of the flow rate in every output: ``d`` the mean grain diameter, ``g'`` the reduced gravity."""
+DT_UNIT = "sqrt(d/g')"
+"""Unit of ``dt_fraction``: the time step is ``dt_fraction x sqrt(d / g')``."""
 
 
 def default_solver() -> str:
@@ -24,9 +49,16 @@ def default_solver() -> str:
         first-order methods (``methods(kind="first-order")``), else
         :data:`REFERENCE_SOLVER`.
     """
+    from ..solvers import FIRST_ORDER, methods
+
     if DEFAULT_FAST_SOLVER in methods(kind=FIRST_ORDER):
         return DEFAULT_FAST_SOLVER
     return REFERENCE_SOLVER
+
+
+def flow_rate_unit(params: FlowParameters) -> float:
+    """The unit :data:`Q_UNIT` of the flow rate, ``d sqrt(g' d)`` with ``d = 2 r`` (length^2 / time)."""
+    return 2.0 * params.radius * params.velocity_scale
 
 
 @dataclass
@@ -46,12 +78,14 @@ class RunConfig:
         ``poster`` (SI) or ``dimensionless`` (see :mod:`lubcontact.scenes.inclined`).
     model : str
         ``dry`` (Coulomb) or ``gluey`` (gluey lubrication + Coulomb).
-    angle : float
-        Incline angle (degrees) for ``inclined_flow``.
+    angle : float or None
+        Incline angle (degrees) for ``inclined_flow``, in (-90, 90); None for
+        ``sedimentation`` (set so on construction: it has no incline).
     steps : int
         Total steps of the run.
     dt_fraction : float
-        Time step as a fraction of ``sqrt(d / g')`` (dimensionless).
+        Time step as a fraction of ``sqrt(d / g')`` (:data:`DT_UNIT`; ``d`` the
+        mean grain diameter, ``g'`` the reduced gravity).
     solver, tol : str, float
         Step solver and its tolerance (default solver: :func:`default_solver`).
     fixed_point : bool
@@ -99,7 +133,7 @@ class RunConfig:
     n_grains: int = 300
     preset: str = "dimensionless"
     model: str = "gluey"
-    angle: float = 22.0
+    angle: float | None = 22.0
     steps: int = 1000
     dt_fraction: float = 0.01
     solver: str = field(default_factory=default_solver)
@@ -124,13 +158,16 @@ class RunConfig:
     def __post_init__(self) -> None:
         if self.scene not in SCENES:
             raise ValueError(f"scene: must be one of {SCENES}, got {self.scene!r}")
-        if self.preset not in inclined.PRESETS:
-            raise ValueError(f"preset: must be one of {tuple(inclined.PRESETS)}, "
-                             f"got {self.preset!r}")
+        if self.preset not in PRESET_NAMES:
+            raise ValueError(f"preset: must be one of {PRESET_NAMES}, got {self.preset!r}")
         for name in ("model", "settle_model"):
-            if getattr(self, name) not in inclined.MODELS:
-                raise ValueError(f"{name}: must be one of {inclined.MODELS}, "
+            if getattr(self, name) not in MODEL_NAMES:
+                raise ValueError(f"{name}: must be one of {MODEL_NAMES}, "
                                  f"got {getattr(self, name)!r}")
+        if self.scene == "sedimentation":
+            self.angle = None                 # no incline: nothing to record
+        elif self.angle is None or not -90 < float(self.angle) < 90:
+            raise ValueError(f"angle: must be in (-90, 90) degrees, got {self.angle}")
         for name in ("n_grains", "checkpoint_every", "sample_every", "bins_per_radius",
                      "max_outer"):
             if int(getattr(self, name)) < 1:
@@ -138,16 +175,19 @@ class RunConfig:
         for name in ("steps", "frame_every", "cross_check_every", "settle_steps", "joint"):
             if int(getattr(self, name)) < 0:
                 raise ValueError(f"{name}: must be >= 0, got {getattr(self, name)}")
-        if not self.tol_fp > 0:
-            raise ValueError(f"tol_fp: must be > 0, got {self.tol_fp}")
+        for name in ("tol", "tol_fp", "dt_fraction", "width"):
+            if not float(getattr(self, name)) > 0:
+                raise ValueError(f"{name}: must be > 0, got {getattr(self, name)}")
         if self.friction is not None and not self.friction >= 0:
             raise ValueError(f"friction: must be >= 0, got {self.friction}")
         if not 0 <= self.average_from < 1:
             raise ValueError(f"average_from: must be in [0, 1), got {self.average_from}")
 
     @property
-    def params(self) -> inclined.FlowParameters:
+    def params(self) -> FlowParameters:
         """The preset's physical parameters, with ``friction`` applied when set."""
+        from ..scenes import inclined
+
         params = inclined.PRESETS[self.preset]()
         return params if self.friction is None else replace(params, friction=self.friction)
 
@@ -171,3 +211,9 @@ class RunConfig:
         """
         known = cls.field_names()
         return cls(**{k: v for k, v in json.loads(text).items() if k in known})
+
+    def differences(self, other: RunConfig, names: tuple[str, ...] = DEFINING_FIELDS
+                    ) -> dict[str, tuple]:
+        """The fields among ``names`` whose values differ: ``{name: (self's, other's)}``."""
+        return {name: (getattr(self, name), getattr(other, name)) for name in names
+                if getattr(self, name) != getattr(other, name)}

@@ -1,8 +1,10 @@
 """Figures of the flow experiment (matplotlib, Agg backend, files only).
 
-Lengths are shown in mean diameters ``d = 2 r`` and velocities in
-``sqrt(g' d)`` (``g'`` the buoyant gravity), whatever the unit system of the
-run; gamma keeps the run's units (impulse per unit depth).
+Lengths are shown in mean diameters ``d = 2 r``, velocities in ``sqrt(g' d)``
+and flow rates in ``d sqrt(g' d)`` (``g'`` the buoyant gravity), whatever the
+unit system of the run; gamma keeps the run's units (impulse per unit depth).
+An inclined flow's axes are the incline's (x downhill, y normal to it); a
+sedimentation's are horizontal x and vertical z, with no angle.
 """
 from __future__ import annotations
 
@@ -19,9 +21,11 @@ from matplotlib.figure import Figure  # noqa: E402
 from matplotlib.patches import Circle  # noqa: E402
 
 from ..io.files import atomic_path  # noqa: E402
+from ..model.scene import Scene  # noqa: E402
 from ..scenes import inclined  # noqa: E402
 from ..sim import Simulation, StepReport  # noqa: E402
 from . import measure  # noqa: E402
+from .config import Q_UNIT  # noqa: E402
 from .sweep import run_folder  # noqa: E402
 
 GAMMA_COLORMAP = "plasma"
@@ -93,7 +97,7 @@ def snapshot(sim: Simulation, report: StepReport | None, path: pathlib.Path,
     path : pathlib.Path
         The image file (format from its suffix).
     title : str, optional
-        Default: time, angle and number of grains.
+        Default: time, angle (an inclined flow) and number of grains.
     """
     scene = sim.scene
     d = 2.0 * float(np.mean(scene.grains.radii))
@@ -115,15 +119,25 @@ def snapshot(sim: Simulation, report: StepReport | None, path: pathlib.Path,
     ax.set_xlim(0, width / d)
     ax.set_ylim(0, height / d)
     ax.set_aspect("equal")
-    ax.set_xlabel("x / d (downhill, periodic)")
-    ax.set_ylabel("y / d (normal to the incline)")
-    angle = scene.metadata.get("angle_deg", 0.0)
-    ax.set_title(title or f"t = {scene.time:.4g}, theta = {angle:g} deg, {scene.grains.count} grains")
+    if is_incline(scene):
+        ax.set_xlabel("x / d (downhill, periodic)")
+        ax.set_ylabel("y / d (normal to the incline)")
+        where = f", theta = {scene.metadata.get('angle_deg', 0.0):g} deg"
+    else:
+        ax.set_xlabel("x / d (horizontal, periodic)")
+        ax.set_ylabel("z / d (height above the plane)")
+        where = ""
+    ax.set_title(title or f"t = {scene.time:.4g}{where}, {scene.grains.count} grains")
     _save(fig, path)
 
 
+def is_incline(scene: Scene) -> bool:
+    """Whether ``scene`` is an inclined flow (its metadata name; a sedimentation is not)."""
+    return scene.metadata.get("name") != "sedimentation"
+
+
 def profiles(curves: list[tuple[str, measure.Profile]], path: pathlib.Path,
-             params: inclined.FlowParameters) -> None:
+             params: inclined.FlowParameters, incline: bool = True) -> None:
     """Velocity u(z) and packing fraction phi(z), one line per labelled profile.
 
     Parameters
@@ -134,6 +148,9 @@ def profiles(curves: list[tuple[str, measure.Profile]], path: pathlib.Path,
         The image file.
     params : FlowParameters
         The runs' parameters (units of the axes).
+    incline : bool
+        An inclined flow (velocity downhill, height normal to the incline);
+        False: a sedimentation (horizontal velocity, vertical height).
     """
     d, speed = 2.0 * params.radius, params.velocity_scale
     fig, (ax_u, ax_phi) = plt.subplots(1, 2, figsize=(9, 4.5), sharey=True)
@@ -141,8 +158,12 @@ def profiles(curves: list[tuple[str, measure.Profile]], path: pathlib.Path,
         z = prof.centres / d
         ax_u.plot(prof.velocity / speed, z, label=label)
         ax_phi.plot(prof.packing, z, label=label)
-    ax_u.set_xlabel("u / sqrt(g' d)  (downhill velocity)")
-    ax_u.set_ylabel("z / d  (height above the plane under the bed)")
+    if incline:
+        ax_u.set_xlabel("u / sqrt(g' d)  (downhill velocity)")
+        ax_u.set_ylabel("z / d  (height above the plane under the bed, normal to it)")
+    else:
+        ax_u.set_xlabel("u_x / sqrt(g' d)  (horizontal velocity)")
+        ax_u.set_ylabel("z / d  (height above the plane under the bed)")
     ax_phi.set_xlabel("packing fraction phi (-)")
     ax_u.legend(fontsize=8)
     ax_u.grid(alpha=0.3)
@@ -158,28 +179,25 @@ def _by_model(rows: list[dict]) -> dict[str, list[dict]]:
     return {m: sorted(r, key=lambda row: float(row["angle"])) for m, r in models.items()}
 
 
-def flow_rate_curve(rows: list[dict], path: pathlib.Path,
-                    params: inclined.FlowParameters) -> None:
-    """Q(theta) per model, Q in units of ``d sqrt(g' d)``, with its standard deviation.
+def flow_rate_curve(rows: list[dict], path: pathlib.Path) -> None:
+    """Q(theta) per model with its standard deviation, Q in units of ``d sqrt(g' d)``.
 
     Parameters
     ----------
     rows : list of dict
-        Sweep rows (``model``, ``angle``, ``flow_rate``, ``flow_rate_std``).
+        Sweep rows (``model``, ``angle``, ``flow_rate``, ``flow_rate_std``;
+        the flow rates in units of ``d sqrt(g' d)``, as run summaries give them).
     path : pathlib.Path
         The image file.
-    params : FlowParameters
-        The runs' parameters (unit of Q).
     """
-    unit = 2.0 * params.radius * params.velocity_scale
     fig, ax = plt.subplots(figsize=(6, 4.5))
     for model, group in _by_model(rows).items():
         angles = [float(r["angle"]) for r in group]
-        rates = [float(r["flow_rate"]) / unit for r in group]
-        errors = [float(r["flow_rate_std"]) / unit for r in group]
+        rates = [float(r["flow_rate"]) for r in group]
+        errors = [float(r["flow_rate_std"]) for r in group]
         ax.errorbar(angles, rates, yerr=errors, marker="o", capsize=3, label=model)
     ax.set_xlabel("incline angle theta (degrees)")
-    ax.set_ylabel("flow rate Q / (d sqrt(g' d))")
+    ax.set_ylabel(f"flow rate Q / ({Q_UNIT})")
     ax.legend()
     ax.grid(alpha=0.3)
     _save(fig, path)
@@ -229,7 +247,7 @@ def sweep_figures(rows: list[dict], out_dir: pathlib.Path, preset: str = "dimens
     """
     out_dir = pathlib.Path(out_dir)
     params = inclined.PRESETS[preset]()
-    flow_rate_curve(rows, out_dir / "flow_rate.png", params)
+    flow_rate_curve(rows, out_dir / "flow_rate.png")
     state_fractions(rows, out_dir / "contact_states.png")
     for model, group in _by_model(rows).items():
         curves = []

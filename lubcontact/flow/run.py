@@ -7,19 +7,28 @@ In its output folder a run writes:
   scene arrays, gluey state and warm start by pair key, step count) with the
   measurement accumulators; :meth:`FlowRun.resume` continues from it and
   reaches the same final state as an uninterrupted run;
-- ``measurements.npz``: time series (kinetic energy, flow rate, contact
-  states, solver residuals and iterations, Clarabel cross-checks), the
-  time-averaged profiles and the gamma histogram;
+- ``measurements.npz``: time series (kinetic energy, flow rate in units of
+  ``d sqrt(g' d)``, contact states, solver residuals and iterations, Clarabel
+  cross-checks), the time-averaged profiles and the gamma histogram;
 - ``frames/frame_<step>.npz``: positions, velocities, spins and the contacts
   with their gamma (:func:`frame_arrays`), every ``frame_every`` steps;
-- ``summary.json`` (:meth:`FlowRun.finish`): means over the averaging window.
+- ``summary.json`` (:meth:`FlowRun.finish`): means over the averaging window
+  (strict JSON: a quantity without a value is ``null``, never ``NaN``).
 
 Every file is written atomically (:mod:`lubcontact.io.files`), so an
 interruption never leaves a half-written file and loses nothing already saved.
+Inside :func:`lubcontact.flow.interrupt.stop_on_signals`, a run stops between
+two steps with a checkpoint (:class:`~lubcontact.flow.interrupt.Interrupted`).
+
+Timings (``wall_time``, ``cpu_time`` and the steps per second) count the steps
+only: before its first step a run solves small problems of each cone family
+its law can produce, untimed (:meth:`FlowRun.warm_up`), so that numba
+compilation and first imports land in ``warm_up_time`` instead.
 """
 from __future__ import annotations
 
 import json
+import math
 import pathlib
 import time
 from dataclasses import replace
@@ -28,12 +37,15 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from ..io.files import save_npz, save_text
+from ..model.assemble import assemble
+from ..model.contacts import find_contacts
 from ..model.scene import Scene
+from ..problem.step import StepProblem
 from ..scenes import inclined
 from ..sim import Simulation, SimulationState, StepReport
 from ..solvers import CONVERGED, solve
-from . import measure
-from .config import RunConfig
+from . import interrupt, measure
+from .config import DEFINING_FIELDS, DT_UNIT, Q_UNIT, RunConfig, flow_rate_unit
 
 if TYPE_CHECKING:
     from tqdm import tqdm
@@ -43,6 +55,9 @@ SERIES = ("step", "time", "kinetic_energy", "flow_rate", "contacts", "unglued", 
 """Time series sampled every ``sample_every`` steps (``measurements.npz``: ``series.<name>``)."""
 GAMMA_BINS = 20
 """Bins of the gamma / gamma_min histogram over [0, 1]."""
+WARM_UP_TOL = 1e-2
+WARM_UP_ITERATIONS = 20
+"""Tolerance and iteration cap of the untimed warm-up solves (:meth:`FlowRun.warm_up`)."""
 
 
 class FlowRun:
@@ -64,7 +79,8 @@ class FlowRun:
     sim : Simulation
         Steps the scene (no trajectory kept: memory stays flat).
     series : dict of str to list
-        The :data:`SERIES`, one entry per sample.
+        The :data:`SERIES`, one entry per sample (``flow_rate`` in units of
+        ``d sqrt(g' d)``, :data:`~lubcontact.flow.config.Q_UNIT`).
     profiles : ProfileAccumulator
         Depth profiles summed over the samples of the averaging window.
     gamma_counts : ndarray of int64, shape (GAMMA_BINS,)
@@ -75,6 +91,9 @@ class FlowRun:
         Steps per solver status (None: unknown, a checkpoint predating it).
     wall_time, cpu_time : float
         Stepping time (seconds), wall clock and processor.
+    warm_up_time : float
+        Wall-clock time (seconds) of the untimed warm-ups (:meth:`warm_up`;
+        one per process that stepped the run).
     last_report : StepReport or None
         What the last step computed.
     """
@@ -101,6 +120,8 @@ class FlowRun:
         self.statuses: dict[str, int] | None = {}
         self.wall_time = 0.0
         self.cpu_time = 0.0
+        self.warm_up_time = 0.0
+        self._warmed = False
         self.last_report: StepReport | None = None
 
     @property
@@ -122,24 +143,70 @@ class FlowRun:
         n_steps : int
             Steps to take.
         progress : bool
-            Show a progress bar (tqdm) on the terminal.
+            Show a progress bar (tqdm).
+
+        Raises
+        ------
+        Interrupted
+            When a stop was requested (:mod:`lubcontact.flow.interrupt`): the
+            step under way is finished, a checkpoint written (with an output
+            folder), then this is raised.
         """
         end = min(self.config.steps, self.steps_done + n_steps)
+        if end <= self.steps_done:
+            return
+        if not self._warmed:
+            self.warm_up()
         bar = _progress_bar(end - self.steps_done, progress, self.config)
-        while self.steps_done < end:
-            start, start_cpu = time.perf_counter(), time.process_time()
-            report = self.sim.step()
-            self.wall_time += time.perf_counter() - start
-            self.cpu_time += time.process_time() - start_cpu
-            if self.statuses is not None:
-                status = report.result.status
-                self.statuses[status] = self.statuses.get(status, 0) + 1
-            self.last_report = report
-            self._measure(report)
+        try:
+            while self.steps_done < end:
+                if interrupt.requested():
+                    raise self._interrupted()
+                start, start_cpu = time.perf_counter(), time.process_time()
+                report = self.sim.step()
+                self.wall_time += time.perf_counter() - start
+                self.cpu_time += time.process_time() - start_cpu
+                if self.statuses is not None:
+                    status = report.result.status
+                    self.statuses[status] = self.statuses.get(status, 0) + 1
+                self.last_report = report
+                self._measure(report)
+                if bar is not None:
+                    bar.update(1)
+        finally:
             if bar is not None:
-                bar.update(1)
-        if bar is not None:
-            bar.close()
+                bar.close()
+
+    def warm_up(self) -> None:
+        """Solve, untimed, a small problem of each cone family the run's law can produce.
+
+        The first solve of a kind compiles numba kernels (seconds) and imports
+        the solver's modules; a flowing layer meets a new kind when friction
+        first appears, long after the first step. Here each kind is met once,
+        at a loose tolerance (:data:`WARM_UP_TOL`, :data:`WARM_UP_ITERATIONS`),
+        with the run's solver settings; nothing is applied to the state. The
+        time goes to :attr:`warm_up_time`, not to the step timings.
+        """
+        self._warmed = True
+        start = time.perf_counter()
+        settings = self.sim.settings
+        settings = replace(settings, tol=max(settings.tol, WARM_UP_TOL),
+                           max_iter=WARM_UP_ITERATIONS, tol_fp=max(settings.tol_fp, WARM_UP_TOL),
+                           max_outer=min(settings.max_outer, 2))
+        for problem in warm_up_problems(self.sim):
+            try:
+                settings.solve(problem)
+            except Exception:      # noqa: BLE001 - a warm-up only buys timing accuracy
+                pass
+        self.warm_up_time += time.perf_counter() - start
+
+    def _interrupted(self) -> interrupt.Interrupted:
+        """Write a checkpoint of the current step (with an output folder); the exception to raise."""
+        checkpoint = None
+        if self.out_dir is not None:
+            self.save_checkpoint()
+            checkpoint = self._file("checkpoint.npz")
+        return interrupt.Interrupted(self.steps_done, checkpoint, describe(self.config))
 
     def finish(self, progress: bool = False) -> dict[str, Any]:
         """Step to ``config.steps``, then write the final checkpoint and ``summary.json``.
@@ -147,7 +214,7 @@ class FlowRun:
         Parameters
         ----------
         progress : bool
-            Show a progress bar (tqdm) on the terminal.
+            Show a progress bar (tqdm).
 
         Returns
         -------
@@ -157,7 +224,7 @@ class FlowRun:
         self.advance(self.config.steps - self.steps_done, progress)
         self.save_checkpoint()
         summary = self.summary()
-        save_text(self._file("summary.json"), json.dumps(summary, indent=2))
+        save_text(self._file("summary.json"), summary_json(summary))
         return summary
 
     def _measure(self, report: StepReport) -> None:
@@ -181,7 +248,8 @@ class FlowRun:
         else:
             states = measure.contact_states(report.gamma, gamma_min, active)
         values = (self.steps_done, scene.time, measure.kinetic_energy(scene),
-                  measure.flow_rate(scene), int(np.count_nonzero(active)), *states,
+                  measure.flow_rate(scene) / flow_rate_unit(self.params),
+                  int(np.count_nonzero(active)), *states,
                   report.result.residual, report.result.iterations, report.result.success)
         for name, value in zip(SERIES, values):
             self.series[name].append(value)
@@ -202,8 +270,8 @@ class FlowRun:
             ``profile.velocity``, ``profile.area``, ``profile.momentum`` (K,)
             and ``profile.samples``; ``gamma_histogram`` (GAMMA_BINS,);
             ``cross_checks`` (n, 2) of (step, relative difference);
-            ``wall_time`` and ``cpu_time`` (seconds); ``statuses`` and
-            ``config`` as JSON strings.
+            ``wall_time``, ``cpu_time`` and ``warm_up_time`` (seconds);
+            ``statuses``, ``config`` and ``units`` (of the series) as JSON strings.
         """
         prof = self.profiles.profile()
         out = {f"series.{k}": np.asarray(v, dtype=float) for k, v in self.series.items()}
@@ -215,8 +283,10 @@ class FlowRun:
                     "cross_checks": np.asarray(self.cross_checks, dtype=float).reshape(-1, 2),
                     "wall_time": np.float64(self.wall_time),
                     "cpu_time": np.float64(self.cpu_time),
+                    "warm_up_time": np.float64(self.warm_up_time),
                     "statuses": np.array(json.dumps(self.statuses)),
-                    "config": np.array(self.config.to_json())})
+                    "config": np.array(self.config.to_json()),
+                    "units": np.array(json.dumps(units(self.params)))})
         return out
 
     def save_checkpoint(self) -> None:
@@ -263,25 +333,40 @@ class FlowRun:
         out_dir : pathlib.Path, optional
             Where the resumed run writes (default: the checkpoint's folder).
         steps : int, optional
-            New total number of steps.
+            New total number of steps (default: the stored total); not below
+            the checkpoint's step.
         **changes
             :class:`RunConfig` fields (e.g. ``friction=0.5``) that continue the
             run with other settings from the checkpoint's state; they are
-            stored in the config of the checkpoints written afterwards.
+            stored in the config of the checkpoints written afterwards. The
+            :data:`~lubcontact.flow.config.DEFINING_FIELDS` cannot change.
 
         Returns
         -------
         FlowRun
             At the checkpoint's step, with its measurements so far.
+
+        Raises
+        ------
+        ValueError
+            Naming a defining field that ``changes`` would change, or
+            ``steps`` when it is below the checkpoint's step.
         """
         path = pathlib.Path(path)
         with np.load(path) as data:
             data = dict(data)
-        config = RunConfig.from_json(str(data["config"]))
+        stored = RunConfig.from_json(str(data["config"]))
         if steps is not None:
             changes = {**changes, "steps": int(steps)}
-        config = replace(config, **changes)
+        config = replace(stored, **changes)
+        changed = stored.differences(config, DEFINING_FIELDS)
+        if changed:
+            raise ValueError("; ".join(f"{name}: the checkpoint's run has {old!r}, cannot continue "
+                                       f"with {new!r}" for name, (old, new) in changed.items()))
         state = SimulationState.from_arrays(data)
+        if config.steps < state.steps_done:
+            raise ValueError(f"steps: {config.steps} is below the checkpoint's step "
+                             f"{state.steps_done}")
         run = cls(config, state.scene, path.parent if out_dir is None else out_dir)
         run.sim.restore(state)
         run._restore_measurements(data)
@@ -290,6 +375,9 @@ class FlowRun:
     def _restore_measurements(self, data: dict[str, np.ndarray]) -> None:
         """Take the accumulators back from :meth:`measurements` arrays."""
         self.series = {name: list(data[f"series.{name}"]) for name in SERIES}
+        if "units" not in data:                  # older checkpoints: flow rate in length^2 / time
+            scale = flow_rate_unit(self.params)
+            self.series["flow_rate"] = [value / scale for value in self.series["flow_rate"]]
         self.profiles = measure.ProfileAccumulator(
             data["profile.edges"], self.profiles.period, area=data["profile.area"],
             momentum=data["profile.momentum"], samples=int(data["profile.samples"]))
@@ -297,6 +385,7 @@ class FlowRun:
         self.cross_checks = [tuple(row) for row in data["cross_checks"]]
         self.wall_time = float(data["wall_time"])
         self.cpu_time = float(data.get("cpu_time", np.nan))  # older checkpoints: unknown
+        self.warm_up_time = float(data.get("warm_up_time", 0.0))
         self.statuses = json.loads(str(data["statuses"])) if "statuses" in data else None
         if not self.averaging and self.profiles.samples:
             self.profiles.reset()
@@ -308,16 +397,21 @@ class FlowRun:
         Returns
         -------
         dict
-            ``model``, ``angle`` (degrees), ``steps``, ``time``; ``flow_rate``
-            and ``flow_rate_std`` (length^2 / time, over the averaging
-            window); the last ``kinetic_energy``; the verdict of
+            ``scene``, ``model``, ``angle`` (degrees; ``inclined_flow``
+            only), ``steps``, ``time``, ``dt_fraction``; ``flow_rate`` and
+            ``flow_rate_std`` (in units of ``d sqrt(g' d)``, over the
+            averaging window); the last ``kinetic_energy``; the verdict of
             :func:`~lubcontact.flow.measure.classify_flow` (``state``,
-            ``energy_ratio``, ``relative_change``); ``fraction_<state>`` of
-            the active contacts per contact state; ``unconverged_steps`` (None
-            if unknown), ``step_statuses``, ``unconverged_samples``;
-            ``max_cross_check`` (NaN without cross-checks); ``wall_time`` and
-            ``cpu_time`` (seconds), ``steps_per_second``,
-            ``steps_per_cpu_second``; ``solver`` and ``tol``.
+            ``energy_ratio``, ``relative_change``; NaN when there are fewer
+            than 4 samples); ``fraction_<state>`` of the active contacts per
+            contact state; ``unconverged_steps`` (None if unknown),
+            ``step_statuses``, ``unconverged_samples``; ``max_cross_check``
+            (NaN without cross-checks); ``wall_time`` and ``cpu_time``
+            (seconds, the steps only), ``steps_per_second``,
+            ``steps_per_cpu_second``, ``warm_up_time`` (seconds, untimed
+            compilation and first imports); ``solver`` and ``tol``;
+            ``units`` (:func:`units`). NaN is written ``null`` in
+            ``summary.json`` (:func:`summary_json`).
         """
         series = {k: np.asarray(v, dtype=float) for k, v in self.series.items()}
         window = series["step"] > self.config.average_from * self.config.steps
@@ -332,8 +426,10 @@ class FlowRun:
                    if series["time"].size >= 4 else None)
         cross = np.asarray(self.cross_checks, dtype=float).reshape(-1, 2)
         rate = series["flow_rate"][window]
-        return {"model": self.config.model, "angle": self.config.angle,
+        where = ({"angle": self.config.angle} if self.config.scene == "inclined_flow" else {})
+        return {"scene": self.config.scene, "model": self.config.model, **where,
                 "steps": self.steps_done, "time": float(self.sim.scene.time),
+                "dt_fraction": self.config.dt_fraction,
                 "flow_rate": float(np.mean(rate)) if window.any() else 0.0,
                 "flow_rate_std": float(np.std(rate)) if window.any() else 0.0,
                 "kinetic_energy": (float(series["kinetic_energy"][-1]) if series["time"].size
@@ -352,7 +448,98 @@ class FlowRun:
                 "cpu_time": self.cpu_time,
                 "steps_per_cpu_second": (self.steps_done / self.cpu_time if self.cpu_time
                                          else 0.0),
-                "solver": self.config.solver, "tol": self.config.tol}
+                "warm_up_time": self.warm_up_time,
+                "solver": self.config.solver, "tol": self.config.tol,
+                "units": units(self.params)}
+
+
+def units(params: inclined.FlowParameters) -> dict[str, str]:
+    """Units of a run's outputs (``summary.json``, ``measurements.npz``), in words.
+
+    Parameters
+    ----------
+    params : FlowParameters
+        The run's parameters (its unit system).
+
+    Returns
+    -------
+    dict of str to str
+        ``flow_rate`` (:data:`~lubcontact.flow.config.Q_UNIT`), ``dt_fraction``
+        (:data:`~lubcontact.flow.config.DT_UNIT`), ``time``, ``kinetic_energy``,
+        ``wall_time`` and ``d`` / ``g'`` (what the symbols stand for).
+    """
+    si = params.units == "SI"
+    return {"flow_rate": Q_UNIT, "dt_fraction": DT_UNIT,
+            "d": "mean grain diameter", "g'": "reduced gravity g (1 - rho_f / rho_p)",
+            "time": "s" if si else "sqrt(r/g') (r = g' = 1)",
+            "kinetic_energy": "J/m (per unit depth)" if si else "rho_p g' r^3 (r = g' = rho_p = 1)",
+            "wall_time": "s"}
+
+
+def json_safe(value: Any) -> Any:
+    """``value`` with every non-finite float (NaN, inf) replaced by None, in dicts and lists."""
+    if isinstance(value, dict):
+        return {key: json_safe(item) for key, item in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [json_safe(item) for item in value]
+    if isinstance(value, (float, np.floating)):
+        return float(value) if math.isfinite(value) else None
+    if isinstance(value, np.integer):
+        return int(value)
+    return value
+
+
+def summary_json(summary: dict[str, Any]) -> str:
+    """``summary`` as strict JSON (indented): a quantity without a finite value is ``null``."""
+    return json.dumps(json_safe(summary), indent=2, allow_nan=False)
+
+
+def describe(config: RunConfig) -> str:
+    """A run in words: ``inclined_flow dry 22 deg`` or ``sedimentation frictionless``."""
+    words = f"{config.scene} {config.model}"
+    return words if config.angle is None else f"{words} {config.angle:g} deg"
+
+
+def warm_up_problems(sim: Simulation) -> list[StepProblem]:
+    """Step problems of the current scene, one per set of cone kinds the law gives its contacts.
+
+    The contacts are the scene's (when none touch yet, the first grain is
+    placed on top of the second); each problem gives them all the same gluey
+    state: unglued (0), glued (``gamma_min / 2``) and frictional
+    (``gamma_min``), so that, e.g., boxes and friction cones both occur.
+    Nothing of ``sim`` is changed.
+
+    Parameters
+    ----------
+    sim : Simulation
+
+    Returns
+    -------
+    list of StepProblem
+        Distinct by cone kinds (empty with fewer than two grains and no contact).
+    """
+    scene = sim.scene.copy()
+    contacts = find_contacts(scene, sim.d_max)
+    if contacts.count == 0:
+        grains = scene.grains
+        if grains.count < 2:
+            return []
+        grains.positions[0] = grains.positions[1] + [0.0, grains.radii[0] + grains.radii[1]]
+        contacts = find_contacts(scene, sim.d_max)
+    floor = np.asarray(sim.law.gamma_min(contacts), dtype=float)
+    finite = np.isfinite(floor)
+    states = [np.zeros(contacts.count)]
+    if finite.any():
+        states += [np.where(finite, 0.5 * floor, 0.0), np.where(finite, floor, 0.0)]
+    problems, seen = [], set()
+    for gamma in states:
+        cones = sim.law.cones(contacts, gamma)
+        kinds = tuple(sorted(set(cones.kinds.tolist())))
+        if kinds not in seen:
+            seen.add(kinds)
+            problems.append(assemble(scene, contacts, cones, sim.dt,
+                                     rotations=sim.law.needs_rotation))
+    return problems
 
 
 def frame_arrays(sim: Simulation, report: StepReport | None) -> dict[str, np.ndarray]:
@@ -422,5 +609,4 @@ def _progress_bar(total: int, enabled: bool, config: RunConfig) -> tqdm | None:
         return None
     from tqdm import tqdm
 
-    return tqdm(total=total, desc=f"{config.scene} {config.model} {config.angle:g} deg",
-                unit="step", leave=False)
+    return tqdm(total=total, desc=describe(config), unit="step", leave=False)

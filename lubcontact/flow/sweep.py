@@ -4,7 +4,12 @@ In the sweep's folder: ``bed.npz`` (the bed every run tilts), one folder per run
 ``<model>/angle_<angle>/`` (the files of :mod:`lubcontact.flow.run`) and
 ``sweep.csv`` with one row per run (:data:`SWEEP_COLUMNS`). Each run is
 resumable: a finished one (its ``summary.json`` exists) is read back, an
-interrupted one continues from its checkpoint.
+interrupted one continues from its checkpoint. A folder holding a run that
+another scene or physics made (:data:`~lubcontact.flow.config.DEFINING_FIELDS`)
+is an error, not a silent mix of two sweeps.
+
+Flow rates are in units of ``d sqrt(g' d)`` (:data:`~lubcontact.flow.config.Q_UNIT`),
+in the console, in ``sweep.csv`` (named in its header) and in the figures.
 """
 from __future__ import annotations
 
@@ -18,20 +23,82 @@ import numpy as np
 
 from ..io.files import atomic_path
 from .bed import initial_scene
-from .config import RunConfig
+from .config import DEFINING_FIELDS, Q_UNIT, RunConfig, flow_rate_unit
 from .run import FlowRun
 
 SWEEP_COLUMNS = ("model", "angle", "flow_rate", "flow_rate_std", "state", "energy_ratio",
                  "relative_change", "fraction_unglued", "fraction_glued", "fraction_frictional",
                  "kinetic_energy", "steps", "time", "unconverged_steps", "max_cross_check",
-                 "wall_time", "steps_per_second", "cpu_time", "steps_per_cpu_second", "solver",
-                 "tol")
+                 "wall_time", "steps_per_second", "cpu_time", "steps_per_cpu_second",
+                 "warm_up_time", "solver", "tol")
 """Columns of ``sweep.csv``: keys of :meth:`lubcontact.flow.run.FlowRun.summary`."""
+COLUMN_UNITS = {"angle": "deg", "flow_rate": Q_UNIT, "flow_rate_std": Q_UNIT, "wall_time": "s",
+                "cpu_time": "s", "warm_up_time": "s"}
+"""Units written in the header of ``sweep.csv``: ``flow_rate [d sqrt(g' d)]``."""
+
+
+def csv_header(column: str) -> str:
+    """The header of a column of ``sweep.csv``: its key, with its unit in brackets if it has one."""
+    unit = COLUMN_UNITS.get(column)
+    return column if unit is None else f"{column} [{unit}]"
 
 
 def run_folder(out_dir: pathlib.Path, model: str, angle: float) -> pathlib.Path:
     """The folder of one run of a sweep: ``out_dir/<model>/angle_<angle, 05.2f>``."""
     return pathlib.Path(out_dir) / model / f"angle_{float(angle):05.2f}"
+
+
+def stored_config(checkpoint: pathlib.Path) -> RunConfig:
+    """The :class:`RunConfig` stored in a checkpoint."""
+    with np.load(checkpoint) as data:
+        return RunConfig.from_json(str(data["config"]))
+
+
+def stored_steps(checkpoint: pathlib.Path) -> int:
+    """Steps done by the run of a checkpoint (0 when there is none)."""
+    if not pathlib.Path(checkpoint).exists():
+        return 0
+    with np.load(checkpoint) as data:
+        return int(data["steps_done"])
+
+
+def folder_conflicts(run_dir: pathlib.Path, config: RunConfig) -> dict[str, tuple]:
+    """The fields of the run in ``run_dir`` that differ from ``config`` and must not.
+
+    Those are the :data:`~lubcontact.flow.config.DEFINING_FIELDS` and the
+    friction coefficient (the runs of one sweep share it); ``bed``, a path
+    that may be spelled differently, is not compared.
+
+    Returns
+    -------
+    dict of str to (stored, requested)
+        Empty when the folder holds no checkpoint or the same run.
+    """
+    checkpoint = pathlib.Path(run_dir) / "checkpoint.npz"
+    if not checkpoint.exists():
+        return {}
+    stored = stored_config(checkpoint)
+    names = tuple(name for name in DEFINING_FIELDS if name != "bed")
+    changed = stored.differences(config, names)
+    if "preset" not in changed and stored.params.friction != config.params.friction:
+        changed["friction"] = (stored.friction, config.friction)
+    return changed
+
+
+def check_folder(run_dir: pathlib.Path, config: RunConfig) -> None:
+    """Refuse a run folder whose checkpoint was made with other defining fields.
+
+    Raises
+    ------
+    ValueError
+        Naming the folder and the fields that differ (:func:`folder_conflicts`).
+    """
+    changed = folder_conflicts(run_dir, config)
+    if changed:
+        raise ValueError(f"{run_dir} holds a run with other settings ("
+                         + ", ".join(f"{name} {old!r}, here {new!r}"
+                                     for name, (old, new) in changed.items())
+                         + "): use another output folder")
 
 
 def sweep(config: RunConfig, angles: np.ndarray, models: list[str], out_dir: pathlib.Path,
@@ -57,33 +124,61 @@ def sweep(config: RunConfig, angles: np.ndarray, models: list[str], out_dir: pat
     -------
     list of dict
         The runs' summaries, models outer, angles inner.
+
+    Raises
+    ------
+    ValueError
+        When a run folder holds a run made with other settings (:func:`check_folder`).
+    Interrupted
+        When a stop is requested (:mod:`lubcontact.flow.interrupt`): the run
+        under way (or the next one, at step 0) is checkpointed; running the
+        sweep again continues it.
     """
     out_dir = pathlib.Path(out_dir)
     rows = []
+    print(f"Q: time-averaged flow rate per unit depth, in units of {Q_UNIT} "
+          "(d: mean grain diameter, g': reduced gravity)", flush=True)
     for model in models:
         for angle in angles:
-            run_dir = run_folder(out_dir, model, angle)
-            done = run_dir / "summary.json"
-            if done.exists():
-                rows.append(json.loads(done.read_text()))
-                continue
             run_config = replace(config, model=model, angle=float(angle),
                                  bed=str(out_dir / "bed.npz"))
+            run_dir = run_folder(out_dir, model, angle)
+            check_folder(run_dir, run_config)
+            done = run_dir / "summary.json"
+            if done.exists():
+                rows.append(_read_summary(done, run_config))
+                continue
             checkpoint = run_dir / "checkpoint.npz"
-            if checkpoint.exists():
-                run = FlowRun.resume(checkpoint, run_dir, steps=run_config.steps)
+            if checkpoint.exists():      # with this sweep's settings (solver, periods, ...)
+                changes = {name: getattr(run_config, name)
+                           for name in RunConfig.field_names() - set(DEFINING_FIELDS)}
+                run = FlowRun.resume(checkpoint, run_dir, **changes)
             else:
                 run = FlowRun(run_config, initial_scene(run_config, out_dir, progress), run_dir)
             summary = run.finish(progress)
             rows.append(summary)
-            print(f"{model:6s} {angle:5.1f} deg  Q = {summary['flow_rate']:.4g}  "
+            print(f"{model:6s} {angle:5.1f} deg  Q = {summary['flow_rate']:.4g} {Q_UNIT}  "
                   f"{summary['state']}  {summary['steps_per_second']:.1f} steps/s", flush=True)
     write_csv(out_dir / "sweep.csv", rows)
     return rows
 
 
+def _read_summary(path: pathlib.Path, config: RunConfig) -> dict[str, Any]:
+    """A finished run's ``summary.json``; flow rates of older files (length^2 / time) converted."""
+    row = json.loads(path.read_text())
+    if "units" not in row:
+        scale = flow_rate_unit(config.params)
+        for key in ("flow_rate", "flow_rate_std"):
+            if row.get(key) is not None:
+                row[key] = row[key] / scale
+    return row
+
+
 def write_csv(path: pathlib.Path, rows: list[dict[str, Any]]) -> None:
     """Write sweep rows as CSV (atomically), the :data:`SWEEP_COLUMNS` only.
+
+    The header names each column with its unit (:func:`csv_header`); a
+    quantity without a value (None, NaN) is an empty cell.
 
     Parameters
     ----------
@@ -93,6 +188,13 @@ def write_csv(path: pathlib.Path, rows: list[dict[str, Any]]) -> None:
         Run summaries (other keys are left out).
     """
     with atomic_path(path) as temporary, open(temporary, "w", newline="") as stream:
-        writer = csv.DictWriter(stream, fieldnames=SWEEP_COLUMNS, extrasaction="ignore")
-        writer.writeheader()
-        writer.writerows(rows)
+        writer = csv.writer(stream)
+        writer.writerow([csv_header(column) for column in SWEEP_COLUMNS])
+        for row in rows:
+            writer.writerow([_cell(row.get(column)) for column in SWEEP_COLUMNS])
+
+
+def _cell(value: Any) -> Any:
+    if value is None or (isinstance(value, float) and not np.isfinite(value)):
+        return ""
+    return value

@@ -1,0 +1,256 @@
+"""``lubcontact run`` / ``sweep``: resume semantics, interruption, help text and argument errors."""
+import json
+import os
+import re
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from lubcontact.flow import cli as flow_cli
+from lubcontact.flow.bed import initial_scene
+from lubcontact.flow.config import RunConfig
+from lubcontact.flow.run import FlowRun
+
+SMALL = ["--n", "24", "--width", "12", "--model", "dry", "--dt", "0.05", "--settle-steps", "0",
+         "--solver", "clarabel", "--checkpoint-every", "3", "--sample-every", "3", "--no-progress"]
+ENV = dict(os.environ, OPENBLAS_NUM_THREADS="1", MPLBACKEND="Agg")
+
+
+def small_run(out, steps, done):
+    """A run of ``steps`` steps stopped after ``done`` (its checkpoint: the multiple of 3 below)."""
+    config = RunConfig(scene="inclined_flow", n_grains=24, width=12.0, model="dry", angle=22.0,
+                       steps=steps, dt_fraction=0.05, settle_steps=0, solver="clarabel",
+                       checkpoint_every=3, sample_every=3)
+    run = FlowRun(config, initial_scene(config, out), out)
+    run.advance(done)
+    return run
+
+
+def stored(out):
+    with np.load(out / "checkpoint.npz") as data:
+        return int(data["steps_done"]), RunConfig.from_json(str(data["config"]))
+
+
+def error_lines(capsys):
+    return [line for line in capsys.readouterr().err.splitlines() if line.strip()]
+
+
+# -- defect 1: resume ------------------------------------------------------------------------------
+def test_resume_without_steps_continues_the_stored_run(tmp_path, capsys):
+    """A 12-step run killed at step 7 resumes to 12 steps (not to the default 1000)."""
+    out = tmp_path / "run"
+    small_run(out, steps=12, done=7)                        # checkpoint at step 6
+    assert stored(out)[0] == 6
+    assert flow_cli.run_main(["inclined_flow", "--out", str(out), "--resume", "--no-progress"]) == 0
+    steps_done, config = stored(out)
+    assert (steps_done, config.steps) == (12, 12)
+    assert json.loads((out / "summary.json").read_text())["steps"] == 12
+    assert "resuming" in capsys.readouterr().out
+
+
+def test_resume_with_explicit_steps_changes_the_total_and_says_so(tmp_path, capsys):
+    out = tmp_path / "run"
+    small_run(out, steps=12, done=12)
+    capsys.readouterr()
+    assert flow_cli.run_main(["inclined_flow", "--out", str(out), "--resume", "--steps", "18",
+                              "--no-progress"]) == 0
+    assert stored(out)[0] == 18 and stored(out)[1].steps == 18
+    assert "from 12 to 18 steps" in capsys.readouterr().out
+    with pytest.raises(SystemExit) as exit_:                # below the checkpoint's step: refused
+        flow_cli.run_main(["--out", str(out), "--resume", "--steps", "9", "--no-progress"])
+    assert exit_.value.code == 2
+    lines = error_lines(capsys)
+    assert len(lines) == 1 and "--steps" in lines[0]
+
+
+CONFLICTS = [(["--n", "30"], "--n"), (["--angle", "25"], "--angle"), (["--model", "gluey"], "--model"),
+             (["--preset", "poster"], "--preset"), (["--seed", "3"], "--seed"),
+             (["--dt", "0.02"], "--dt"), (["--width", "14"], "--width"),
+             (["--settle-steps", "5"], "--settle-steps")]
+
+
+def test_resume_rejects_flags_that_define_the_scene_or_the_physics(tmp_path, capsys):
+    out = tmp_path / "run"
+    small_run(out, steps=12, done=12)
+    before = (out / "checkpoint.npz").read_bytes()
+    base = ["inclined_flow", "--out", str(out), "--resume", "--steps", "12", "--no-progress"]
+    for flags, name in CONFLICTS:
+        capsys.readouterr()
+        with pytest.raises(SystemExit) as exit_:
+            flow_cli.run_main(base + flags)
+        assert exit_.value.code == 2, flags
+        lines = error_lines(capsys)
+        assert len(lines) == 1 and name in lines[0], (flags, lines)
+    with pytest.raises(SystemExit):                         # several at once: all named, one line
+        flow_cli.run_main(base + ["--n", "30", "--seed", "4"])
+    lines = error_lines(capsys)
+    assert len(lines) == 1 and "--n" in lines[0] and "--seed" in lines[0]
+    with pytest.raises(SystemExit):                         # the scene too
+        flow_cli.run_main(["sedimentation"] + base[1:])
+    assert "sedimentation" in error_lines(capsys)[0]
+    assert (out / "checkpoint.npz").read_bytes() == before  # nothing was touched
+    # the stored values themselves may be repeated (the same command line plus --resume)
+    assert flow_cli.run_main(base + ["--n", "24", "--model", "dry", "--dt", "0.05"]) == 0
+
+
+def test_resume_without_a_checkpoint_is_an_error(tmp_path, capsys):
+    out = tmp_path / "nothing"
+    with pytest.raises(SystemExit) as exit_:
+        flow_cli.run_main(["inclined_flow", "--out", str(out), "--resume", "--steps", "3", *SMALL])
+    assert exit_.value.code == 2
+    lines = error_lines(capsys)
+    assert len(lines) == 1 and "checkpoint" in lines[0] and "--resume" in lines[0]
+    assert not out.exists()
+
+
+# -- defect 2: Ctrl-C -----------------------------------------------------------------------------
+def wait_for(path, process, seconds=60.0):
+    deadline = time.monotonic() + seconds
+    while not path.exists():
+        assert process.poll() is None, process.communicate()
+        assert time.monotonic() < deadline, f"no {path} after {seconds} s"
+        time.sleep(0.05)
+
+
+def interrupt(command, checkpoint):
+    process = subprocess.Popen(command, env=ENV, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                               text=True)
+    try:
+        wait_for(checkpoint, process)
+        process.send_signal(signal.SIGINT)
+        _, stderr = process.communicate(timeout=60)
+    finally:
+        if process.poll() is None:
+            process.kill()
+    return process.returncode, stderr
+
+
+def test_ctrl_c_stops_the_run_with_a_checkpoint_and_one_line(tmp_path):
+    out = tmp_path / "run"
+    command = [sys.executable, "-m", "lubcontact.cli", "run", "inclined_flow", "--n", "24",
+               "--width", "12", "--model", "dry", "--steps", "800", "--dt", "0.02",
+               "--settle-steps", "0", "--checkpoint-every", "50", "--sample-every", "10",
+               "--out", str(out)]
+    code, stderr = interrupt(command, out / "checkpoint.npz")
+    assert code == 130, stderr
+    lines = [line for line in stderr.splitlines() if line.strip()]
+    assert len(lines) == 1 and "interrupted at step" in lines[0], stderr
+    assert f"lubcontact run --out {out} --resume" in lines[0]
+    step = int(re.search(r"interrupted at step (\d+)", lines[0]).group(1))
+    steps_done, config = stored(out)
+    assert steps_done == step and 0 < step < 800 and config.steps == 800
+    resumed = subprocess.run([sys.executable, "-m", "lubcontact.cli", "run", "--out", str(out),
+                              "--resume"], env=ENV, capture_output=True, text=True, timeout=300)
+    assert resumed.returncode == 0, resumed.stderr
+    assert json.loads((out / "summary.json").read_text())["steps"] == 800
+    assert stored(out)[0] == 800
+
+
+def test_ctrl_c_stops_a_sweep_with_a_checkpoint_and_one_line(tmp_path):
+    out = tmp_path / "sweep"
+    args = ["--angles", "22", "--models", "dry", "--n", "24", "--width", "12", "--steps", "800",
+            "--dt", "0.02", "--settle-steps", "0", "--checkpoint-every", "50", "--sample-every", "10",
+            "--out", str(out)]
+    command = [sys.executable, "-m", "lubcontact.cli", "sweep", *args]
+    run_dir = out / "dry" / "angle_22.00"
+    code, stderr = interrupt(command, run_dir / "checkpoint.npz")
+    assert code == 130, stderr
+    lines = [line for line in stderr.splitlines() if line.strip()]
+    assert len(lines) == 1 and "interrupted at step" in lines[0], stderr
+    assert "lubcontact sweep" in lines[0] and "--angles 22" in lines[0]
+    step = int(re.search(r"interrupted at step (\d+)", lines[0]).group(1))
+    assert stored(run_dir)[0] == step
+    resumed = subprocess.run(command, env=ENV, capture_output=True, text=True, timeout=300)
+    assert resumed.returncode == 0, resumed.stderr
+    assert json.loads((run_dir / "summary.json").read_text())["steps"] == 800
+
+
+# -- defect 5: help, argument errors, progress bar, import cost ------------------------------------
+def help_blocks(text):
+    """``{invocation: help text}`` of each option (and positional) of an argparse help page."""
+    blocks, current = {}, None
+    for line in text.splitlines():
+        if re.match(r"^  [-{]", line):
+            parts = re.split(r"\s{2,}", line.strip(), maxsplit=1)
+            current = parts[0]
+            blocks[current] = parts[1] if len(parts) > 1 else ""
+        elif current is not None and line.startswith("   ") and line.strip():
+            blocks[current] += " " + line.strip()
+        else:
+            current = None
+    return blocks
+
+
+@pytest.mark.parametrize("command", ["run", "sweep"])
+def test_help_gives_a_text_and_the_default_of_every_option(command, capsys):
+    main = {"run": flow_cli.run_main, "sweep": flow_cli.sweep_main}[command]
+    with pytest.raises(SystemExit) as exit_:
+        main(["--help"])
+    assert exit_.value.code == 0
+    text = capsys.readouterr().out
+    for markup in ("``", ":func:", ":class:", ":mod:"):
+        assert markup not in text
+    blocks = help_blocks(text)
+    assert len(blocks) > 20
+    for invocation, help_ in blocks.items():
+        if invocation.startswith("-h"):
+            continue
+        assert help_, f"{invocation}: no help text"
+        assert "default" in help_, f"{invocation}: no default shown ({help_!r})"
+    dt = next(h for i, h in blocks.items() if i.startswith("--dt"))
+    assert "sqrt(d/g')" in dt and "mean" in dt and "diameter" in dt
+
+
+RUN_ERRORS = [(["--n", "0"], "--n", "n_grains"), (["--angle", "abc"], "--angle", None),
+              (["--angle", "95"], "--angle", "angle_deg"), (["--steps", "-5"], "--steps", None),
+              (["--tol", "0"], "--tol", None), (["--dt", "0"], "--dt", "dt_fraction"),
+              (["--checkpoint-every", "0"], "--checkpoint-every", "checkpoint_every"),
+              (["--mu", "-1"], "--mu", "friction"), (["--solver", "nope"], "--solver", None),
+              (["--width", "-2"], "--width", None), (["--max-outer", "0"], "--max-outer", "max_outer")]
+SWEEP_ERRORS = [(["--angles", "15:28"], "--angles", None), (["--models", "dry,wet"], "--models", None),
+                (["--n", "0"], "--n", "n_grains"), (["--tol-fp", "0"], "--tol-fp", "tol_fp")]
+
+
+def test_bad_values_are_one_line_errors_naming_the_flag(tmp_path, capsys):
+    run_base = ["inclined_flow", "--out", str(tmp_path / "run"), *SMALL, "--steps", "1"]
+    sweep_base = ["--out", str(tmp_path / "sweep"), *SMALL, "--steps", "1", "--angles", "22",
+                  "--models", "dry"]
+    cases = ([(flow_cli.run_main, run_base, *case) for case in RUN_ERRORS]
+             + [(flow_cli.sweep_main, sweep_base, *case) for case in SWEEP_ERRORS])
+    for main, base, bad, flag, field in cases:
+        capsys.readouterr()
+        with pytest.raises(SystemExit) as exit_:
+            main(base + bad)
+        assert exit_.value.code == 2, bad
+        lines = error_lines(capsys)
+        assert len(lines) == 1 and flag in lines[0], (bad, lines)
+        assert "Traceback" not in lines[0] and (field is None or field not in lines[0]), lines
+
+
+def test_no_progress_bar_when_stderr_is_not_a_terminal(tmp_path, capsys):
+    argv = ["inclined_flow", "--out", str(tmp_path / "run"), *SMALL, "--steps", "4"]
+    argv.remove("--no-progress")
+    assert flow_cli.run_main(argv) == 0
+    assert capsys.readouterr().err == ""
+
+
+@pytest.mark.parametrize("command", ["run", "sweep"])
+def test_help_imports_no_solver_plotting_or_scipy(command):
+    """``lubcontact run --help`` must stay instant: nothing heavy is imported to parse."""
+    done = subprocess.run([sys.executable, "-X", "importtime", "-m", "lubcontact.cli", command,
+                           "--help"], env=ENV, capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0 and "usage" in done.stdout
+    imported = {line.rsplit("|", 1)[-1].strip() for line in done.stderr.splitlines()
+                if line.startswith("import time:")}
+    heavy = {"numba", "cvxpy", "matplotlib", "scipy", "lubcontact.solvers", "tqdm"}
+    assert not heavy & imported, sorted(heavy & imported)
+
+
+def test_names_known_to_the_parser_match_the_scenes():
+    from lubcontact.flow.config import MODEL_NAMES, PRESET_NAMES
+    from lubcontact.scenes import inclined
+    assert PRESET_NAMES == tuple(inclined.PRESETS) and MODEL_NAMES == inclined.MODELS
