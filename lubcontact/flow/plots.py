@@ -18,7 +18,7 @@ import numpy as np  # noqa: E402
 from matplotlib.axes import Axes  # noqa: E402
 from matplotlib.collections import LineCollection, PatchCollection  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
-from matplotlib.patches import Circle  # noqa: E402
+from matplotlib.patches import Circle, Patch  # noqa: E402
 
 from ..io.files import atomic_path  # noqa: E402
 from ..model.scene import Scene  # noqa: E402
@@ -119,6 +119,11 @@ def snapshot(sim: Simulation, report: StepReport | None, path: pathlib.Path,
     ax.set_xlim(0, width / d)
     ax.set_ylim(0, height / d)
     ax.set_aspect("equal")
+    handles = [Patch(facecolor="0.85", edgecolor="0.6", label="grains")]
+    if len(scene.fixed_radii):
+        handles.append(Patch(facecolor="0.35", label="fixed bed (rough plane)"))
+    ax.legend(handles=handles, loc="upper right", fontsize=8, framealpha=0.9)
+    _gravity_arrow(ax, scene, height / d)
     if is_incline(scene):
         ax.set_xlabel("x / d (downhill, periodic)")
         ax.set_ylabel("y / d (normal to the incline)")
@@ -129,6 +134,20 @@ def snapshot(sim: Simulation, report: StepReport | None, path: pathlib.Path,
         where = ""
     ax.set_title(title or f"t = {scene.time:.4g}{where}, {scene.grains.count} grains")
     _save(fig, path)
+
+
+def _gravity_arrow(ax: Axes, scene: Scene, height: float) -> None:
+    """An arrow along gravity in the frame of the plot (tilted on an incline), labelled g."""
+    direction = np.asarray(scene.gravity[:2], dtype=float)
+    norm = float(np.linalg.norm(direction))
+    if norm == 0:
+        return
+    length = 0.25 * height
+    start = np.array([0.06 * ax.get_xlim()[1], 0.9 * height])
+    end = start + length * direction / norm
+    ax.annotate("", xy=end, xytext=start, arrowprops=dict(arrowstyle="-|>", color="tab:blue", lw=2))
+    ax.text(*(start + 0.5 * (end - start) + [0.02 * height, 0.0]), "g", color="tab:blue",
+            fontsize=11)
 
 
 def is_incline(scene: Scene) -> bool:
@@ -224,7 +243,7 @@ def state_fractions(rows: list[dict], path: pathlib.Path) -> None:
                     color=colour, marker="o", label=f"{model}: {state}")
     ax.set_xlabel("incline angle theta (degrees)")
     ax.set_ylabel("fraction of active contacts (-)")
-    ax.set_ylim(0, 1)
+    ax.set_ylim(-0.03, 1.03)                  # fractions of 0 and 1 stay off the frame
     ax.legend(fontsize=8)
     ax.grid(alpha=0.3)
     _save(fig, path)

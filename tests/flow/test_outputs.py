@@ -133,3 +133,23 @@ def test_a_sedimentation_run_records_and_shows_no_angle(tmp_path, capsys, figure
                            str(tmp_path / "other"), *SMALL])
     assert exit_.value.code == 2 and "--angle" in capsys.readouterr().err
     assert math.isfinite(summary["flow_rate"])
+
+
+def test_the_snapshot_shows_the_bed_and_gravity_and_fractions_stay_off_the_frame(tmp_path,
+                                                                                 monkeypatch):
+    """The flow snapshot has a legend naming the fixed bed and an arrow along gravity; the
+    contact-state fractions (often exactly 0 or 1) are not drawn on the frame of the axes."""
+    saved = []
+    monkeypatch.setattr(plots, "_save", lambda fig, path: saved.append(fig))
+    flow_demo.demo(tmp_path / "flow", n_grains=30, steps=4, settle_steps=30)
+    snapshot = next(fig for fig in saved if "grains" in fig.axes[0].get_title())
+    ax = snapshot.axes[0]
+    labels = [text.get_text() for text in ax.get_legend().get_texts()]
+    assert labels[0] == "grains" and "fixed bed" in labels[1]
+    arrows = [child for child in ax.texts if child.get_text() == "g"]
+    assert len(arrows) == 1 and any(patch.arrow_patch is not None for patch in ax.texts
+                                    if hasattr(patch, "arrow_patch"))
+    plots.state_fractions([{"model": "gluey", "angle": 20.0, "fraction_unglued": 0.0,
+                            "fraction_glued": 1.0, "fraction_frictional": 0.0}], tmp_path / "s.png")
+    low, high = saved[-1].axes[0].get_ylim()
+    assert low < 0.0 and high > 1.0
