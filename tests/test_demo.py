@@ -19,3 +19,25 @@ def test_the_solver_table_times_exclude_numba_compilation(tmp_path):
     apgd, jacobi = float(rows["apgd"][solve]), float(rows["apgd-jacobi"][solve])
     assert rows["apgd"][1] == rows["apgd-jacobi"][1] == "converged"
     assert apgd <= 10 * jacobi + 0.01, (apgd, jacobi)
+
+
+def test_the_pile_plot_separates_unglued_from_glued_contacts(tmp_path, monkeypatch):
+    """Axes in grain diameters (the pile's unit), unglued contacts grey, glued ones on a log scale
+    of |gamma| (a linear scale to gamma = -100 drew -5 < gamma < 0 in the unglued colour)."""
+    from pathlib import Path
+
+    import matplotlib.figure
+    from matplotlib.colors import LogNorm
+
+    from lubcontact.demo import pile_section
+
+    figures = []
+    monkeypatch.setattr(matplotlib.figure.Figure, "savefig",
+                        lambda fig, *args, **kwargs: figures.append(fig))
+    pile_section(Path(tmp_path), n_grains=60, steps=30)
+    ax = figures[0].axes[0]
+    assert ax.get_xlabel() == "x (grain diameters)" and ax.get_ylabel() == "y (grain diameters)"
+    lines = [c for c in ax.collections if c.get_label().startswith(("unglued", "glued"))]
+    unglued, glued = lines
+    assert unglued.get_label().startswith("unglued (gamma = 0)") and unglued.get_array() is None
+    assert isinstance(glued.norm, LogNorm) and glued.get_array().min() > 0
