@@ -16,6 +16,7 @@ import numpy as np
 
 from . import scenes
 from .bench.harness import compare_methods
+from .bench.options import plain
 from .bench.tables import format_table
 from .model.laws import GlueyLubrication
 from .sim.simulation import Simulation
@@ -148,7 +149,7 @@ def flow_section(out: Path) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="lubcontact demo", description=__doc__,
+    parser = argparse.ArgumentParser(prog="lubcontact demo", description=plain(__doc__),
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--out", type=Path, default=Path("out"), help="output folder (default out/)")
     parser.add_argument("--no-flow", action="store_true", help="skip the inclined-flow part")

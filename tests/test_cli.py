@@ -31,3 +31,14 @@ def test_version_and_bad_solver_module(capsys):
     assert "--solver-module: cannot import 'no_such_module_here'" in capsys.readouterr().err
     assert main(["--solver-module"]) == 2
     assert main(["nope"]) == 2
+
+
+@pytest.mark.parametrize("command", [["check-hard"], ["compare"], ["verify"], ["bench", "solvers"],
+                                     ["bench", "friction"], ["demo"], ["run"], ["sweep"]])
+def test_help_has_no_markup(command, capsys):
+    """--help shows plain text (docstrings' reStructuredText roles and literals removed)."""
+    with pytest.raises(SystemExit) as stop:
+        main([*command, "--help"])
+    assert stop.value.code == 0
+    out = capsys.readouterr().out
+    assert out and "``" not in out and ":func:" not in out and ":class:" not in out

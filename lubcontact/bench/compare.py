@@ -45,7 +45,7 @@ from ..solvers import methods as registered
 from ..solvers import reference_method
 from ..solvers.siconos_peer import available_methods, register_siconos, siconos_status
 from . import problem_sets
-from .options import check_methods, data_folder
+from .options import check_methods, data_folder, plain
 from .problem_sets import PACKAGE_DATA, ProblemSet, SetUnavailable
 from .report import environment, replot, write_outputs
 from .runs import MAX_OUTER, REFERENCE_TOL, SUCCESS_SLACK, run_set, variants
@@ -58,7 +58,7 @@ HEADLINE_TOL = 1e-6
 
 def parser() -> argparse.ArgumentParser:
     """The options of ``lubcontact compare``."""
-    p = argparse.ArgumentParser(prog="lubcontact compare", description=__doc__.split("\n")[0])
+    p = argparse.ArgumentParser(prog="lubcontact compare", description=plain(__doc__.split("\n")[0]))
     p.add_argument("--set", dest="sets", action="append", metavar="NAME",
                    help=f"problem set (repeatable): {', '.join(problem_sets.SETS)}; default piles")
     p.add_argument("--solvers", nargs="+", metavar="METHOD",

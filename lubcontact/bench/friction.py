@@ -70,7 +70,7 @@ from .friction_problems import (
     settling_step,
 )
 from .harness import TimedSolve, iterative, solve_reference, timed_solve, warm_up
-from .options import check_methods, data_folder, names
+from .options import check_methods, data_folder, names, plain
 from .problem_sets import DATA_DIR_ENV, FRICTION, PILE_DT, PILE_STEPS
 from .tables import format_table
 
@@ -243,7 +243,7 @@ def pile_rows(step: PileStep, methods: list[str], tol: float, max_outer: int, fo
 # -- command -----------------------------------------------------------------------------------
 def parser() -> argparse.ArgumentParser:
     """The options of ``lubcontact bench friction``."""
-    parser = argparse.ArgumentParser(prog="lubcontact bench friction", description=__doc__,
+    parser = argparse.ArgumentParser(prog="lubcontact bench friction", description=plain(__doc__),
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--problems", default=None,
                         help="external problems by name or file name, comma-separated globs "

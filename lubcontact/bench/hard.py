@@ -39,7 +39,7 @@ from ..problem.metrics import PROPERTY_TOL, scaled_velocity_error, solution_prop
 from ..problem.step import StepProblem
 from ..solvers import CONVERGED, CoulombResult, SolveResult, SolveSettings, methods, reference_method
 from .harness import timed_solve
-from .options import check_methods, names
+from .options import check_methods, names, plain
 
 if TYPE_CHECKING:
     from .cases.hard import HardCase
@@ -235,7 +235,7 @@ def summary(cells: list[Cell]) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     """``lubcontact check-hard``: print the case x solver matrix; exit 1 on a wrong or crashed cell."""
-    parser = argparse.ArgumentParser(prog="lubcontact check-hard", description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(prog="lubcontact check-hard", description=plain(__doc__.splitlines()[0]))
     parser.add_argument("--cases", help="comma-separated case names (default: all)")
     parser.add_argument("--solvers", help="comma-separated method names (default: all registered)")
     parser.add_argument("--tol", type=float, default=1e-9, help="solver tolerance (default 1e-9)")

@@ -1,6 +1,7 @@
 """Command-line values common to the benchmark commands: name lists, methods, the data folder."""
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 from ..solvers import methods
@@ -37,3 +38,12 @@ def data_folder(override: str | Path | None) -> Path:
         if override is None:
             raise
         raise ValueError(f"--data-dir: not a directory: {override}") from None
+
+
+def plain(text: str) -> str:
+    """Docstring text for ``--help``: reStructuredText roles and literals made plain.
+
+    ``:func:`~a.b.name``` -> ``name``, ``:mod:`a.b``` -> ``a.b``, double backquotes -> none.
+    """
+    text = re.sub(r":[a-z]+:`~?(?:[\w.]+\.)?([^`<]+?)`", lambda m: m.group(1), text)
+    return text.replace("``", "")

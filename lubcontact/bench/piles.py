@@ -45,7 +45,7 @@ from ..problem.step import StepProblem
 from ..solvers import CONVERGED, INTERIOR_POINT, SolveSettings, solver_info
 from ..solvers import methods as registered
 from .harness import TimedSolve, iterative, solve_reference, timed_solve, warm_up
-from .options import check_methods, names
+from .options import check_methods, names, plain
 from .pile_problems import PILES, PileCase, matched_forces, next_step_problem, pile_cases
 
 BASELINE = "clarabel-direct"
@@ -246,7 +246,7 @@ def summarise(measured: CaseResult, accuracy: float, out: Callable[[str], None] 
 
 def solvers_main(argv: list[str] | None = None) -> int:
     """``lubcontact bench solvers``: see the module docstring."""
-    parser = argparse.ArgumentParser(prog="lubcontact bench solvers", description=__doc__,
+    parser = argparse.ArgumentParser(prog="lubcontact bench solvers", description=plain(__doc__),
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--sizes", default="100,1000,10000", help="grain counts, comma separated")
     parser.add_argument("--methods", default=None,
