@@ -42,6 +42,7 @@ file is from symmetric positive semi-definite (real files are not always).
 """
 from __future__ import annotations
 
+import weakref
 from dataclasses import dataclass
 
 import numpy as np
@@ -305,7 +306,12 @@ def delassus_diagnostics(problem: LocalProblem) -> dict:
         ``converged`` (False when the smallest eigenvalue could not be
         confirmed: it is then the best estimate, or NaN).
     """
-    matrix = sp.csr_matrix(problem.delassus)
+    return matrix_diagnostics(problem.delassus)
+
+
+def matrix_diagnostics(matrix: sp.spmatrix) -> dict:
+    """:func:`delassus_diagnostics` of a matrix ``W`` given alone."""
+    matrix = sp.csr_matrix(matrix)
     n = matrix.shape[0]
     norm = float(spla.norm(matrix)) if matrix.nnz else 0.0
     asymmetry = float(spla.norm(matrix - matrix.T)) / norm if norm > 0 else 0.0
@@ -385,18 +391,36 @@ def convexified(problem: LocalProblem) -> tuple[LocalProblem, dict]:
         the diagnostics with ``repaired`` (bool), ``shift`` (``delta``) and
         ``perturbation`` ``= |W' - W|_F / |W|_F``.
     """
-    report = delassus_diagnostics(problem)
+    repaired, report = _repaired_delassus(problem.delassus)
+    if repaired is None:
+        return problem, dict(report)
+    fixed = LocalProblem(delassus=repaired, free_velocity=problem.free_velocity, cones=problem.cones,
+                         shift=problem.shift, name=problem.name, scaling=problem.scaling)
+    return fixed, dict(report)
+
+
+_LAST_REPAIR: list = [None, None, None]
+"""``[weak reference to W, repaired W or None, report]`` of the last :func:`convexified` call:
+the fixed point on s re-solves with the same ``W`` (only the shift changes), so its
+eigenvalues are computed once, not at every outer iteration."""
+
+
+def _repaired_delassus(matrix: sp.spmatrix) -> tuple[sp.csr_matrix | None, dict]:
+    """``(W', report)`` for :func:`convexified` (``W' = None``: nothing to repair), cached by identity."""
+    known = _LAST_REPAIR[0]() if _LAST_REPAIR[0] is not None else None
+    if known is matrix:
+        return _LAST_REPAIR[1], _LAST_REPAIR[2]
+    report = matrix_diagnostics(matrix)
     low = report["min_eigenvalue"] if np.isfinite(report["min_eigenvalue"]) else 0.0
     negative = report["relative_min_eigenvalue"] < -REPAIR_TOL and low < 0
     report.update(repaired=False, shift=0.0, perturbation=0.0)
-    if report["asymmetry"] <= REPAIR_TOL and not negative:
-        return problem, report
-    matrix = sp.csr_matrix(problem.delassus)
-    shift = -low if negative else 0.0
-    repaired = sp.csr_matrix((matrix + matrix.T) * 0.5 + shift * sp.identity(matrix.shape[0]))
-    norm = float(spla.norm(matrix))
-    report.update(repaired=True, shift=shift,
-                  perturbation=float(spla.norm(repaired - matrix)) / norm if norm else 0.0)
-    fixed = LocalProblem(delassus=repaired, free_velocity=problem.free_velocity, cones=problem.cones,
-                         shift=problem.shift, name=problem.name, scaling=problem.scaling)
-    return fixed, report
+    repaired = None
+    if report["asymmetry"] > REPAIR_TOL or negative:
+        csr = sp.csr_matrix(matrix)
+        shift = -low if negative else 0.0
+        repaired = sp.csr_matrix((csr + csr.T) * 0.5 + shift * sp.identity(csr.shape[0]))
+        norm = float(spla.norm(csr))
+        report.update(repaired=True, shift=shift,
+                      perturbation=float(spla.norm(repaired - csr)) / norm if norm else 0.0)
+    _LAST_REPAIR[:] = [weakref.ref(matrix), repaired, report]
+    return repaired, report

@@ -80,7 +80,8 @@ class LocalProblem(ConicProblemMixin):
 
     def __post_init__(self):
         n = self.cones.n_rows
-        self.delassus = sp.csr_matrix(self.delassus)
+        if not sp.isspmatrix_csr(self.delassus):        # a copy with another shift keeps W itself
+            self.delassus = sp.csr_matrix(self.delassus)
         checks.require(self.delassus.shape == (n, n), "W", f"expected shape {(n, n)}",
                        self.delassus.shape)
         self.free_velocity = checks.as_array("q", self.free_velocity, shape=(n,))

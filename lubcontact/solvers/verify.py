@@ -269,7 +269,7 @@ def _forces_from_velocities(problem: ConicProblem, velocities: np.ndarray) -> np
         fit = replace(problem, delassus=sp.csr_matrix(problem.delassus.T @ problem.delassus),
                       free_velocity=problem.delassus.T @ residual,
                       shift=np.zeros(problem.n_contacts))
-    return solve(fit, "clarabel", tol=1e-10).forces
+    return solve(fit, reference_method(fit), tol=1e-10).forces
 
 
 def _velocity_violation(problem: ConicProblem, scaled: ConicProblem, velocities: np.ndarray,

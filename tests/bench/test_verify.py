@@ -67,3 +67,14 @@ def test_bad_input_is_a_one_line_error(tmp_path, capsys):
     with pytest.raises(SystemExit):
         main([str(PROBLEM), str(tmp_path / "short.npz"), "--tol", "-1"])
     assert "--tol" in capsys.readouterr().err
+
+
+def test_velocities_alone_verify_a_local_problem():
+    """Forces are recovered by the reference that accepts the problem (clarabel-dual here: the
+    primal form needs a step problem; it raised before)."""
+    from lubcontact.solvers.verify import verify
+
+    problem = read_problem(PROBLEM)
+    result = solve_coulomb(problem, "apgd-jacobi", tol=1e-10, tol_fp=1e-9, max_iter=100000)
+    report = verify(problem, velocities=problem.velocity(result.forces), tol=1e-6, reference=None)
+    assert report.forces_recovered and report.passed and report.penetration <= 1e-6

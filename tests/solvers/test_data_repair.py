@@ -42,3 +42,11 @@ def test_symmetric_psd_data_is_left_alone():
     local = read_problem(data_dir() / "fclib-local" / "LMGC_100_PR_PerioBox-i00361-60-03000.hdf5")
     same, report = convexified(local)
     assert same is local and not report["repaired"]
+
+
+def test_the_repair_is_computed_once_per_matrix():
+    """The fixed point re-solves with the same W: its eigenvalues are not recomputed each time."""
+    problem = read_problem(data_dir() / "siconos-testdata" / "Capsules-i122-1617.dat")
+    first, _ = convexified(problem)
+    again, report = convexified(problem.with_shift(np.ones(problem.n_contacts)))
+    assert again.delassus is first.delassus and report["repaired"]
