@@ -10,6 +10,7 @@ This layer sees problems only (:mod:`lubcontact.problem`), never grains.
 from . import (
     direct,  # noqa: F401  (registers clarabel-direct, osqp, scs)
     gradient,  # noqa: F401  (registers pgd, apgd, bb, apgd-jacobi, apgd-as)
+    newton,  # noqa: F401  (registers newton-ac)
     reference,  # noqa: F401  (registers clarabel, clarabel-dual)
 )
 from .coulomb import solve_coulomb
@@ -17,6 +18,7 @@ from .registry import (
     FIRST_ORDER,
     INTERIOR_POINT,
     KINDS,
+    NEWTON,
     QP,
     SolverInfo,
     capable_methods,
@@ -45,6 +47,6 @@ from .settings import SolveSettings
 
 __all__ = ["solve", "solve_coulomb", "SolveSettings", "CoulombResult", "methods", "register",
     "unregister", "solver_info", "capable_methods", "reference_method", "SolverInfo",
-    "FIRST_ORDER", "INTERIOR_POINT", "QP", "KINDS", "check_status", "MethodOutput",
+    "FIRST_ORDER", "INTERIOR_POINT", "QP", "NEWTON", "KINDS", "check_status", "MethodOutput",
     "SolveResult", "SolverError", "SolverWarning", "CONVERGED", "DIVERGED", "FAILED",
     "INACCURATE", "MAX_ITER", "STATUSES"]

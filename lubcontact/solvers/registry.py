@@ -37,8 +37,10 @@ from .result import CONVERGED, DIVERGED, FAILED, INACCURATE, SUSPICIOUS_RESIDUAL
 FIRST_ORDER = "first-order"
 INTERIOR_POINT = "interior-point"
 QP = "qp"
-KINDS = (FIRST_ORDER, INTERIOR_POINT, QP)
-"""Solver families: first-order (projected gradient, ADMM), interior point, QP-only."""
+NEWTON = "newton"
+KINDS = (FIRST_ORDER, INTERIOR_POINT, QP, NEWTON)
+"""Solver families: first-order (projected gradient, ADMM), interior point, QP-only,
+semismooth Newton (a sparse factorisation per iteration)."""
 
 ALL_CONES = frozenset(ConeKind)
 CONVEX_CONES = frozenset(ConeKind) - {ConeKind.UNION}

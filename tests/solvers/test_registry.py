@@ -13,6 +13,7 @@ from lubcontact.solvers import (
     FIRST_ORDER,
     INTERIOR_POINT,
     KINDS,
+    NEWTON,
     QP,
     CoulombResult,
     MethodOutput,
@@ -32,11 +33,12 @@ def test_every_method_has_a_kind_and_the_kinds_partition_the_registry():
     assert {"pgd", "apgd", "apgd-jacobi", "apgd-as", "bb"} <= by_kind[FIRST_ORDER]
     assert {"clarabel", "clarabel-dual", "clarabel-direct"} <= by_kind[INTERIOR_POINT]
     assert by_kind[QP] == {"osqp"}
+    assert by_kind[NEWTON] == {"newton-ac"}
 
 
 def test_unknown_kind_and_duplicate_name_are_rejected():
     with pytest.raises(ValueError, match="kind"):
-        methods(kind="newton")
+        methods(kind="quasi-newton")
     with pytest.raises(ValueError, match="name: solver 'apgd' is already registered"):
         register("apgd")(lambda problem, **_: None)
     with pytest.raises(ValueError, match="kind"):

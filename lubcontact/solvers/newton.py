@@ -1,0 +1,335 @@
+"""Semismooth Newton on the Alart-Curnier function: exact Coulomb friction in a few sparse solves.
+
+The first-order methods need 10^3-10^5 iterations where Coulomb's law is
+stiff (dense piles, large ``mu``); a Newton method on a non-smooth equation
+needs tens. With ``u = W r + q`` (the problem's offset ``b`` without any shift
+``s``), ``rho_c > 0`` per contact and ``y = r - rho u``, Coulomb's law and the
+frictionless force sets are the zeros of (Alart and Curnier, 1991)::
+
+    phi(r) = r - P(y)
+
+    P_n(y) = max(y_n, 0)                                     NONNEG and COULOMB normal rows
+    P_T(y) = projection of y_T onto the disk of radius       COULOMB tangential rows
+             mu max(y_n, 0)
+    P_i(y) = clip(y_i, lo_i, hi_i)                           other rows: FREE (R), NONPOS,
+                                                             tangential rows forced to 0
+
+``phi = 0`` says: the normal force and the normal velocity are complementary,
+the tangential force lies in the friction disk, and a sliding contact's force
+opposes its sliding velocity; it is Coulomb's law itself, not the convex
+relaxation, so the method is registered with ``native_coulomb=True`` and the
+fixed point on ``s`` is not needed (:func:`~lubcontact.solvers.solve_coulomb`
+runs it once).
+
+Newton step. ``P`` is piecewise smooth; with ``G`` an element of its
+generalised Jacobian at ``y`` (block diagonal per contact: 0 or 1 on box rows,
+1 on a pushed normal row, the identity on a sticking tangential block,
+``(R/|y_T|) (I - t t^T)`` and the column ``mu t`` on a sliding one, ``t =
+y_T/|y_T|``), the Jacobian of ``phi`` is ``J = I - G + G diag(rho) W``. Rows
+where ``G`` vanishes (open contacts, zero-forced rows) are identity rows: their
+update is ``-phi`` and they are eliminated, so the sparse LU factorisation
+(SuperLU) is of the active rows only.
+
+Globalisation: a non-monotone Armijo line search on ``psi = |phi|^2 / 2``
+(the reference value is the largest of the last few); when the Newton
+direction gives no decrease, the steepest-descent direction of ``psi``,
+``-J^T phi``, is tried instead. Stopping: the FCLIB error
+(:func:`~lubcontact.problem.metrics.coulomb_error`, the measure every report
+uses) below ``tol``. Status ``max_iter`` at the cap, ``failed`` when neither
+direction decreases ``psi`` (a stationary point of the merit function that
+is not a solution); the last iterate is returned in both cases.
+"""
+from __future__ import annotations
+
+import time
+import warnings
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from ..problem.conic import ConicProblem
+from ..problem.metrics import coulomb_error
+from .coulomb import solve_coulomb
+from .registry import CONVEX_CONES, NEWTON, register
+from .result import CONVERGED, FAILED, MAX_ITER, MethodOutput
+
+LINE_SEARCH_MEMORY = 5
+"""Non-monotone line search: ``psi`` is compared with the largest of this many last values."""
+
+ARMIJO = 1e-4
+"""Sufficient decrease factor of the line search."""
+
+REGULARISATIONS = (0.0, 1e-10, 1e-8, 1e-6, 1e-4)
+"""Diagonal shifts tried in turn when the active block of the Jacobian is singular."""
+
+STALL_WINDOW = 100
+STALL_FACTOR = 0.5
+"""Newton has stalled when its best FCLIB error did not fall by this factor over the last
+``STALL_WINDOW`` iterations (the error of a semismooth Newton method is not monotone: its
+global phase wanders for tens of iterations before the fast local phase)."""
+
+POLISH_ITERATIONS = 10
+"""Newton iterations tried from the fallback's result (kept where they lower the error)."""
+
+STALLED = "stalled"
+"""Status of a Newton phase that stalled (reported in ``info``, never as a result's status)."""
+
+MAX_HALVINGS = 30
+"""Step halvings before a direction is given up."""
+
+
+class AlartCurnier:
+    """The Alart-Curnier function of one normalised problem and its generalised Jacobian.
+
+    Parameters
+    ----------
+    problem : ConicProblem
+        Normalised, convex cones (no UNION); its shift is ignored.
+
+    Attributes
+    ----------
+    rho : ndarray, shape (n_rows,)
+        Per-row step ``1 / W_nn`` of the row's contact.
+    """
+
+    def __init__(self, problem: ConicProblem):
+        cones = problem.cones
+        nc, dim_t = cones.count, cones.tangent_dim
+        self.W = problem.delassus.tocsr()
+        self.q = problem.offset.copy()
+        self.q[:nc] -= problem.shift
+        self.n_rows = problem.n_rows
+        projector = cones.projector
+        self.lower, self.upper = projector.lower.copy(), projector.upper.copy()
+        self.cone_n, self.cone_t, self.cone_mu = projector.pieces[0]
+        self.box = np.ones(self.n_rows, dtype=bool)
+        self.box[self.cone_n] = False
+        self.box[self.cone_t.ravel()] = False
+        diagonal = self.W.diagonal()[:nc]
+        positive = diagonal[diagonal > 0]
+        floor = 1e-12 * (positive.max() if positive.size else 1.0)
+        rho_contact = 1.0 / np.maximum(diagonal, floor)
+        row_contact = np.concatenate([np.arange(nc), np.repeat(cones.tangential, dim_t)]).astype(int)
+        self.rho = rho_contact[row_contact]
+        self.scaled_W = sp.diags(self.rho) @ self.W
+        self.dim_t = dim_t
+
+    def residual(self, forces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``phi(r)`` and ``y = r - rho (W r + q)``, both shape (n_rows,)."""
+        y = forces - self.rho * (self.W @ forces + self.q)
+        projected = np.clip(y, self.lower, self.upper)
+        if self.cone_n.size:
+            y_n = y[self.cone_n]
+            y_t = y[self.cone_t]
+            radius = self.cone_mu * np.maximum(y_n, 0.0)
+            norm_t = np.linalg.norm(y_t, axis=1)
+            scale = np.minimum(1.0, np.divide(radius, norm_t, out=np.ones_like(norm_t), where=norm_t > 0))
+            projected[self.cone_n] = np.maximum(y_n, 0.0)
+            projected[self.cone_t] = scale[:, None] * y_t
+        return forces - projected, y
+
+    def jacobian(self, y: np.ndarray) -> tuple[sp.csr_matrix, np.ndarray]:
+        """``J = I - G + G diag(rho) W`` at ``y``, and the mask of rows where ``G`` is not zero."""
+        rows, cols, vals = [], [], []
+        box = np.flatnonzero(self.box & (y > self.lower) & (y < self.upper))
+        rows.append(box)
+        cols.append(box)
+        vals.append(np.ones(box.size))
+        if self.cone_n.size:
+            y_n, y_t = y[self.cone_n], y[self.cone_t]
+            pushed = y_n > 0
+            rows.append(self.cone_n[pushed])
+            cols.append(self.cone_n[pushed])
+            vals.append(np.ones(int(pushed.sum())))
+            radius = self.cone_mu * np.maximum(y_n, 0.0)
+            norm_t = np.linalg.norm(y_t, axis=1)
+            stick = pushed & (norm_t <= radius)
+            slide = pushed & (norm_t > radius) & (radius > 0)
+            k = self.dim_t
+            eye = np.eye(k)
+            t = y_t[slide] / norm_t[slide, None]
+            block = (radius[slide] / norm_t[slide])[:, None, None] * (eye - t[:, :, None] * t[:, None, :])
+            t_rows = self.cone_t[slide]
+            rows.append(np.repeat(t_rows, k, axis=1).ravel())
+            cols.append(np.tile(t_rows, (1, k)).ravel())
+            vals.append(block.ravel())
+            rows.append(t_rows.ravel())
+            cols.append(np.repeat(self.cone_n[slide], k))
+            vals.append((self.cone_mu[slide, None] * t).ravel())
+            stick_rows = self.cone_t[stick].ravel()
+            rows.append(stick_rows)
+            cols.append(stick_rows)
+            vals.append(np.ones(stick_rows.size))
+        n = self.n_rows
+        G = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(n, n))
+        active = np.zeros(n, dtype=bool)
+        active[np.unique(G.nonzero()[0])] = True
+        J = sp.identity(n, format="csr") - G + G @ self.scaled_W
+        return J.tocsr(), active
+
+
+def _newton_direction(J: sp.csr_matrix, active: np.ndarray, phi: np.ndarray) -> np.ndarray | None:
+    """Solve ``J d = -phi`` with the identity rows eliminated.
+
+    A singular active block (``W`` rank deficient: more sticking rows than
+    degrees of freedom) is regularised, ``J_AA + delta I`` with ``delta`` from
+    :data:`REGULARISATIONS` in turn (a proximal step, as in Siconos' PROX); None
+    when every one fails.
+    """
+    direction = -phi.copy()
+    rows = np.flatnonzero(active)
+    if rows.size == 0:
+        return direction
+    fixed = np.flatnonzero(~active)
+    J_rows = J[rows]
+    rhs = -phi[rows] - J_rows[:, fixed] @ direction[fixed]
+    block = J_rows[:, rows].tocsc()
+    for delta in REGULARISATIONS:
+        matrix = block if delta == 0 else (block + delta * sp.identity(rows.size, format="csc")).tocsc()
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("error", spla.MatrixRankWarning)
+                solved = spla.splu(matrix, permc_spec="COLAMD").solve(rhs)
+        except (RuntimeError, spla.MatrixRankWarning):
+            continue
+        if np.all(np.isfinite(solved)):
+            direction[rows] = solved
+            return direction
+    return None
+
+
+@register("newton-ac", kind=NEWTON, cones=CONVEX_CONES, warm_start=True, native_coulomb=True)
+def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = 200,
+                         warm_start: np.ndarray | None = None, fallback: str | None = "apgd-jacobi",
+                         replay: MethodOutput | None = None) -> MethodOutput:
+    """Semismooth Newton on the Alart-Curnier function (exact Coulomb, sparse LU per iteration).
+
+    Parameters
+    ----------
+    problem : ConicProblem
+        Normalised; read as the Coulomb problem with ``q = b - [s, 0]``.
+    tol : float
+        Stop when the FCLIB error is below it.
+    max_iter : int
+        Cap on Newton iterations (one sparse LU each).
+    warm_start : ndarray, shape (n_rows,), optional
+        Initial forces (scaled); zero otherwise.
+    fallback : str or None
+        Registered method whose fixed point on ``s``
+        (:func:`~lubcontact.solvers.solve_coulomb`) takes over from the best
+        Newton iterate when Newton stalls (the FCLIB error did not fall by
+        :data:`STALL_FACTOR` in :data:`STALL_WINDOW` iterations), fails or
+        reaches ``max_iter``; None: no fallback. Newton stalls where the
+        generalised Jacobian is singular at the solution (degenerate contacts,
+        e.g. the 2020-contact Siconos granular file with its indefinite ``W``).
+    replay : MethodOutput, optional
+        Returned as is (see ``native_coulomb`` in :class:`~lubcontact.solvers.SolverInfo`).
+
+    Returns
+    -------
+    MethodOutput
+        ``iterations``: Newton iterations plus the fallback's inner iterations.
+        ``info``: ``factorizations`` (sparse LU count), ``gradient_steps``
+        (steepest-descent steps taken where the Newton direction failed),
+        ``newton_status`` and ``error`` (the Newton phase's FCLIB error), and
+        ``fallback_iterations`` / ``fallback_status`` when the fallback ran.
+    """
+    if replay is not None:
+        return replay
+    start = time.perf_counter()
+    function = AlartCurnier(problem)
+    unshifted = problem.with_shift(np.zeros(problem.cones.count))
+    forces = np.zeros(problem.n_rows) if warm_start is None else np.array(warm_start, dtype=float)
+    setup_time = time.perf_counter() - start
+    phase = _newton_phase(function, unshifted, forces, tol, max_iter)
+    forces, status, iterations = phase.forces, phase.status, phase.iterations
+    info = {"factorizations": phase.factorizations, "gradient_steps": phase.gradient_steps,
+            "newton_status": phase.status, "error": phase.error}
+    if status != CONVERGED and fallback is not None:
+        rescue = solve_coulomb(problem, fallback, tol=tol, tol_fp=tol, warm_start=forces)
+        iterations += rescue.iterations
+        info.update(fallback_iterations=rescue.iterations, fallback_status=rescue.status)
+        if np.all(np.isfinite(rescue.forces)):
+            forces = rescue.forces
+            finish = _newton_phase(function, unshifted, forces, tol, POLISH_ITERATIONS)
+            iterations += finish.iterations
+            info["factorizations"] += finish.factorizations
+            status = CONVERGED if finish.status == CONVERGED else rescue.status
+            forces = finish.forces
+    return MethodOutput(forces, status, iterations, setup_time=setup_time,
+                        solve_time=time.perf_counter() - start - setup_time,
+                        residual_history=phase.history, info=info)
+
+
+@dataclass
+class _Phase:
+    """Outcome of the Newton iterations: the best iterate and its record."""
+
+    forces: np.ndarray
+    status: str
+    iterations: int
+    error: float
+    history: np.ndarray
+    factorizations: int
+    gradient_steps: int
+
+
+def _newton_phase(function: AlartCurnier, unshifted: ConicProblem, forces: np.ndarray,
+                  tol: float, max_iter: int) -> _Phase:
+    """Newton iterations from ``forces`` until the FCLIB error is below ``tol``, a stall or the cap."""
+    phi, y = function.residual(forces)
+    merit = 0.5 * float(phi @ phi)
+    recent = [merit]
+    error = coulomb_error(unshifted, forces)
+    history = [error]
+    best = (error, forces)
+    gradient_steps = iterations = 0
+    status = MAX_ITER
+    while error > tol and iterations < max_iter:
+        if iterations >= STALL_WINDOW and best[0] > STALL_FACTOR * min(history[:-STALL_WINDOW]):
+            status = STALLED
+            break
+        iterations += 1
+        J, active = function.jacobian(y)
+        newton = _newton_direction(J, active, phi)
+        step = None
+        if newton is not None:
+            step = _line_search(function, forces, newton, 2.0 * merit, max(recent))
+        if step is None:
+            gradient = J.T @ phi
+            step = _line_search(function, forces, -gradient, float(gradient @ gradient), max(recent))
+            gradient_steps += 1
+        if step is None:
+            status = FAILED
+            break
+        forces, phi, y, merit = step
+        recent = (recent + [merit])[-LINE_SEARCH_MEMORY:]
+        error = coulomb_error(unshifted, forces)
+        history.append(error)
+        best = min(best, (error, forces), key=lambda pair: pair[0])
+    if best[0] <= tol:
+        status = CONVERGED
+    return _Phase(forces=best[1], status=status, iterations=iterations, error=best[0],
+                  history=np.asarray(history), factorizations=iterations, gradient_steps=gradient_steps)
+
+
+def _line_search(function: AlartCurnier, forces: np.ndarray, direction: np.ndarray,
+                 slope: float, reference: float) -> tuple | None:
+    """Backtrack from the full step until ``psi`` falls below the non-monotone Armijo bound.
+
+    ``slope`` is the decrease rate of ``psi`` along ``direction`` at ``forces``
+    (``2 psi`` for the Newton direction, ``|J^T phi|^2`` for steepest descent).
+    """
+    if not slope > 0:
+        return None
+    alpha = 1.0
+    for _ in range(MAX_HALVINGS):
+        trial = forces + alpha * direction
+        phi, y = function.residual(trial)
+        value = 0.5 * float(phi @ phi)
+        if value <= reference - ARMIJO * alpha * slope:
+            return trial, phi, y, value
+        alpha *= 0.5
+    return None

@@ -1,0 +1,113 @@
+"""newton-ac, the semismooth Newton method on the Alart-Curnier function, against exact answers,
+the Clarabel reference and Siconos' test problems."""
+import numpy as np
+import pytest
+
+from lubcontact.bench.cases.reference import CASES as REFERENCE_CASES
+from lubcontact.bench.cases.reference import load as load_reference
+from lubcontact.bench.hard import expected_for, load_cases
+from lubcontact.bench.problem_sets import benchmark_file
+from lubcontact.io.readers import read_problem
+from lubcontact.problem.cones import ConeKind
+from lubcontact.problem.metrics import (
+    coulomb_error,
+    scaled_coulomb_error,
+    scaled_velocity_error,
+    velocity_error,
+)
+from lubcontact.solvers import CONVERGED, MAX_ITER, solve_coulomb, solver_info
+from lubcontact.solvers.newton import AlartCurnier, newton_alart_curnier
+
+
+def siconos_test_problem(name):
+    problem = read_problem(benchmark_file("siconos-testdata", name))
+    return problem.local() if hasattr(problem, "local") else problem
+
+
+@pytest.mark.parametrize("name", sorted(REFERENCE_CASES))
+def test_agrees_with_the_stored_reference_on_every_reference_case(name):
+    problem, solution = load_reference(name)
+    result = solve_coulomb(problem, "newton-ac", tol=1e-12)
+    assert result.status == CONVERGED
+    assert velocity_error(problem, result.velocities, solution["velocities"]) <= 1e-8
+
+
+FRICTIONAL_HARD = ["radius_ratio_100_friction", "mu_zero_friction", "hex_box_lid_friction",
+                   "wedge_planes_friction", "cone_apex_2d", "cone_apex_3d", "dt_large_friction",
+                   "tetrahedron_3d_friction"]
+
+
+@pytest.mark.parametrize("name", FRICTIONAL_HARD)
+def test_exact_coulomb_on_the_frictional_hard_cases(name):
+    """Exact answers where the case has one, else Clarabel's fixed point on s (unique there)."""
+    case = load_cases()[name]
+    expected = expected_for(case, case.problem, fixed_point=True)
+    result = solve_coulomb(case.problem, "newton-ac", tol=1e-10)
+    assert result.status == CONVERGED
+    assert scaled_velocity_error(case.problem, result.velocities, expected.velocities) <= 1e-8
+
+
+def test_mu_ten_converges_where_the_fixed_point_on_s_does_not():
+    """mu = 10: the fixed point on s hits its cap with apgd-jacobi and Clarabel (check-hard
+    --fixed-point); Newton converges in 8 iterations to a Coulomb error of round-off."""
+    case = load_cases()["mu_ten"]
+    result = solve_coulomb(case.problem, "newton-ac", tol=1e-10)
+    assert result.status == CONVERGED and result.iterations <= 20
+    assert scaled_coulomb_error(case.problem, result.forces) <= 1e-10
+    assert "fallback_iterations" not in result.info
+
+
+@pytest.mark.parametrize("name, cap", [
+    ("FrictionContactProblem00237.dat", 100),   # 2D, 376 contacts: the file apgd-jacobi misses
+    ("Capsules-i122-1617.dat", 200),            # 3D, non-symmetric and singular W (regularised)
+    ("spheres-in-a-box-98-i10000-256-10.hdf5", 100),
+])
+def test_siconos_problems_reach_1e_8_by_newton_alone(name, cap):
+    problem = siconos_test_problem(name)
+    result = solve_coulomb(problem, "newton-ac", tol=1e-8)
+    assert result.status == CONVERGED
+    assert scaled_coulomb_error(problem, result.forces) <= 1e-8
+    assert result.info["newton_status"] == CONVERGED and result.iterations <= cap
+
+
+def test_a_stalled_newton_hands_over_to_the_fallback_and_says_so():
+    """FCLIB's LMGC_100_PR_PerioBox: Newton wanders without progress; apgd-jacobi's fixed point
+    takes over from its best iterate and reaches the tolerance."""
+    problem = read_problem(benchmark_file("fclib-local", "LMGC_100_PR_PerioBox-i00361-60-03000.hdf5"))
+    alone = solve_coulomb(problem, "newton-ac", tol=1e-8, fallback=None)
+    assert alone.status != CONVERGED and scaled_coulomb_error(problem, alone.forces) > 1e-8
+    rescued = solve_coulomb(problem, "newton-ac", tol=1e-8)
+    assert rescued.info["newton_status"] in ("stalled", MAX_ITER)
+    assert rescued.info["fallback_iterations"] > 0
+    assert rescued.status == CONVERGED and scaled_coulomb_error(problem, rescued.forces) <= 1e-8
+
+
+def test_max_iter_is_reported_with_the_best_iterate():
+    problem = siconos_test_problem("FrictionContactProblem00237.dat").normalized()
+    out = newton_alart_curnier(problem, tol=1e-14, max_iter=3, fallback=None)
+    assert out.status == MAX_ITER and out.iterations == 3
+    assert out.info["error"] == pytest.approx(coulomb_error(problem, out.forces))
+    assert out.info["error"] == pytest.approx(out.residual_history.min())
+
+
+def test_jacobian_matches_finite_differences_away_from_kinks():
+    """J = I - G + G diag(rho) W: a directional derivative of phi at a generic point."""
+    problem = siconos_test_problem("Capsules-i122-1617.dat").normalized()
+    function = AlartCurnier(problem)
+    rng = np.random.default_rng(0)
+    forces = np.abs(rng.normal(size=problem.n_rows))
+    phi, y = function.residual(forces)
+    J, active = function.jacobian(y)
+    direction = rng.normal(size=problem.n_rows)
+    step = 1e-7
+    difference = (function.residual(forces + step * direction)[0] - phi) / step
+    assert np.linalg.norm(difference - J @ direction) <= 1e-5 * np.linalg.norm(J @ direction)
+    assert np.all(J[~active].toarray() == np.eye(problem.n_rows)[~active])
+
+
+def test_solves_coulomb_natively_and_rejects_the_union_cone():
+    info = solver_info("newton-ac")
+    assert info.native_coulomb and info.kind == "newton" and ConeKind.UNION not in info.cones
+    problem = siconos_test_problem("FrictionContactProblem00237.dat")
+    result = solve_coulomb(problem, "newton-ac", tol=1e-8)
+    assert result.outer_iterations == 1 and result.fixed_point_converged
