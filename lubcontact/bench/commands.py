@@ -4,7 +4,8 @@ Benchmarks are listed in :data:`BENCHMARKS` and imported lazily:
 
 - ``solvers``: every method on 2D piles at rest (:mod:`lubcontact.bench.piles`);
 - ``friction``: exact Coulomb friction on external problems and a pile step
-  (:mod:`lubcontact.bench.friction`).
+  (:mod:`lubcontact.bench.friction`);
+- ``flow``: exact-Coulomb steps of developed inclined flows (:mod:`lubcontact.bench.flow_steps`).
 """
 from __future__ import annotations
 
@@ -13,6 +14,7 @@ import importlib
 BENCHMARKS = {
     "solvers": ("lubcontact.bench.piles", "solvers_main", "every solver on 2D piles at rest"),
     "friction": ("lubcontact.bench.friction", "main", "friction benchmarks"),
+    "flow": ("lubcontact.bench.flow_steps", "main", "exact-Coulomb steps of developed inclined flows"),
 }
 """Name -> (module, function, one line of help); ``function(argv) -> int``."""
 

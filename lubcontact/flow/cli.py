@@ -229,6 +229,9 @@ def sweep_parser() -> argparse.ArgumentParser:
                              "(default: dry,gluey)")
     parser.add_argument("--out", type=pathlib.Path, default=pathlib.Path("out/sweep"),
                         help="output folder (default: out/sweep)")
+    parser.add_argument("--workers", type=int, default=1, metavar="N",
+                        help="runs at once, each in its own process; the results do not "
+                             "depend on it (default: 1)")
     _add_common(parser, resume=False)
     return parser
 
@@ -420,6 +423,8 @@ def sweep_main(argv: list[str] | None = None) -> int:
                      f"choose from {', '.join(MODEL_NAMES)}")
     if angles.size == 0:
         parser.error(f"argument --angles: no angle in {args.angles!r}")
+    if args.workers < 1:
+        parser.error(f"argument --workers: must be >= 1, got {args.workers}")
     for angle in angles:
         if not -90 < angle < 90:
             parser.error(f"argument --angles: {angle:g} is not in (-90, 90) degrees")
@@ -447,9 +452,12 @@ def sweep_main(argv: list[str] | None = None) -> int:
                              + "): use another --out")
 
     resume = "lubcontact sweep " + shlex.join(argv)
+    from concurrent.futures.process import BrokenProcessPool
+
     try:
         with interrupt.stop_on_signals():
-            rows = sweep(config, angles, models, args.out, progress)
+            rows = sweep(config, angles, models, args.out, progress and args.workers == 1,
+                         workers=args.workers)
     except interrupt.Interrupted as exc:
         print(_interrupted_line(exc, resume), file=sys.stderr)
         return interrupt.EXIT_STATUS
@@ -457,6 +465,10 @@ def sweep_main(argv: list[str] | None = None) -> int:
         print(f"interrupted again: stopped at once; the last checkpoints resume: {resume}",
               file=sys.stderr)
         return interrupt.EXIT_STATUS
+    except BrokenProcessPool:
+        print(f"a worker process died (killed or out of memory); the runs resume from their last "
+              f"checkpoints: {resume}", file=sys.stderr)
+        return 1
     from . import plots
 
     plots.sweep_figures(rows, args.out, config.preset)

@@ -45,6 +45,10 @@ class Interrupted(Exception):
         super().__init__(f"interrupted at step {step} ({what})")
         self.step, self.checkpoint, self.what = step, checkpoint, what
 
+    def __reduce__(self) -> tuple:
+        """Picklable with its fields (a sweep's worker process hands it to the parent)."""
+        return type(self), (self.step, self.checkpoint, self.what)
+
 
 def requested() -> bool:
     """Whether a stop was requested by a signal inside :func:`stop_on_signals`."""

@@ -15,13 +15,17 @@ from __future__ import annotations
 
 import csv
 import json
+import multiprocessing
 import pathlib
+from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import replace
 from typing import Any
 
 import numpy as np
 
+from .. import checks
 from ..io.files import atomic_path
+from . import interrupt
 from .bed import initial_scene
 from .config import DEFINING_FIELDS, Q_UNIT, RunConfig, flow_rate_unit
 from .run import FlowRun
@@ -102,7 +106,7 @@ def check_folder(run_dir: pathlib.Path, config: RunConfig) -> None:
 
 
 def sweep(config: RunConfig, angles: np.ndarray, models: list[str], out_dir: pathlib.Path,
-          progress: bool = False) -> list[dict[str, Any]]:
+          progress: bool = False, workers: int = 1) -> list[dict[str, Any]]:
     """Every (model, angle) run from one settled bed; finished runs are read back, not redone.
 
     Prints one line per run it finishes, then writes ``out_dir/sweep.csv``.
@@ -118,7 +122,11 @@ def sweep(config: RunConfig, angles: np.ndarray, models: list[str], out_dir: pat
     out_dir : pathlib.Path
         The sweep's folder.
     progress : bool
-        Show progress bars.
+        Show progress bars (sequential sweeps only).
+    workers : int
+        Runs at once, each in its own process (1: one after the other, here).
+        The bed is settled first, here; the runs are independent and
+        deterministic, so the results do not depend on ``workers``.
 
     Returns
     -------
@@ -128,39 +136,85 @@ def sweep(config: RunConfig, angles: np.ndarray, models: list[str], out_dir: pat
     Raises
     ------
     ValueError
-        When a run folder holds a run made with other settings (:func:`check_folder`).
+        When a run folder holds a run made with other settings (:func:`check_folder`),
+        or ``workers`` is not a positive integer.
     Interrupted
-        When a stop is requested (:mod:`lubcontact.flow.interrupt`): the run
-        under way (or the next one, at step 0) is checkpointed; running the
-        sweep again continues it.
+        When a stop is requested (:mod:`lubcontact.flow.interrupt`): the runs
+        under way are checkpointed; running the sweep again continues them.
     """
+    workers = int(checks.positive("workers", workers, shape=()))
     out_dir = pathlib.Path(out_dir)
-    rows = []
     print(f"Q: time-averaged flow rate per unit depth, in units of {Q_UNIT} "
           "(d: mean grain diameter, g': reduced gravity)", flush=True)
+    runs = []
     for model in models:
         for angle in angles:
             run_config = replace(config, model=model, angle=float(angle),
                                  bed=str(out_dir / "bed.npz"))
             run_dir = run_folder(out_dir, model, angle)
             check_folder(run_dir, run_config)
-            done = run_dir / "summary.json"
-            if done.exists():
-                rows.append(_read_summary(done, run_config))
-                continue
-            checkpoint = run_dir / "checkpoint.npz"
-            if checkpoint.exists():      # with this sweep's settings (solver, periods, ...)
-                changes = {name: getattr(run_config, name)
-                           for name in RunConfig.field_names() - set(DEFINING_FIELDS)}
-                run = FlowRun.resume(checkpoint, run_dir, **changes)
-            else:
-                run = FlowRun(run_config, initial_scene(run_config, out_dir, progress), run_dir)
-            summary = run.finish(progress)
-            rows.append(summary)
-            print(f"{model:6s} {angle:5.1f} deg  Q = {summary['flow_rate']:.4g} {Q_UNIT}  "
-                  f"{summary['state']}  {summary['steps_per_second']:.1f} steps/s", flush=True)
+            runs.append((run_config, run_dir))
+    if any(not (run_dir / "summary.json").exists() for _, run_dir in runs):
+        initial_scene(runs[0][0], out_dir, progress)      # the common bed: settled once, saved
+    if workers == 1 or len(runs) == 1:
+        rows = [_report(run_sweep_point(run_config, run_dir, out_dir, progress))
+                for run_config, run_dir in runs]
+    else:
+        rows = _in_processes(runs, out_dir, workers)
     write_csv(out_dir / "sweep.csv", rows)
     return rows
+
+
+def run_sweep_point(config: RunConfig, run_dir: pathlib.Path, out_dir: pathlib.Path,
+                    progress: bool = False) -> tuple[dict[str, Any], bool]:
+    """One run of a sweep: read back when finished, continued from its checkpoint, or started.
+
+    ``out_dir`` is the sweep's folder (its ``bed.npz`` is the bed, settled when absent).
+
+    Returns
+    -------
+    (dict, bool)
+        The run's summary, and whether it was computed now (False: read back).
+    """
+    done = run_dir / "summary.json"
+    if done.exists():
+        return _read_summary(done, config), False
+    checkpoint = run_dir / "checkpoint.npz"
+    if checkpoint.exists():      # with this sweep's settings (solver, periods, ...)
+        changes = {name: getattr(config, name) for name in RunConfig.field_names() - set(DEFINING_FIELDS)}
+        run = FlowRun.resume(checkpoint, run_dir, **changes)
+    else:
+        run = FlowRun(config, initial_scene(config, out_dir, progress), run_dir)
+    return run.finish(progress), True
+
+
+def _worker_point(config: RunConfig, run_dir: pathlib.Path,
+                  out_dir: pathlib.Path) -> tuple[dict[str, Any], bool]:
+    """:func:`run_sweep_point` in a worker process: a signal checkpoints the run under way."""
+    with interrupt.stop_on_signals():
+        return run_sweep_point(config, run_dir, out_dir)
+
+
+def _in_processes(runs: list[tuple[RunConfig, pathlib.Path]], out_dir: pathlib.Path,
+                  workers: int) -> list[dict[str, Any]]:
+    """The runs in ``workers`` processes (spawned: no state shared with this one), in order."""
+    context = multiprocessing.get_context("spawn")
+    rows: list[dict[str, Any] | None] = [None] * len(runs)
+    with ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool:
+        futures = {pool.submit(_worker_point, run_config, run_dir, out_dir): index
+                   for index, (run_config, run_dir) in enumerate(runs)}
+        for future in as_completed(futures):
+            rows[futures[future]] = _report(future.result())
+    return rows
+
+
+def _report(outcome: tuple[dict[str, Any], bool]) -> dict[str, Any]:
+    """Print the line of a run computed now; return its summary."""
+    summary, computed = outcome
+    if computed:
+        print(f"{summary['model']:6s} {summary['angle']:5.1f} deg  Q = {summary['flow_rate']:.4g} "
+              f"{Q_UNIT}  {summary['state']}  {summary['steps_per_second']:.1f} steps/s", flush=True)
+    return summary
 
 
 def _read_summary(path: pathlib.Path, config: RunConfig) -> dict[str, Any]:

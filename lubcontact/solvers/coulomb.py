@@ -115,7 +115,7 @@ def solve_coulomb(problem: ConicProblem, method: str = "clarabel", *, tol: float
     """
     if solver_info(method).native_coulomb and problem.cones.has_friction:
         return solve_native_coulomb(problem, method, tol=tol, max_iter=max_iter,
-                                    warm_start=warm_start, **options)
+                                    warm_start=warm_start, max_outer=max_outer, **options)
     tol_fp = checks.positive_scalar("tol_fp", tol_fp)
     max_outer = int(checks.positive("max_outer", max_outer, shape=()))
     nc = problem.cones.count
@@ -173,8 +173,8 @@ def solve_coulomb(problem: ConicProblem, method: str = "clarabel", *, tol: float
 
 def solve_native_coulomb(problem: ConicProblem, method: str, *, tol: float = 1e-9,
                          max_iter: int | None = None, warm_start: np.ndarray | None = None,
-                         **options) -> CoulombResult:
-    """Exact Coulomb by one solve of a method that solves it natively (``native_coulomb``).
+                         max_outer: int = 50, **options) -> CoulombResult:
+    """Exact Coulomb by a method that solves it natively (``native_coulomb``).
 
     The method solves the Coulomb problem of ``problem`` (``q = b`` without
     the shift) once, giving ``r*``; its forces then go through
@@ -182,32 +182,55 @@ def solve_native_coulomb(problem: ConicProblem, method: str, *, tol: float = 1e-
     method's ``replay`` option hands them over without solving again), so that
     the usual checks apply where the convex problem's natural residual is
     Coulomb's. ``s*`` is a fixed point of ``s -> mu |g_T(s)|`` by construction
-    (``g_T`` does not depend on ``s``): one outer iteration, shift change 0.
+    (``g_T`` does not depend on ``s``): shift change 0.
+
+    UNION contacts (gluey + friction at gamma_min) are fixed on a piece, as in
+    :func:`solve_coulomb`, for methods that accept both pieces (COULOMB and
+    NONPOS): solve with the pieces fixed, flip the contacts the branch rule
+    says are on the wrong piece, re-solve from the last forces, until no
+    contact flips (at most ``max_outer`` solves; ``outer_iterations`` counts them).
 
     Returns
     -------
     CoulombResult
-        ``converged`` only when the method converged and the check passed.
+        ``converged`` only when the method converged, the check passed and no
+        contact was left to flip.
     """
+    info = solver_info(method)
+    branches = _Branches(problem, warm_start, threshold=max(1e3 * tol, 1e-7))
+    if branches.union.any() and not {ConeKind.COULOMB, ConeKind.NONPOS} <= info.cones:
+        raise ValueError(f"method: {method!r} cannot solve this problem: UNION contacts need "
+                         "both pieces (COULOMB and NONPOS contacts)")
     unshifted = problem.with_shift(np.zeros(problem.cones.count))
     scaled = unshifted.normalized()
     force, length = scaled.scaling.force, scaled.scaling.length
     start = None
     if warm_start is not None:
         start = checks.as_array("warm_start", warm_start, shape=(problem.n_rows,)) / force
-    kwargs = dict(options, tol=checks.positive_scalar("tol", tol), warm_start=start)
+    kwargs = dict(options, tol=checks.positive_scalar("tol", tol))
     if max_iter is not None:
         kwargs["max_iter"] = max_iter
-    out = solver_info(method).function(scaled, **kwargs)
-    shift = np.zeros(problem.cones.count)
-    if out.status != FAILED and np.all(np.isfinite(out.forces)):
-        shift = coulomb_shift(unshifted, out.forces * force)
-    result = solve(problem.with_shift(shift), method, tol=tol, max_iter=max_iter,
-                   normalized=scaled.with_shift(shift / length), replay=out, **options)
-    return CoulombResult(**vars(result), outer_iterations=1, shift_change=0.0,
-                         inner_status=result.status,
-                         fixed_point_converged=result.status == CONVERGED,
-                         shift_history=np.zeros(1))
+    iterations, settled = 0, False
+    for outer in range(1, int(checks.positive("max_outer", max_outer, shape=())) + 1):  # noqa: B007
+        convex = branches.on(unshifted)
+        out = info.function(branches.on(scaled), warm_start=start, **kwargs)
+        iterations += out.iterations
+        shift = np.zeros(problem.cones.count)
+        if out.status == FAILED or not np.all(np.isfinite(out.forces)):
+            settled = True
+            break
+        shift = branches.restrict(coulomb_shift(convex, out.forces * force))
+        start = out.forces
+        if not branches.update(convex.with_shift(shift), out.forces * force, length, force):
+            settled = True
+            break
+    result = solve(convex.with_shift(shift), method, tol=tol, max_iter=max_iter,
+                   normalized=branches.on(scaled).with_shift(shift / length), replay=out, **options)
+    status = result.status if settled else MAX_ITER
+    return CoulombResult(**{**vars(result), "status": status, "iterations": iterations},
+                         outer_iterations=outer, shift_change=0.0, inner_status=result.status,
+                         fixed_point_converged=status == CONVERGED, shift_history=np.zeros(outer),
+                         pulled=branches.pulled_contacts, branch_flips=branches.flips)
 
 
 def _relative_change(new: np.ndarray, old: np.ndarray) -> float:

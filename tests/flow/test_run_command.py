@@ -212,7 +212,8 @@ RUN_ERRORS = [(["--n", "0"], "--n", "n_grains"), (["--angle", "abc"], "--angle",
               (["--mu", "-1"], "--mu", "friction"), (["--solver", "nope"], "--solver", None),
               (["--width", "-2"], "--width", None), (["--max-outer", "0"], "--max-outer", "max_outer")]
 SWEEP_ERRORS = [(["--angles", "15:28"], "--angles", None), (["--models", "dry,wet"], "--models", None),
-                (["--n", "0"], "--n", "n_grains"), (["--tol-fp", "0"], "--tol-fp", "tol_fp")]
+                (["--n", "0"], "--n", "n_grains"), (["--tol-fp", "0"], "--tol-fp", "tol_fp"),
+                (["--workers", "0"], "--workers", None)]
 
 
 def test_bad_values_are_one_line_errors_naming_the_flag(tmp_path, capsys):
@@ -254,3 +255,65 @@ def test_names_known_to_the_parser_match_the_scenes():
     from lubcontact.flow.config import MODEL_NAMES, PRESET_NAMES
     from lubcontact.scenes import inclined
     assert PRESET_NAMES == tuple(inclined.PRESETS) and MODEL_NAMES == inclined.MODELS
+
+
+# -- sweeps in worker processes (issue 16) ---------------------------------------------------------
+SWEEP_SMALL = ["--models", "dry", "--angles", "20,24", "--n", "24", "--width", "12", "--dt", "0.05",
+               "--settle-steps", "0", "--solver", "clarabel", "--checkpoint-every", "3",
+               "--sample-every", "3", "--no-progress"]
+
+
+def sweep_rows(out):
+    lines = (out / "sweep.csv").read_text().splitlines()
+    header = lines[0].split(",")
+    timing = {i for i, name in enumerate(header) if "time" in name or "per_" in name
+              or "second" in name}
+    return [[cell for i, cell in enumerate(line.split(",")) if i not in timing] for line in lines]
+
+
+def final_positions(run_dir):
+    with np.load(run_dir / "checkpoint.npz") as data:
+        return {key: data[key] for key in data.files if key.startswith("scene")}
+
+
+def test_a_sweep_in_two_workers_equals_the_sequential_sweep(tmp_path, capsys):
+    sequential, parallel = tmp_path / "one", tmp_path / "two"
+    assert flow_cli.sweep_main([*SWEEP_SMALL, "--steps", "9", "--out", str(sequential)]) == 0
+    assert flow_cli.sweep_main([*SWEEP_SMALL, "--steps", "9", "--out", str(parallel),
+                                "--workers", "2"]) == 0
+    assert sweep_rows(sequential) == sweep_rows(parallel)
+    assert len(sweep_rows(parallel)) == 3
+    for angle in ("angle_20.00", "angle_24.00"):
+        one = final_positions(sequential / "dry" / angle)
+        two = final_positions(parallel / "dry" / angle)
+        assert one.keys() == two.keys() and one
+        for key in one:
+            np.testing.assert_array_equal(one[key], two[key])
+
+
+def test_a_killed_worker_loses_at_most_its_last_checkpoint_interval(tmp_path):
+    out = tmp_path / "sweep"
+    command = [sys.executable, "-m", "lubcontact.cli", "sweep", *SWEEP_SMALL, "--steps", "400",
+               "--out", str(out), "--workers", "2"]
+    process = subprocess.Popen(command, env=ENV, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                               text=True)
+    checkpoint = out / "dry" / "angle_20.00" / "checkpoint.npz"
+    deadline = time.time() + 240
+    while not checkpoint.exists() and time.time() < deadline and process.poll() is None:
+        time.sleep(0.2)
+    assert checkpoint.exists(), process.communicate()[1]
+    children = subprocess.run(["pgrep", "-P", str(process.pid)], capture_output=True, text=True)
+    workers = [int(pid) for pid in children.stdout.split()
+               if b"spawn_main" in open(f"/proc/{pid}/cmdline", "rb").read()]   # not the resource tracker
+    assert len(workers) == 2
+    os.kill(workers[0], signal.SIGKILL)
+    _, stderr = process.communicate(timeout=120)
+    assert process.returncode == 1, stderr
+    lines = [line for line in stderr.splitlines() if line.strip()]
+    assert len(lines) == 1 and "worker process died" in lines[0] and "--workers 2" in lines[0]
+    kept = stored(checkpoint.parent)[0]
+    assert kept >= 3
+    resumed = subprocess.run(command, env=ENV, capture_output=True, text=True, timeout=600)
+    assert resumed.returncode == 0, resumed.stderr
+    for angle in ("angle_20.00", "angle_24.00"):
+        assert json.loads((out / "dry" / angle / "summary.json").read_text())["steps"] == 400

@@ -15,7 +15,7 @@ from lubcontact.problem.metrics import (
     scaled_velocity_error,
     velocity_error,
 )
-from lubcontact.solvers import CONVERGED, MAX_ITER, solve_coulomb, solver_info
+from lubcontact.solvers import CONVERGED, MAX_ITER, solve, solve_coulomb, solver_info
 from lubcontact.solvers.newton import AlartCurnier, newton_alart_curnier
 
 
@@ -111,3 +111,16 @@ def test_solves_coulomb_natively_and_rejects_the_union_cone():
     problem = siconos_test_problem("FrictionContactProblem00237.dat")
     result = solve_coulomb(problem, "newton-ac", tol=1e-8)
     assert result.outer_iterations == 1 and result.fixed_point_converged
+
+
+def test_union_contacts_go_through_the_branch_rule():
+    """Gluey + friction at gamma_min (UNION): the pieces are fixed, flipped by the branch rule and
+    re-solved natively; the answer is Clarabel's fixed point on s."""
+    case = load_cases()["gamma_states_gluey_coulomb"]
+    assert np.any(case.problem.cones.kinds == ConeKind.UNION)
+    expected = expected_for(case, case.problem, fixed_point=True)
+    result = solve_coulomb(case.problem, "newton-ac", tol=1e-10)
+    assert result.status == CONVERGED and result.outer_iterations >= 1
+    assert scaled_velocity_error(case.problem, result.velocities, expected.velocities) <= 1e-8
+    with pytest.raises(ValueError, match="UNION"):
+        solve(case.problem, "newton-ac")

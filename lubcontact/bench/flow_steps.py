@@ -1,0 +1,127 @@
+"""``lubcontact bench flow``: the solves of a developed inclined flow, per size, model and method.
+
+A pile at rest is the easy case; a flow changes its active set, its push/pull
+branches and its stick/slip states every step. For each size and model this
+benchmark settles a bed (frictionless, ``apgd-jacobi``), tilts it by the
+angle, lets the flow develop, and caches that state in
+``CACHE/flow-<n>-<model>-<angle>.npz`` (built once: a second call reads it).
+Then, for each method, it restores the state, solves one untimed step (numba
+compilation and imports are never timed) and times ``--steps`` steps with
+exact Coulomb friction (``SolveSettings(exact_coulomb=True)``), each warm-
+started from the previous one as in a simulation. Per method it prints the
+contacts, the median solve time per step, iterations per step, the largest
+FCLIB error over the steps (the accuracy measure of a frictional step, whose
+velocities are not unique) and the statuses.
+"""
+from __future__ import annotations
+
+import argparse
+import pathlib
+import time
+from typing import Any
+
+import numpy as np
+
+from ..problem.metrics import scaled_coulomb_error
+from ..scenes import inclined
+from ..sim.simulation import Simulation
+from ..sim.state import SimulationState
+from ..solvers import SolveSettings
+from .harness import warm_up
+from .options import check_methods, names
+from .tables import format_table
+
+COLUMNS = ("n_grains", "model", "method", "contacts", "s_per_step", "iterations", "max_fclib_error",
+           "statuses")
+
+
+def developed_flow(n_grains: int, model: str, angle: float, cache: pathlib.Path, *, seed: int = 1,
+                   settle_steps: int = 400, develop_steps: int = 100) -> Simulation:
+    """A simulation of a developed inclined flow (dimensionless preset, ``dt = 0.01 sqrt(d/g')``).
+
+    Built once and cached in ``cache`` (the state after ``develop_steps`` flow steps).
+    """
+    params = inclined.dimensionless_parameters()
+    dt = inclined.time_step(params)
+    law = params.law(model)
+    path = pathlib.Path(cache) / f"flow-{n_grains}-{model}-{angle:g}.npz"
+    if path.exists():
+        with np.load(path) as data:
+            state = SimulationState.from_arrays(data)
+        sim = Simulation(state.scene, law, dt, solver="apgd-jacobi", tol=1e-6, on_failure="warn")
+        sim.restore(state)
+        return sim
+    bed = Simulation(inclined.sedimentation(n_grains, params, seed=seed), params.law("frictionless"),
+                     dt, solver="apgd-jacobi", tol=1e-6, fixed_point=False, on_failure="warn")
+    bed.run(settle_steps)
+    sim = Simulation(inclined.inclined_flow(bed.scene, angle), law, dt, solver="apgd-jacobi",
+                     tol=1e-6, on_failure="warn")
+    sim.run(develop_steps)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    from ..io.files import save_npz
+
+    save_npz(path, **sim.state.to_arrays())
+    return sim
+
+
+def time_method(sim: Simulation, method: str, steps: int, tol: float) -> dict[str, Any]:
+    """Solve ``steps`` steps of ``sim`` from its current state with ``method``; the state is kept."""
+    start = sim.state
+    settings = SolveSettings(method=method, tol=tol, exact_coulomb=True)
+    sim.step(settings)                       # untimed: compilation, caches
+    times, iterations, errors, contacts, statuses = [], [], [], [], set()
+    for _ in range(steps):
+        clock = time.perf_counter()
+        report = sim.step(settings)
+        times.append(time.perf_counter() - clock)
+        iterations.append(report.result.iterations)
+        contacts.append(report.problem.n_contacts)
+        statuses.add(report.result.status)
+        errors.append(scaled_coulomb_error(report.problem, report.result.forces))
+    sim.restore(start)
+    return {"method": method, "contacts": int(np.mean(contacts)), "s_per_step": float(np.median(times)),
+            "iterations": float(np.median(iterations)), "max_fclib_error": float(max(errors)),
+            "statuses": ",".join(sorted(statuses))}
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``lubcontact bench flow [--sizes ...] [--models ...] [--methods ...]``."""
+    parser = argparse.ArgumentParser(prog="lubcontact bench flow",
+                                     description="Exact-Coulomb step solves of developed inclined "
+                                                 "flows, per size, model and method.")
+    parser.add_argument("--sizes", type=int, nargs="+", default=[1000],
+                        help="numbers of grains (default: 1000)")
+    parser.add_argument("--models", type=names, default=["dry", "gluey"],
+                        help="comma list of dry, gluey (default: dry,gluey)")
+    parser.add_argument("--methods", type=names, default=["apgd-jacobi", "newton-ac"],
+                        help="comma list of registered methods (default: apgd-jacobi,newton-ac)")
+    parser.add_argument("--angle", type=float, default=25.0, help="incline angle, degrees (default: 25)")
+    parser.add_argument("--steps", type=int, default=10, help="timed steps per method (default: 10)")
+    parser.add_argument("--tol", type=float, default=1e-6, help="solver tolerance (default: 1e-6)")
+    parser.add_argument("--cache", type=pathlib.Path, default=pathlib.Path("out/bench-flow"),
+                        help="folder of the developed flows (default: out/bench-flow)")
+    args = parser.parse_args(argv)
+    try:
+        check_methods("--methods", args.methods)
+    except ValueError as exc:
+        parser.error(f"argument {exc}")
+    for flag, value in (("--sizes", min(args.sizes)), ("--steps", args.steps)):
+        if value < 1:
+            parser.error(f"argument {flag}: must be >= 1, got {value}")
+    if not args.tol > 0:
+        parser.error(f"argument --tol: must be > 0, got {args.tol}")
+    for model in args.models:
+        if model not in ("dry", "gluey"):
+            parser.error(f"argument --models: unknown model {model!r}; choose from dry, gluey")
+    rows = []
+    for n_grains in args.sizes:
+        for model in args.models:
+            sim = developed_flow(n_grains, model, args.angle, args.cache)
+            warm_up(sim.next_problem()[2], args.methods)
+            for method in args.methods:
+                row = {"n_grains": n_grains, "model": model, **time_method(sim, method, args.steps, args.tol)}
+                rows.append(row)
+                print(format_table([row], COLUMNS), flush=True)
+    print()
+    print(format_table(rows, COLUMNS))
+    return 0
