@@ -33,17 +33,22 @@ update is ``-phi`` and they are eliminated, so the sparse LU factorisation
 Globalisation: a non-monotone Armijo line search on ``psi = |phi|^2 / 2``
 (the reference value is the largest of the last few); when the Newton
 direction gives no decrease, the steepest-descent direction of ``psi``,
-``-J^T phi``, is tried instead. Stopping: the FCLIB error
-(:func:`~lubcontact.problem.metrics.coulomb_error`, the measure every report
-uses) below ``tol``. Status ``max_iter`` at the cap, ``failed`` when neither
-direction decreases ``psi`` (a stationary point of the merit function that
-is not a solution); the last iterate is returned in both cases.
+``-J^T phi``, is tried instead. Where ``W`` is rank deficient (more contact
+rows than degrees of freedom: a hyperstatic packing, most dense piles) the
+Newton system is singular at sticking contacts; a proximal-point outer loop
+(as in Siconos' PROX) makes each subproblem well posed: solve with ``W + sigma
+I`` and ``q - sigma r_k``, centre ``r_k`` at the result, shrink ``sigma`` while
+the error halves (:func:`_proximal_newton`). The starting ``sigma`` values of
+:data:`STRATEGIES` are tried in turn while one stalls. Stopping: the FCLIB
+error (:func:`~lubcontact.problem.metrics.coulomb_error`, the measure every
+report uses) below ``tol``. When every strategy stalls, the best iterate goes
+to a first-order fallback (``fallback``), its status then being the result's.
 """
 from __future__ import annotations
 
 import time
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
@@ -53,7 +58,7 @@ from ..problem.conic import ConicProblem
 from ..problem.metrics import coulomb_error
 from .coulomb import solve_coulomb
 from .registry import CONVEX_CONES, NEWTON, register
-from .result import CONVERGED, FAILED, MAX_ITER, MethodOutput
+from .result import CONVERGED, FAILED, INACCURATE, MAX_ITER, MethodOutput
 
 LINE_SEARCH_MEMORY = 5
 """Non-monotone line search: ``psi`` is compared with the largest of this many last values."""
@@ -64,14 +69,31 @@ ARMIJO = 1e-4
 REGULARISATIONS = (0.0, 1e-10, 1e-8, 1e-6, 1e-4)
 """Diagonal shifts tried in turn when the active block of the Jacobian is singular."""
 
-STALL_WINDOW = 100
+STALL_WINDOW = 60
 STALL_FACTOR = 0.5
 """Newton has stalled when its best FCLIB error did not fall by this factor over the last
 ``STALL_WINDOW`` iterations (the error of a semismooth Newton method is not monotone: its
 global phase wanders for tens of iterations before the fast local phase)."""
 
+STRATEGIES = (1e-3, 0.0, 1e-4)
+"""Starting proximal weights ``sigma`` (units of the median diagonal of ``W``) tried in turn,
+each from the warm start, while the previous one stalled: 1e-3 solves the rank-deficient
+piles and the 3D Siconos files, plain Newton (0) spheres-in-a-box, 1e-4 the 2020-contact
+granular file (measured on Siconos' and FCLIB's test problems)."""
+SIGMA_MIN = 1e-10
+"""Floor of the proximal weight, in units of the median diagonal of ``W``."""
+
+INNER_CAP = 10
+INNER_REDUCTION = 1e-3
+"""Newton iterations per proximal step: at most ``INNER_CAP``, until ``|phi_sigma|`` is below
+``INNER_REDUCTION`` times the current natural residual."""
+
 POLISH_ITERATIONS = 10
-"""Newton iterations tried from the fallback's result (kept where they lower the error)."""
+"""Proximal Newton iterations tried from the fallback's result (kept where they lower the error)."""
+
+FINISH_ITERATIONS = 2
+"""Plain Newton iterations after the proximal loop converged (kept where they lower the error):
+quadratic convergence takes a solution at ``tol`` to round-off where the Jacobian is regular."""
 
 STALLED = "stalled"
 """Status of a Newton phase that stalled (reported in ``info``, never as a result's status)."""
@@ -113,12 +135,22 @@ class AlartCurnier:
         rho_contact = 1.0 / np.maximum(diagonal, floor)
         row_contact = np.concatenate([np.arange(nc), np.repeat(cones.tangential, dim_t)]).astype(int)
         self.rho = rho_contact[row_contact]
-        self.scaled_W = sp.diags(self.rho) @ self.W
         self.dim_t = dim_t
+        self.typical = float(np.median(diagonal)) if nc else 1.0
+        self.sigma, self.center = 0.0, np.zeros(self.n_rows)
+        self.scaled_W = sp.diags(self.rho) @ self.W
+
+    def set_proximal(self, sigma: float, center: np.ndarray) -> None:
+        """Solve the proximal problem ``W + sigma I``, ``q - sigma center`` from now on (0: the problem)."""
+        self.sigma, self.center = float(sigma), np.array(center, dtype=float)
+        self.scaled_W = sp.diags(self.rho) @ (self.W + self.sigma * sp.identity(self.n_rows, format="csr"))
 
     def residual(self, forces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """``phi(r)`` and ``y = r - rho (W r + q)``, both shape (n_rows,)."""
-        y = forces - self.rho * (self.W @ forces + self.q)
+        """``phi(r)`` and ``y = r - rho (W r + q + sigma (r - center))``, both shape (n_rows,)."""
+        velocity = self.W @ forces + self.q
+        if self.sigma:
+            velocity += self.sigma * (forces - self.center)
+        y = forces - self.rho * velocity
         projected = np.clip(y, self.lower, self.upper)
         if self.cone_n.size:
             y_n = y[self.cone_n]
@@ -131,7 +163,7 @@ class AlartCurnier:
         return forces - projected, y
 
     def jacobian(self, y: np.ndarray) -> tuple[sp.csr_matrix, np.ndarray]:
-        """``J = I - G + G diag(rho) W`` at ``y``, and the mask of rows where ``G`` is not zero."""
+        """``J = I - G + G diag(rho) (W + sigma I)`` at ``y``, and the rows where ``G`` is not zero."""
         rows, cols, vals = [], [], []
         box = np.flatnonzero(self.box & (y > self.lower) & (y < self.upper))
         rows.append(box)
@@ -201,7 +233,7 @@ def _newton_direction(J: sp.csr_matrix, active: np.ndarray, phi: np.ndarray) -> 
 
 
 @register("newton-ac", kind=NEWTON, cones=CONVEX_CONES, warm_start=True, native_coulomb=True)
-def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = 200,
+def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = 500,
                          warm_start: np.ndarray | None = None, fallback: str | None = "apgd-jacobi",
                          replay: MethodOutput | None = None) -> MethodOutput:
     """Semismooth Newton on the Alart-Curnier function (exact Coulomb, sparse LU per iteration).
@@ -219,11 +251,12 @@ def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = 2
     fallback : str or None
         Registered method whose fixed point on ``s``
         (:func:`~lubcontact.solvers.solve_coulomb`) takes over from the best
-        Newton iterate when Newton stalls (the FCLIB error did not fall by
-        :data:`STALL_FACTOR` in :data:`STALL_WINDOW` iterations), fails or
+        Newton iterate when every strategy stalls (the FCLIB error did not fall
+        by :data:`STALL_FACTOR` in :data:`STALL_WINDOW` iterations), fails or
         reaches ``max_iter``; None: no fallback. Newton stalls where the
-        generalised Jacobian is singular at the solution (degenerate contacts,
-        e.g. the 2020-contact Siconos granular file with its indefinite ``W``).
+        generalised Jacobian is singular at the solution for every proximal
+        weight tried (degenerate contacts, e.g. the 7002-contact Siconos
+        granular file with its indefinite ``W``).
     replay : MethodOutput, optional
         Returned as is (see ``native_coulomb`` in :class:`~lubcontact.solvers.SolverInfo`).
 
@@ -233,6 +266,7 @@ def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = 2
         ``iterations``: Newton iterations plus the fallback's inner iterations.
         ``info``: ``factorizations`` (sparse LU count), ``gradient_steps``
         (steepest-descent steps taken where the Newton direction failed),
+        ``proximal_steps`` and ``strategies`` (the starting weights tried),
         ``newton_status`` and ``error`` (the Newton phase's FCLIB error), and
         ``fallback_iterations`` / ``fallback_status`` when the fallback ran.
     """
@@ -243,24 +277,110 @@ def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = 2
     unshifted = problem.with_shift(np.zeros(problem.cones.count))
     forces = np.zeros(problem.n_rows) if warm_start is None else np.array(warm_start, dtype=float)
     setup_time = time.perf_counter() - start
-    phase = _newton_phase(function, unshifted, forces, tol, max_iter)
+    phase = _strategies(function, unshifted, forces, tol, max_iter)
     forces, status, iterations = phase.forces, phase.status, phase.iterations
     info = {"factorizations": phase.factorizations, "gradient_steps": phase.gradient_steps,
+            "proximal_steps": phase.proximal_steps, "strategies": phase.strategies,
             "newton_status": phase.status, "error": phase.error}
     if status != CONVERGED and fallback is not None:
         rescue = solve_coulomb(problem, fallback, tol=tol, tol_fp=tol, warm_start=forces)
         iterations += rescue.iterations
         info.update(fallback_iterations=rescue.iterations, fallback_status=rescue.status)
         if np.all(np.isfinite(rescue.forces)):
-            forces = rescue.forces
-            finish = _newton_phase(function, unshifted, forces, tol, POLISH_ITERATIONS)
+            finish = _proximal_newton(function, unshifted, rescue.forces, tol, POLISH_ITERATIONS,
+                                      STRATEGIES[0])
             iterations += finish.iterations
             info["factorizations"] += finish.factorizations
-            status = CONVERGED if finish.status == CONVERGED else rescue.status
             forces = finish.forces
+            # newton-ac's test is the FCLIB error: a fallback "converged" by its own measure
+            # but above tol is inaccurate here
+            status = (CONVERGED if finish.error <= tol else
+                      INACCURATE if rescue.status == CONVERGED else rescue.status)
+            info["error"] = finish.error
     return MethodOutput(forces, status, iterations, setup_time=setup_time,
                         solve_time=time.perf_counter() - start - setup_time,
                         residual_history=phase.history, info=info)
+
+
+def _strategies(function: AlartCurnier, unshifted: ConicProblem, forces: np.ndarray,
+                tol: float, max_iter: int) -> _Phase:
+    """:func:`_proximal_newton` with each ``sigma`` of :data:`STRATEGIES` in turn, each from
+    ``forces`` (a strategy's stalled iterate is a worse start than the warm start, measured),
+    until one converges or ``max_iter`` Newton iterations are spent; the best phase is returned."""
+    best, history, tried = None, [], []
+    iterations = gradient_steps = proximal_steps = 0
+    for sigma in STRATEGIES:
+        phase = _proximal_newton(function, unshifted, forces, tol, max_iter - iterations, sigma)
+        tried.append(sigma)
+        iterations += phase.iterations
+        gradient_steps += phase.gradient_steps
+        proximal_steps += phase.proximal_steps
+        history.extend(phase.history if not history else phase.history[1:])
+        if best is None or phase.error < best.error:
+            best = phase
+        if phase.status == CONVERGED or iterations >= max_iter:
+            break
+    return _Phase(forces=best.forces, status=best.status, iterations=iterations, error=best.error,
+                  history=np.asarray(history), factorizations=iterations, gradient_steps=gradient_steps,
+                  proximal_steps=proximal_steps, strategies=tried)
+
+
+def _proximal_newton(function: AlartCurnier, unshifted: ConicProblem, forces: np.ndarray,
+                     tol: float, max_iter: int, sigma: float) -> _Phase:
+    """Proximal-point iterations, each solved by Newton, until the FCLIB error is below ``tol``.
+
+    Each outer iteration solves (approximately: ``|phi_sigma|`` down by
+    :data:`INNER_REDUCTION`, or the FCLIB error below ``tol``) the problem with
+    ``W + sigma I`` and ``q - sigma r_k`` centred at the current forces
+    ``r_k``: a well-posed problem even where ``W`` is rank deficient (more
+    contact rows than degrees of freedom, a hyperstatic packing), whose Newton
+    system is not singular. ``sigma`` starts at ``sigma`` times the median
+    diagonal of ``W`` (0: plain Newton throughout), is divided by 10 after an
+    outer iteration whose subproblem was solved (towards plain Newton, down to
+    :data:`SIGMA_MIN`) and multiplied by 10 after one whose was not. The phase stalls when the best
+    error did not fall by :data:`STALL_FACTOR` over :data:`STALL_WINDOW`
+    Newton iterations.
+    """
+    scale = sigma * function.typical
+    q_norm = 1.0 + float(np.linalg.norm(function.q))
+    error = coulomb_error(unshifted, forces)
+    history, best = [error], (error, forces)
+    iterations = gradient_steps = proximal_steps = 0
+    status = MAX_ITER
+    while error > tol and iterations < max_iter:
+        if len(history) > STALL_WINDOW and best[0] > STALL_FACTOR * min(history[:-STALL_WINDOW]):
+            status = STALLED
+            break
+        function.set_proximal(scale, forces)
+        if scale > 0:
+            inner = _newton_phase(function, unshifted, forces, tol, min(INNER_CAP, max_iter - iterations),
+                                  inner_tol=INNER_REDUCTION * error * q_norm)
+        else:                           # plain Newton: one run, its line search's memory intact
+            inner = _newton_phase(function, unshifted, forces, tol, min(STALL_WINDOW, max_iter - iterations))
+        proximal_steps += 1
+        iterations += inner.iterations
+        gradient_steps += inner.gradient_steps
+        history.extend(inner.history[1:])
+        forces, error = inner.forces, inner.error
+        best = min(best, (error, forces), key=lambda pair: pair[0])
+        if inner.solved and scale > 0:      # the proximal problem was solved: move towards Newton
+            scale = max(scale / 10.0, SIGMA_MIN * function.typical)
+        elif scale > 0:                     # it was not: a better-posed subproblem
+            scale *= 10.0
+        if inner.iterations == 0:
+            status = FAILED
+            break
+    if best[0] <= tol:
+        status = CONVERGED
+        if scale > 0:                   # the proximal loop stops at tol; plain Newton is quadratic here
+            function.set_proximal(0.0, best[1])
+            finish = _newton_phase(function, unshifted, best[1], 0.0, FINISH_ITERATIONS)
+            iterations += finish.iterations
+            history.extend(finish.history[1:])
+            best = min(best, (finish.error, finish.forces), key=lambda pair: pair[0])
+    return _Phase(forces=best[1], status=status, iterations=iterations, error=best[0],
+                  history=np.asarray(history), factorizations=iterations,
+                  gradient_steps=gradient_steps, proximal_steps=proximal_steps)
 
 
 @dataclass
@@ -274,11 +394,15 @@ class _Phase:
     history: np.ndarray
     factorizations: int
     gradient_steps: int
+    proximal_steps: int = 0
+    strategies: list = field(default_factory=list)
+    solved: bool = False
 
 
 def _newton_phase(function: AlartCurnier, unshifted: ConicProblem, forces: np.ndarray,
-                  tol: float, max_iter: int) -> _Phase:
-    """Newton iterations from ``forces`` until the FCLIB error is below ``tol``, a stall or the cap."""
+                  tol: float, max_iter: int, inner_tol: float = 0.0) -> _Phase:
+    """Newton iterations on ``function`` from ``forces`` until the FCLIB error of ``unshifted``
+    is below ``tol``, ``|phi| <= inner_tol``, a failed line search or the cap."""
     phi, y = function.residual(forces)
     merit = 0.5 * float(phi @ phi)
     recent = [merit]
@@ -287,10 +411,7 @@ def _newton_phase(function: AlartCurnier, unshifted: ConicProblem, forces: np.nd
     best = (error, forces)
     gradient_steps = iterations = 0
     status = MAX_ITER
-    while error > tol and iterations < max_iter:
-        if iterations >= STALL_WINDOW and best[0] > STALL_FACTOR * min(history[:-STALL_WINDOW]):
-            status = STALLED
-            break
+    while error > tol and iterations < max_iter and np.sqrt(2.0 * merit) > inner_tol:
         iterations += 1
         J, active = function.jacobian(y)
         newton = _newton_direction(J, active, phi)
@@ -312,7 +433,8 @@ def _newton_phase(function: AlartCurnier, unshifted: ConicProblem, forces: np.nd
     if best[0] <= tol:
         status = CONVERGED
     return _Phase(forces=best[1], status=status, iterations=iterations, error=best[0],
-                  history=np.asarray(history), factorizations=iterations, gradient_steps=gradient_steps)
+                  history=np.asarray(history), factorizations=iterations, gradient_steps=gradient_steps,
+                  solved=bool(np.sqrt(2.0 * merit) <= inner_tol))
 
 
 def _line_search(function: AlartCurnier, forces: np.ndarray, direction: np.ndarray,
