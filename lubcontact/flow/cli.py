@@ -232,6 +232,10 @@ def sweep_parser() -> argparse.ArgumentParser:
     parser.add_argument("--workers", type=int, default=1, metavar="N",
                         help="runs at once, each in its own process; the results do not "
                              "depend on it (default: 1)")
+    parser.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                        help="run the runs on the Dask cluster of this scheduler "
+                             "(tcp://host:port; its workers must see --out; needs the optional "
+                             "dependency distributed) (default: none, local processes)")
     _add_common(parser, resume=False)
     return parser
 
@@ -425,6 +429,12 @@ def sweep_main(argv: list[str] | None = None) -> int:
         parser.error(f"argument --angles: no angle in {args.angles!r}")
     if args.workers < 1:
         parser.error(f"argument --workers: must be >= 1, got {args.workers}")
+    if args.scheduler is not None:
+        try:
+            import distributed  # noqa: F401
+        except ImportError:
+            parser.error("argument --scheduler: needs the optional dependency distributed "
+                         "(pip install lubcontact[dask])")
     for angle in angles:
         if not -90 < angle < 90:
             parser.error(f"argument --angles: {angle:g} is not in (-90, 90) degrees")
@@ -457,7 +467,7 @@ def sweep_main(argv: list[str] | None = None) -> int:
     try:
         with interrupt.stop_on_signals():
             rows = sweep(config, angles, models, args.out, progress and args.workers == 1,
-                         workers=args.workers)
+                         workers=args.workers, scheduler=args.scheduler)
     except interrupt.Interrupted as exc:
         print(_interrupted_line(exc, resume), file=sys.stderr)
         return interrupt.EXIT_STATUS
@@ -465,6 +475,12 @@ def sweep_main(argv: list[str] | None = None) -> int:
         print(f"interrupted again: stopped at once; the last checkpoints resume: {resume}",
               file=sys.stderr)
         return interrupt.EXIT_STATUS
+    except OSError as exc:              # --scheduler: no cluster at that address
+        if args.scheduler is None:
+            raise
+        print(f"lubcontact sweep: argument --scheduler: cannot reach {args.scheduler}: {exc}",
+              file=sys.stderr)
+        return 2
     except BrokenProcessPool:
         print(f"a worker process died (killed or out of memory); the runs resume from their last "
               f"checkpoints: {resume}", file=sys.stderr)

@@ -106,7 +106,7 @@ def check_folder(run_dir: pathlib.Path, config: RunConfig) -> None:
 
 
 def sweep(config: RunConfig, angles: np.ndarray, models: list[str], out_dir: pathlib.Path,
-          progress: bool = False, workers: int = 1) -> list[dict[str, Any]]:
+          progress: bool = False, workers: int = 1, scheduler: str | None = None) -> list[dict[str, Any]]:
     """Every (model, angle) run from one settled bed; finished runs are read back, not redone.
 
     Prints one line per run it finishes, then writes ``out_dir/sweep.csv``.
@@ -156,7 +156,9 @@ def sweep(config: RunConfig, angles: np.ndarray, models: list[str], out_dir: pat
             runs.append((run_config, run_dir))
     if any(not (run_dir / "summary.json").exists() for _, run_dir in runs):
         initial_scene(runs[0][0], out_dir, progress)      # the common bed: settled once, saved
-    if workers == 1 or len(runs) == 1:
+    if scheduler is not None:
+        rows = _on_dask(runs, out_dir, scheduler)
+    elif workers == 1 or len(runs) == 1:
         rows = [_report(run_sweep_point(run_config, run_dir, out_dir, progress))
                 for run_config, run_dir in runs]
     else:
@@ -204,6 +206,24 @@ def _in_processes(runs: list[tuple[RunConfig, pathlib.Path]], out_dir: pathlib.P
         futures = {pool.submit(_worker_point, run_config, run_dir, out_dir): index
                    for index, (run_config, run_dir) in enumerate(runs)}
         for future in as_completed(futures):
+            rows[futures[future]] = _report(future.result())
+    return rows
+
+
+def _on_dask(runs: list[tuple[RunConfig, pathlib.Path]], out_dir: pathlib.Path,
+             scheduler: str) -> list[dict[str, Any]]:
+    """The runs as tasks of the Dask cluster at ``scheduler``, in order."""
+    try:
+        from distributed import Client
+        from distributed import as_completed as dask_completed
+    except ImportError as exc:
+        raise ValueError("scheduler: a Dask cluster needs the optional dependency 'distributed' "
+                         "(pip install lubcontact[dask])") from exc
+    rows: list[dict[str, Any] | None] = [None] * len(runs)
+    with Client(scheduler) as client:
+        futures = {client.submit(_worker_point, run_config, run_dir, out_dir, pure=False): index
+                   for index, (run_config, run_dir) in enumerate(runs)}
+        for future in dask_completed(list(futures)):
             rows[futures[future]] = _report(future.result())
     return rows
 

@@ -317,3 +317,54 @@ def test_a_killed_worker_loses_at_most_its_last_checkpoint_interval(tmp_path):
     assert resumed.returncode == 0, resumed.stderr
     for angle in ("angle_20.00", "angle_24.00"):
         assert json.loads((out / "dry" / angle / "summary.json").read_text())["steps"] == 400
+
+
+def test_a_sweep_on_a_dask_cluster_equals_the_sequential_sweep_and_survives_a_lost_worker(tmp_path):
+    """A local Dask cluster of two worker processes. One worker is killed once its run has written
+    a checkpoint; Dask hands the task to a worker again, which continues from that checkpoint."""
+    distributed = pytest.importorskip("distributed")
+    sequential, on_dask = tmp_path / "one", tmp_path / "dask"
+    assert flow_cli.sweep_main([*SWEEP_SMALL, "--steps", "30", "--out", str(sequential)]) == 0
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                  dashboard_address=None) as cluster:
+        argv = [*SWEEP_SMALL, "--steps", "30", "--out", str(on_dask),
+                "--scheduler", cluster.scheduler_address]
+        checkpoint = on_dask / "dry" / "angle_20.00" / "checkpoint.npz"
+        killed = []
+
+        def kill_one_worker_at_its_first_checkpoint():
+            deadline = time.time() + 120
+            while not checkpoint.exists() and time.time() < deadline:
+                time.sleep(0.05)
+            with distributed.Client(cluster.scheduler_address) as client:
+                address = next(iter(client.scheduler_info()["workers"]))
+                killed.append(stored(checkpoint.parent)[0])
+                try:
+                    client.run(os._exit, 1, workers=[address])
+                except (OSError, distributed.comm.core.CommClosedError):
+                    pass                    # the worker died before it could answer: expected
+
+        import threading
+        killer = threading.Thread(target=kill_one_worker_at_its_first_checkpoint)
+        killer.start()
+        assert flow_cli.sweep_main(argv) == 0
+        killer.join()
+    assert killed and killed[0] >= 3
+    assert sweep_rows(sequential) == sweep_rows(on_dask)
+    for angle in ("angle_20.00", "angle_24.00"):
+        one = final_positions(sequential / "dry" / angle)
+        two = final_positions(on_dask / "dry" / angle)
+        for key in one:
+            np.testing.assert_array_equal(one[key], two[key])
+
+
+def test_an_unreachable_scheduler_is_a_one_line_error(tmp_path, capsys):
+    pytest.importorskip("distributed")
+    import dask
+
+    with dask.config.set({"distributed.comm.timeouts.connect": "1s"}):
+        code = flow_cli.sweep_main([*SWEEP_SMALL, "--steps", "3", "--out", str(tmp_path / "s"),
+                                    "--scheduler", "tcp://127.0.0.1:9"])
+    assert code == 2
+    lines = error_lines(capsys)
+    assert len(lines) == 1 and "--scheduler" in lines[0] and "127.0.0.1:9" in lines[0]
