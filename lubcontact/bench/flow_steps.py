@@ -22,6 +22,7 @@ from typing import Any
 
 import numpy as np
 
+from ..io.files import save_npz
 from ..problem.metrics import scaled_coulomb_error
 from ..scenes import inclined
 from ..sim.simulation import Simulation
@@ -45,7 +46,8 @@ def developed_flow(n_grains: int, model: str, angle: float, cache: pathlib.Path,
     The grains fall from their release heights for ``settle_steps`` steps
     (the default settles 10^3-3x10^3 grains into a bed with about two contacts
     per grain), then flow down the incline for ``develop_steps``. Built once
-    and cached in ``cache`` (the state after the flow steps).
+    and cached in ``cache`` (the settled bed, shared by the models, and the
+    state after the flow steps).
     """
     params = inclined.dimensionless_parameters()
     dt = inclined.time_step(params)
@@ -57,15 +59,21 @@ def developed_flow(n_grains: int, model: str, angle: float, cache: pathlib.Path,
         sim = Simulation(state.scene, law, dt, solver="apgd-jacobi", tol=1e-6, on_failure="warn")
         sim.restore(state)
         return sim
-    bed = Simulation(inclined.sedimentation(n_grains, params, seed=seed), params.law("frictionless"),
-                     dt, solver="apgd-jacobi", tol=1e-6, fixed_point=False, on_failure="warn")
-    bed.run(settle_steps)
+    bed_path = pathlib.Path(cache) / f"bed-{n_grains}-{settle_steps}.npz"
+    if bed_path.exists():
+        with np.load(bed_path) as data:
+            bed = SimulationState.from_arrays(data)
+    else:
+        settling = Simulation(inclined.sedimentation(n_grains, params, seed=seed),
+                              params.law("frictionless"), dt, solver="apgd-jacobi", tol=1e-6,
+                              fixed_point=False, on_failure="warn")
+        settling.run(settle_steps)
+        bed = settling.state
+        bed_path.parent.mkdir(parents=True, exist_ok=True)
+        save_npz(bed_path, **bed.to_arrays())
     sim = Simulation(inclined.inclined_flow(bed.scene, angle), law, dt, solver="apgd-jacobi",
                      tol=1e-6, on_failure="warn")
     sim.run(develop_steps)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    from ..io.files import save_npz
-
     save_npz(path, **sim.state.to_arrays())
     return sim
 
