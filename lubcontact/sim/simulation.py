@@ -32,6 +32,8 @@ from .state import PreviousStep, SimulationState
 from .trajectory import StepReport, Trajectory
 
 ON_FAILURE = ("raise", "warn", "ignore", "fallback")
+SEARCH_SAFETY = 1.5
+"""Margin on the distance a pair can close in one step (:meth:`Simulation.search_distance`)."""
 
 
 class Simulation:
@@ -49,6 +51,8 @@ class Simulation:
         Registered method name (see :func:`lubcontact.solvers.methods`).
     d_max : float, optional
         Contact detection distance; default ``0.1 x`` the smallest radius.
+        Each step widens it to cover the step (:meth:`search_distance`): a
+        pair that can close during the step is always a candidate contact.
     tol : float
         Solver tolerance.
     solver_options : dict, optional
@@ -170,7 +174,7 @@ class Simulation:
             or with ``warm_start=False``).
         """
         scene = self.scene
-        contacts = find_contacts(scene, self.d_max)
+        contacts = find_contacts(scene, self.search_distance())
         gamma = self.state.pairs.lookup(contacts.keys)
         problem = assemble(scene, contacts, self.law.cones(contacts, gamma), self.dt,
                            rotations=self.law.needs_rotation)
@@ -178,6 +182,26 @@ class Simulation:
         if not self.warm_start or previous is None or problem.n_contacts == 0:
             return contacts, gamma, problem, None, None
         return (contacts, gamma, problem, *previous.warm_start(problem))
+
+    def search_distance(self) -> float:
+        """The candidate-contact distance of the coming step: ``d_max``, widened to cover the step.
+
+        During a step two bodies approach each other by at most ``dt`` times
+        the sum of their speeds; a speed after the step is bounded by the
+        fastest grain now plus ``dt |g|`` (contacts do not add kinetic energy).
+        The distance is ``max(d_max, SEARCH_SAFETY dt (2 v + v_obstacle))``,
+        capped where a periodic scene allows no more (the missed-contact check
+        after the step still warns if a pair was missed).
+        """
+        scene = self.scene
+        speed = float(np.max(np.linalg.norm(scene.grains.velocities, axis=1), initial=0.0)) \
+            + self.dt * float(np.linalg.norm(scene.gravity))
+        obstacle = float(np.max(np.linalg.norm(scene.obstacle_velocities(), axis=1), initial=0.0))
+        distance = max(self.d_max, SEARCH_SAFETY * self.dt * (2.0 * speed + obstacle))
+        if scene.period is not None:             # the minimum image needs period > 2 (2 r_max + d)
+            radii = np.concatenate([scene.grains.radii, scene.fixed_radii])
+            distance = max(self.d_max, min(distance, 0.49 * scene.period - 2.0 * float(radii.max())))
+        return distance
 
     def step(self, settings: SolveSettings | None = None) -> StepReport:
         """Advance one time step; returns what the step computed.
@@ -205,8 +229,9 @@ class Simulation:
         normal, _ = problem.cones.split(result.forces)
         new_gamma = self.law.update_gamma(contacts, gamma, normal, self.dt, result.force_scale)
         speed = float(np.max(np.linalg.norm(self.scene.grains.velocities, axis=1), initial=0.0))
+        searched = self.search_distance()
         self._advance(problem, result, PairState.from_contacts(contacts.keys, new_gamma))
-        self._check_missed_contacts(contacts, speed)
+        self._check_missed_contacts(contacts, speed, searched)
         report = StepReport(contacts=contacts, problem=problem, result=result, gamma=new_gamma,
                             gaps_after=problem.gaps_after(result.velocities))
         if self.keep_trajectory:
@@ -214,12 +239,12 @@ class Simulation:
             self.trajectory.record_step(report)
         return report
 
-    def _check_missed_contacts(self, contacts: Contacts, speed_before: float) -> None:
+    def _check_missed_contacts(self, contacts: Contacts, speed_before: float, searched: float) -> None:
         """Warn when the step let two bodies overlap that were not candidate contacts.
 
-        A pair farther apart than ``d_max`` is not a candidate; it can only
+        A pair farther apart than ``searched`` is not a candidate; it can only
         overlap after the step if the two moved towards each other by more
-        than ``d_max``: by at most ``dt`` times the sum of their speeds. Below
+        than ``searched``: by at most ``dt`` times the sum of their speeds. Below
         that bound (the usual case) nothing is searched; above it, the new
         positions are searched for overlaps the step could not see.
         """
@@ -228,7 +253,7 @@ class Simulation:
         speed = max(speed_before, float(np.max(np.linalg.norm(grains.velocities, axis=1),
                                                initial=0.0)))
         obstacle = float(np.max(np.linalg.norm(scene.obstacle_velocities(), axis=1), initial=0.0))
-        if self.dt * (2.0 * speed + obstacle) < self.d_max:
+        if self.dt * (2.0 * speed + obstacle) < searched:
             return
         a, b, keys, gaps, smaller = scene.deep_overlaps()
         missed = ~np.isin(keys, contacts.keys)
@@ -237,9 +262,10 @@ class Simulation:
             self.trajectory.missed_contacts.append(
                 (self.steps_done, int(np.count_nonzero(missed)), float(-gaps[worst] / smaller[worst])))
             warnings.warn(       # one text, so that a long run warns once: details in the trajectory
-                f"pairs overlapped that were not candidate contacts: grains moved more than d_max = "
-                f"{self.d_max:.3g} in one step; raise d_max or lower dt (trajectory.missed_contacts "
-                f"lists the steps)", SolverWarning, stacklevel=3)
+                f"pairs overlapped that were not candidate contacts: grains moved more than the "
+                f"search distance {searched:.3g} in one step (faster than their speed bound, e.g. "
+                f"under an external force); lower dt (trajectory.missed_contacts lists the steps)",
+                SolverWarning, stacklevel=3)
 
     def _verify(self, problem: StepProblem, result: CoulombResult) -> None:
         """Check the step's solution against the reference; keep the report, warn on failure."""

@@ -55,17 +55,31 @@ def test_prescribed_velocities_are_checked():
         _disk_on_floor(fixed_velocity="fast")
 
 
-def test_a_fast_grain_passing_the_detection_distance_is_reported():
-    """A grain at speed 20 moves 1.0 per step (dt = 0.05) against d_max = 0.05: it reaches its
-    neighbour without ever being a candidate contact. The step says so instead of staying silent."""
-    grains = Grains.create(positions=[[0.0, 0.5], [1.6, 0.5]], radii=0.5, masses=1.0,
-                           velocities=[[20.0, 0.0], [0.0, 0.0]])
+def test_a_fast_grain_hitting_a_pile_is_always_a_candidate_contact():
+    """A grain at speed 20 moves 1.0 per step (dt = 0.05), twenty times d_max = 0.05, into a
+    3-grain pile. The search distance of each step covers the step (Simulation.search_distance):
+    no pair is missed, nothing overlaps, and the grain stops on the pile (inelastic)."""
+    grains = Grains.create(positions=[[-2.0, 0.5], [1.6, 0.5], [2.6, 0.5], [2.1, 1.3670]], radii=0.5,
+                           masses=1.0, velocities=[[20.0, 0.0], [0.0, 0.0], [0.0, 0.0], [0.0, 0.0]])
     scene = Scene.create(grains)
+    sim = Simulation(scene, Inelastic(), dt=0.05, d_max=0.05, solver="clarabel")
+    assert sim.search_distance() == pytest.approx(1.5 * 0.05 * 2 * 20.0)
+    sim.run(6)
+    assert sim.trajectory.missed_contacts == []
+    assert min(sim.trajectory.min_gap) >= -1e-9
+    assert sim.scene.grains.velocities[0, 0] < 20.0 / 3        # it hit the pile and shared momentum
+    settled = Simulation(Scene.create(Grains.create(positions=[[0.0, 0.5]], radii=0.5, masses=1.0)),
+                         Inelastic(), dt=0.05, d_max=0.05)
+    assert settled.search_distance() == 0.05                    # at rest: d_max, not wider
+
+
+def test_a_pair_missed_by_a_force_the_speed_bound_cannot_see_is_reported():
+    """An external force of 400 takes a grain at rest to speed 20 within one step: the speed bound
+    (current speeds and gravity) cannot foresee it; the step says so instead of staying silent."""
+    grains = Grains.create(positions=[[0.0, 0.5], [1.6, 0.5]], radii=0.5, masses=1.0)
+    scene = Scene.create(grains, external_force=[[400.0, 0.0], [0.0, 0.0]])
     sim = Simulation(scene, Inelastic(), dt=0.05, d_max=0.05, solver="apgd-as")
     with pytest.warns(SolverWarning, match="pairs overlapped that were not candidate contacts"):
         sim.step()
     (step, count, depth), = sim.trajectory.missed_contacts
-    assert (step, count) == (1, 1) and depth == pytest.approx(0.8)   # 1.0 - 0.1 - 0.1 gap, r 0.5
-    calm = Simulation(scene, Inelastic(), dt=0.05, d_max=1.2, solver="apgd-as")
-    calm.step()                                   # detected: no overlap, no warning
-    assert calm.trajectory.missed_contacts == [] and calm.trajectory.min_gap[-1] >= -1e-9
+    assert (step, count) == (1, 1) and depth == pytest.approx(0.8)   # 1.0 - 0.6 gap = 0.4, r 0.5

@@ -29,8 +29,10 @@ def piles():
 
 
 # Iterations the plain projected gradient needs on the 200-grain gluey reference pile at tol 1e-9:
-# 199 180 (measured; its rate is 1 - 1/cond(W_AA), docs/benchmarks.md), above the default cap.
-PGD_REFERENCE_CAP = 250000
+# 1 195 415 (measured; its rate is 1 - 1/cond(W_AA), docs/benchmarks.md), above the default cap.
+# (199 180 before the stored pile was rebuilt with each step's search distance covering the step:
+# the settling grains then met their contacts earlier, and the pile is another pile.)
+PGD_REFERENCE_CAP = 1_300_000
 
 
 @pytest.mark.parametrize("method", FAST)
