@@ -46,7 +46,7 @@ def developed_flow(n_grains: int, model: str, angle: float, cache: pathlib.Path,
     The grains fall from their release heights for ``settle_steps`` steps
     (the default settles 10^3-3x10^3 grains into a bed with about two contacts
     per grain), then flow down the incline for ``develop_steps``. Built once
-    and cached in ``cache`` (the settled bed, shared by the models, and the
+    and cached in ``cache`` (the settled bed, one per size for both models, and the
     state after the flow steps).
     """
     params = inclined.dimensionless_parameters()

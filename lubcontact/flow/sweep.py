@@ -127,6 +127,14 @@ def sweep(config: RunConfig, angles: np.ndarray, models: list[str], out_dir: pat
         Runs at once, each in its own process (1: one after the other, here).
         The bed is settled first, here; the runs are independent and
         deterministic, so the results do not depend on ``workers``.
+    scheduler : str, optional
+        Address of a Dask distributed scheduler (``tcp://host:port``): the
+        runs become tasks of that cluster instead (``workers`` is then
+        ignored). Its workers must read and write ``out_dir`` (one file
+        system for all) and have lubcontact installed. A worker lost mid-run
+        loses at most one checkpoint interval: Dask gives its task to another
+        worker, which continues the run from its checkpoint. Needs the
+        optional dependency ``distributed`` (``pip install lubcontact[dask]``).
 
     Returns
     -------
@@ -199,7 +207,7 @@ def _worker_point(config: RunConfig, run_dir: pathlib.Path,
 
 def _in_processes(runs: list[tuple[RunConfig, pathlib.Path]], out_dir: pathlib.Path,
                   workers: int) -> list[dict[str, Any]]:
-    """The runs in ``workers`` processes (spawned: no state shared with this one), in order."""
+    """The runs in ``workers`` processes (spawned: they start from a fresh interpreter), in order."""
     context = multiprocessing.get_context("spawn")
     rows: list[dict[str, Any] | None] = [None] * len(runs)
     with ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool:

@@ -67,7 +67,7 @@ def test_a_fast_grain_hitting_a_pile_is_always_a_candidate_contact():
     sim.run(6)
     assert sim.trajectory.missed_contacts == []
     assert min(sim.trajectory.min_gap) >= -1e-9
-    assert sim.scene.grains.velocities[0, 0] < 20.0 / 3        # it hit the pile and shared momentum
+    assert sim.scene.grains.velocities[0, 0] < 20.0 / 3        # it hit the pile and gave it momentum
     settled = Simulation(Scene.create(Grains.create(positions=[[0.0, 0.5]], radii=0.5, masses=1.0)),
                          Inelastic(), dt=0.05, d_max=0.05)
     assert settled.search_distance() == 0.05                    # at rest: d_max, not wider
