@@ -17,8 +17,10 @@ import csv
 import json
 import multiprocessing
 import pathlib
+from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import replace
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -209,13 +211,8 @@ def _in_processes(runs: list[tuple[RunConfig, pathlib.Path]], out_dir: pathlib.P
                   workers: int) -> list[dict[str, Any]]:
     """The runs in ``workers`` processes (spawned: they start from a fresh interpreter), in order."""
     context = multiprocessing.get_context("spawn")
-    rows: list[dict[str, Any] | None] = [None] * len(runs)
     with ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool:
-        futures = {pool.submit(_worker_point, run_config, run_dir, out_dir): index
-                   for index, (run_config, run_dir) in enumerate(runs)}
-        for future in as_completed(futures):
-            rows[futures[future]] = _report(future.result())
-    return rows
+        return _gather(pool.submit, as_completed, runs, out_dir)
 
 
 def _on_dask(runs: list[tuple[RunConfig, pathlib.Path]], out_dir: pathlib.Path,
@@ -227,12 +224,19 @@ def _on_dask(runs: list[tuple[RunConfig, pathlib.Path]], out_dir: pathlib.Path,
     except ImportError as exc:
         raise ValueError("scheduler: a Dask cluster needs the optional dependency 'distributed' "
                          "(pip install lubcontact[dask])") from exc
-    rows: list[dict[str, Any] | None] = [None] * len(runs)
     with Client(scheduler) as client:
-        futures = {client.submit(_worker_point, run_config, run_dir, out_dir, pure=False): index
-                   for index, (run_config, run_dir) in enumerate(runs)}
-        for future in dask_completed(list(futures)):
-            rows[futures[future]] = _report(future.result())
+        return _gather(partial(client.submit, pure=False), dask_completed, runs, out_dir)
+
+
+def _gather(submit: Callable, completed: Callable, runs: list[tuple[RunConfig, pathlib.Path]],
+            out_dir: pathlib.Path) -> list[dict[str, Any]]:
+    """Submit every run (``submit(function, *args)`` returns a future), report each as
+    ``completed(futures)`` yields it, return the summaries in the order of ``runs``."""
+    rows: list[dict[str, Any] | None] = [None] * len(runs)
+    futures = {submit(_worker_point, run_config, run_dir, out_dir): index
+               for index, (run_config, run_dir) in enumerate(runs)}
+    for future in completed(list(futures)):
+        rows[futures[future]] = _report(future.result())
     return rows
 
 

@@ -138,12 +138,11 @@ class AlartCurnier:
         self.dim_t = dim_t
         self.typical = float(np.median(diagonal)) if nc else 1.0
         self.sigma, self.center = 0.0, np.zeros(self.n_rows)
-        self.scaled_W = sp.diags(self.rho) @ self.W
+        self.scaled_W = sp.diags(self.rho) @ self.W          # built once; sigma enters as a diagonal
 
     def set_proximal(self, sigma: float, center: np.ndarray) -> None:
         """Solve the proximal problem ``W + sigma I``, ``q - sigma center`` from now on (0: the problem)."""
         self.sigma, self.center = float(sigma), np.array(center, dtype=float)
-        self.scaled_W = sp.diags(self.rho) @ (self.W + self.sigma * sp.identity(self.n_rows, format="csr"))
 
     def residual(self, forces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``phi(r)`` and ``y = r - rho (W r + q + sigma (r - center))``, both shape (n_rows,)."""
@@ -196,9 +195,10 @@ class AlartCurnier:
             vals.append(np.ones(stick_rows.size))
         n = self.n_rows
         G = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(n, n))
-        active = np.zeros(n, dtype=bool)
-        active[np.unique(G.nonzero()[0])] = True
+        active = G.getnnz(axis=1) > 0
         J = sp.identity(n, format="csr") - G + G @ self.scaled_W
+        if self.sigma:
+            J = J + G @ sp.diags(self.sigma * self.rho)
         return J.tocsr(), active
 
 
@@ -264,7 +264,8 @@ def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = 5
     -------
     MethodOutput
         ``iterations``: Newton iterations plus the fallback's inner iterations.
-        ``info``: ``factorizations`` (sparse LU count), ``gradient_steps``
+        ``info``: ``newton_iterations`` (each one sparse LU, more where a
+        singular block is regularised), ``gradient_steps``
         (steepest-descent steps taken where the Newton direction failed),
         ``proximal_steps`` and ``strategies`` (the starting weights tried),
         ``newton_status`` and ``error`` (the Newton phase's FCLIB error), and
@@ -279,7 +280,7 @@ def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = 5
     setup_time = time.perf_counter() - start
     phase = _strategies(function, unshifted, forces, tol, max_iter)
     forces, status, iterations = phase.forces, phase.status, phase.iterations
-    info = {"factorizations": phase.factorizations, "gradient_steps": phase.gradient_steps,
+    info = {"newton_iterations": phase.iterations, "gradient_steps": phase.gradient_steps,
             "proximal_steps": phase.proximal_steps, "strategies": phase.strategies,
             "newton_status": phase.status, "error": phase.error}
     if status != CONVERGED and fallback is not None:
@@ -290,7 +291,7 @@ def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = 5
             finish = _proximal_newton(function, unshifted, rescue.forces, tol, POLISH_ITERATIONS,
                                       STRATEGIES[0])
             iterations += finish.iterations
-            info["factorizations"] += finish.factorizations
+            info["newton_iterations"] += finish.iterations
             forces = finish.forces
             # newton-ac's test is the FCLIB error: a fallback "converged" by its own measure
             # but above tol is inaccurate here
@@ -321,7 +322,7 @@ def _strategies(function: AlartCurnier, unshifted: ConicProblem, forces: np.ndar
         if phase.status == CONVERGED or iterations >= max_iter:
             break
     return _Phase(forces=best.forces, status=best.status, iterations=iterations, error=best.error,
-                  history=np.asarray(history), factorizations=iterations, gradient_steps=gradient_steps,
+                  history=np.asarray(history), gradient_steps=gradient_steps,
                   proximal_steps=proximal_steps, strategies=tried)
 
 
@@ -379,7 +380,7 @@ def _proximal_newton(function: AlartCurnier, unshifted: ConicProblem, forces: np
             history.extend(finish.history[1:])
             best = min(best, (finish.error, finish.forces), key=lambda pair: pair[0])
     return _Phase(forces=best[1], status=status, iterations=iterations, error=best[0],
-                  history=np.asarray(history), factorizations=iterations,
+                  history=np.asarray(history),
                   gradient_steps=gradient_steps, proximal_steps=proximal_steps)
 
 
@@ -392,7 +393,6 @@ class _Phase:
     iterations: int
     error: float
     history: np.ndarray
-    factorizations: int
     gradient_steps: int
     proximal_steps: int = 0
     strategies: list = field(default_factory=list)
@@ -433,7 +433,7 @@ def _newton_phase(function: AlartCurnier, unshifted: ConicProblem, forces: np.nd
     if best[0] <= tol:
         status = CONVERGED
     return _Phase(forces=best[1], status=status, iterations=iterations, error=best[0],
-                  history=np.asarray(history), factorizations=iterations, gradient_steps=gradient_steps,
+                  history=np.asarray(history), gradient_steps=gradient_steps,
                   solved=bool(np.sqrt(2.0 * merit) <= inner_tol))
 
 
