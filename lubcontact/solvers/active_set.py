@@ -24,6 +24,13 @@ from ..problem.cones import ConeKind, Cones
 from .dual_data import DualData, ResidualTracker
 from .result import CONVERGED
 
+MAX_FINISH_ATTEMPTS = 4
+"""Finish attempts of one ``apgd-as`` solve (the initial guess's included) before it goes on as
+``apgd-jacobi``. At exact rest the first attempt succeeds; off it (radii moved by 5e-7, gaps of
+~1e-6) every attempt can fail, and 4 attempts (at most 12 factorisations) cost 1.07x
+``apgd-jacobi``'s time on a settled 1000-grain pile, where unbounded attempts that restarted the
+loop ran into ``max_iter``."""
+
 
 class ActiveSetFinish:
     """Exact solve on an identified active set (frictionless problems).
@@ -39,11 +46,15 @@ class ActiveSetFinish:
     1e-12 x the largest diagonal is added on the active diagonal (singular
     hyperstatic blocks factor) and one step of iterative refinement removes it.
 
-    A candidate that satisfies every sign and complementarity condition is
-    returned (projected) and kept as ``exact``; otherwise primal-dual active-set rounds replace
-    ``A`` by the candidate's active set, up to ``max_rounds``. When they do not
-    settle, the projected last candidate is returned if its residual beats
-    the current iterate's, as a new starting point for the iterations.
+    An attempt (:meth:`solve`) returns a candidate that satisfies every sign
+    and complementarity condition (projected, and kept as ``exact``);
+    otherwise primal-dual active-set rounds replace ``A`` by the candidate's
+    active set, up to ``max_rounds`` factorisations, and an attempt whose
+    rounds do not settle returns None: the iterations carry on from their own
+    iterate, with their momentum. During the iterations (``apgd-as``) an
+    attempt is made each time the active set has just stayed unchanged for
+    ``stable_iterations`` iterations, at most ``max_attempts`` times
+    (:attr:`exhausted`).
 
     Parameters
     ----------
@@ -53,20 +64,20 @@ class ActiveSetFinish:
         Its cones, all frictionless.
     stable_iterations : int
         Attempt once the active set has not changed for this many iterations.
-    period : int
-        Also attempt every ``period`` iterations (0: never).
     max_rounds : int
         Factorisations per attempt.
+    max_attempts : int
+        Attempts during the iterations (:data:`MAX_FINISH_ATTEMPTS`).
     """
 
-    def __init__(self, data: DualData, cones: Cones, stable_iterations: int = 5, period: int = 0,
-                 max_rounds: int = 3) -> None:
+    def __init__(self, data: DualData, cones: Cones, stable_iterations: int = 5,
+                 max_rounds: int = 3, max_attempts: int = MAX_FINISH_ATTEMPTS) -> None:
         kinds = cones.kinds
         self.sign = np.where(kinds == ConeKind.NONNEG, 1.0, np.where(kinds == ConeKind.NONPOS, -1.0, 0.0))
         self.data = data
         self.stable_iterations = stable_iterations
-        self.period = period
         self.max_rounds = max_rounds
+        self.max_attempts = max_attempts
         self.previous: np.ndarray | None = None
         self.unchanged = 0
         self.attempts = 0
@@ -81,6 +92,12 @@ class ActiveSetFinish:
         self._rows = upper.indices
         self._cols = np.repeat(np.arange(upper.shape[1]), np.diff(upper.indptr))
         self._diagonal = self._rows == self._cols
+
+    @property
+    def exhausted(self) -> bool:
+        """True once ``max_attempts`` attempts are spent: the iterations go on without finish
+        attempts (``apgd-jacobi``) to their own stopping test."""
+        return self.attempts >= self.max_attempts
 
     def active(self, z: np.ndarray, gradient: np.ndarray) -> np.ndarray:
         """Rows that stay off their bound after a gradient step from ``z``: bool, shape (n,)
@@ -100,35 +117,35 @@ class ActiveSetFinish:
         return (self.sign == 0.0) | (self.sign * offset <= level)
 
     def __call__(self, k: int, z: np.ndarray, gradient: np.ndarray) -> np.ndarray | None:
-        """APGD callback (:func:`.gradient_loops.run_apgd`): try the exact solve once the active set
-        stays unchanged; returns the replacement iterate, shape (n,), or None."""
+        """APGD callback (:func:`.gradient_loops.run_apgd`): an attempt when the active set has
+        just stayed unchanged for ``stable_iterations`` iterations (once per settled set), until
+        :attr:`exhausted`; returns the exact solution, shape (n,), or None (the loop goes on)."""
+        if self.exhausted:
+            return None
         active = self.active(z, gradient)
         if self.previous is not None and np.array_equal(active, self.previous):
             self.unchanged += 1
         else:
             self.unchanged = 0
         self.previous = active
-        periodic = self.period > 0 and k % self.period == 0
-        if self.unchanged < self.stable_iterations and not periodic:
+        if self.unchanged != self.stable_iterations:
             return None
-        return self.solve(active, self.data.residual(z, gradient))
+        return self.solve(active)
 
-    def solve(self, active: np.ndarray, current: float = np.inf) -> np.ndarray | None:
-        """PDAS rounds from ``active`` (each set tried once); see the class docstring.
+    def solve(self, active: np.ndarray) -> np.ndarray | None:
+        """One attempt: PDAS rounds from ``active`` (each starting set tried once); see the
+        class docstring.
 
         Parameters
         ----------
         active : ndarray of bool, shape (n,)
             The starting active set.
-        current : float
-            Residual of the current iterate: an unsettled last candidate is returned
-            only when it beats it.
 
         Returns
         -------
         ndarray, shape (n,), or None
-            The checked exact solution (also kept as ``exact``), a better starting
-            point, or None (set tried before, singular factorisation, no improvement).
+            The checked exact solution (also kept as ``exact``), or None (set tried
+            before, singular factorisation, rounds that did not settle).
         """
         key = hash(active.tobytes())
         if key in self.tried:
@@ -137,7 +154,6 @@ class ActiveSetFinish:
         self.attempts += 1
         data = self.data
         slack = 1e-12 * (1.0 + float(np.max(np.abs(data.offset))))
-        candidate = None
         for _ in range(self.max_rounds):
             candidate = self._solve_on(active)
             self.solves += 1
@@ -151,9 +167,7 @@ class ActiveSetFinish:
                 self.exact = data.project(candidate)
                 return self.exact
             active = (active & ~wrong_sign) | violated
-        projected = data.project(candidate)
-        residual = data.residual(projected, data.product(projected) + data.offset)
-        return projected if residual < current else None
+        return None
 
     def _solve_on(self, active: np.ndarray) -> np.ndarray | None:
         import qdldl

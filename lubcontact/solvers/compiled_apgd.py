@@ -116,7 +116,13 @@ def run_apgd_cones(data: DualData, cones: Cones, z: np.ndarray, tol: float, max_
 def run_apgd_box(data: DualData, z: np.ndarray, tol: float, max_iter: int,
                  finish: ActiveSetFinish | None) -> tuple[ResidualTracker, str, int]:
     """APGD in the compiled kernel :func:`.kernels.apgd_box` (K a box, :func:`is_box`);
-    returns to Python only for active-set solves.
+    returns to Python only for active-set attempts.
+
+    The loop's state (iterate, extrapolated point, momentum, Lipschitz
+    estimate, active set) lives here between kernel calls: after an attempt
+    that does not give the exact solution the kernel continues exactly where
+    it stopped, and once ``finish`` is :attr:`~.ActiveSetFinish.exhausted` it
+    runs to its own stopping test, as without a finish.
 
     Parameters
     ----------
@@ -129,8 +135,8 @@ def run_apgd_box(data: DualData, z: np.ndarray, tol: float, max_iter: int,
     max_iter : int
         Iteration cap.
     finish : ActiveSetFinish or None
-        Exact finish tried when the kernel reports a settled active set (and every
-        ``finish.period`` iterations).
+        Exact finish attempted each time the kernel reports a settled active set,
+        until it is exhausted.
 
     Returns
     -------
@@ -141,35 +147,30 @@ def run_apgd_box(data: DualData, z: np.ndarray, tol: float, max_iter: int,
     """
     kernel = box_kernel()
     matrix = data.matrix
-    lipschitz = initial_lipschitz(data, z)
+    iterate, product = z.copy(), data.product(z)
+    extrapolated, extrapolated_product = iterate.copy(), product.copy()
+    active = np.zeros(z.size, dtype=bool)
+    theta, lipschitz, unchanged, first = 1.0, initial_lipschitz(data, z, product), -1, -1.0
     sign = finish.sign if finish is not None else np.zeros(z.size)
-    stable = finish.stable_iterations if finish is not None else 0
-    chunk = finish.period if finish is not None and finish.period > 0 else max_iter
     tracker = ResidualTracker(data, tol)
     done = 0
     while True:
-        best, best_residual, history, code, iterations, products, last, lipschitz = kernel(
-            matrix.indptr, matrix.indices, matrix.data, data.offset, data.project.lower,
-            data.project.upper, data.ratio, sign, z, tol, min(chunk, max_iter - done), lipschitz,
-            stable, DIVERGENCE_FACTOR)
+        stable = finish.stable_iterations if finish is not None and not finish.exhausted else 0
+        (best, best_residual, history, code, iterations, products, theta, lipschitz, unchanged,
+         first) = kernel(matrix.indptr, matrix.indices, matrix.data, data.offset, data.project.lower,
+                         data.project.upper, data.ratio, sign, iterate, product, extrapolated,
+                         extrapolated_product, active, theta, lipschitz, unchanged, first, tol,
+                         max_iter - done, stable, DIVERGENCE_FACTOR)
         done += iterations
         data.products += products
         tracker.history.extend(history)
         if best_residual < tracker.best_residual:
             tracker.best_residual, tracker.best = best_residual, best
-        if code not in (_REQUEST_FINISH, 1) or done >= max_iter or finish is None:
+        if code != _REQUEST_FINISH:
             return tracker, _KERNEL_STATUS.get(code, MAX_ITER), done
-        z = last
-        gradient = data.product(last) + data.offset
-        candidate = finish.solve(finish.active(last, gradient), data.residual(last, gradient))
-        if candidate is not None:
-            status = tracker.record(candidate, data.product(candidate) + data.offset)
-            if status:
-                return tracker, status, done
-            z = candidate
-        if done >= max_iter:
-            return tracker, MAX_ITER, done
-
+        exact = finish.solve(active)
+        if exact is not None and tracker.record(exact, data.product(exact) + data.offset) == CONVERGED:
+            return tracker, CONVERGED, done
 
 
 def joint_coulomb_apgd(convex: ConicProblem, shift: np.ndarray, warm_start: np.ndarray | None,

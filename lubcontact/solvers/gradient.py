@@ -150,15 +150,15 @@ def _apgd(problem: ConicProblem, tol: float, max_iter: int, warm_start: np.ndarr
         finish = ActiveSetFinish(data, problem.cones)
         guess = finish.active(z, data.product(z) + data.offset) if warm_start is not None \
             else finish.closed_rows()
-        candidate = finish.solve(guess)
-        if candidate is not None:
+        exact = finish.solve(guess)
+        if exact is not None:
             tracker = ResidualTracker(data, tol)
-            if tracker.record(candidate, data.product(candidate) + data.offset) == CONVERGED:
+            if tracker.record(exact, data.product(exact) + data.offset) == CONVERGED:
                 info = {"fused_kernel": fused, "active_set_attempts": finish.attempts,
                         "active_set_solves": finish.solves}
                 return _finalise(problem, data, tracker, CONVERGED, finish.solves, setup, start,
                                  info, finish)
-            z = candidate
+            z = exact
     if fused and cones_2d:
         tracker, status, iterations, _ = run_apgd_cones(data, problem.cones, z, tol, max_iter)
     elif fused:

@@ -3,15 +3,16 @@
 Two APGD loops are compiled, each with the product ``W z`` fused with the
 projection, the residual, the restart test and the extrapolation: the box case
 (frictionless problems: every row in ``[lower, upper]``, with the active-set
-bookkeeping), about twice as fast as the numpy loop on the 10^4-grain pile
+bookkeeping, and resumable: it stops for the active-set finish and carries on
+with its momentum), about twice as fast as the numpy loop on the 10^4-grain pile
 (docs/benchmarks.md); and 2D friction cones (optionally with the Coulomb shift
 updated inside, :func:`apgd_cone2d`), about 3x faster than the numpy loop on
 the 1000-grain frictional settling pile; its projection also covers the 2D
 UNION contacts of gluey + friction steps. The numpy loop remains the general
 path (3D cones).
 
-Both loops share the steps of APGD through small helpers (start, backtracking
-test, residual record and stop, extrapolation with restart), inlined into the
+Both loops share the steps of APGD through small helpers (backtracking test,
+residual record and stop, extrapolation with restart; the cone loop's start), inlined into the
 loops by numba (``inline="always"``): as plain calls they made the box loop
 about 20 % slower per iteration on the 1000-grain pile.
 """
@@ -100,29 +101,38 @@ def extrapolate(theta, uphill, x, wx, x_old, wx_old, y, wy):
 
 
 @numba.njit(cache=True)
-def apgd_box(indptr, indices, values, b, lower, upper, ratio, sign, z0, tol, max_iter,
-             lipschitz, stable, divergence):
-    """APGD (restart, backtracking) on ``min 1/2 z.Wz + b.z, lower <= z <= upper``.
+def apgd_box(indptr, indices, values, b, lower, upper, ratio, sign, x_old, wx_old, y, wy, active,
+             theta, lipschitz, unchanged, first, tol, max_iter, stable, divergence):
+    """APGD (restart, backtracking) on ``min 1/2 z.Wz + b.z, lower <= z <= upper``, resumable.
 
     Mirrors :func:`lubcontact.solvers.gradient_loops.run_apgd`. ``ratio`` maps the
     iteration variables to the Jacobi-scaled ones of the stopping measure;
     ``sign`` marks one-sided rows (+1 lower bound 0, -1 upper bound 0) for the
-    active-set count; with ``stable > 0`` the loop stops with status 3 once the
-    active set has not changed for ``stable`` iterations.
+    active set. The loop state is the last iterate ``x_old`` and ``wx_old = W
+    x_old``, the extrapolated point ``y`` and ``wy = W y``, the active set
+    ``active`` of ``x_old`` (bool; arrays updated in place), ``theta``, the
+    Lipschitz estimate, ``unchanged`` (iterations since ``active`` last changed,
+    -1 before the first iteration) and ``first`` (the first residual, the scale
+    of the divergence test; -1 before it): a call given the state a previous
+    call stopped in continues its iterations exactly, momentum included. With
+    ``stable > 0`` the loop stops with status 3 when the active set has just
+    stayed unchanged for ``stable`` iterations, once per settled set (a set
+    that stays settled does not stop the loop again).
 
     Returns
     -------
     best, best_residual, history, status (0 converged, 1 max_iter,
-    2 diverged, 3 active set settled), iterations, products, last iterate,
-    Lipschitz estimate.
+    2 diverged, 3 active set settled), iterations, products, and the state's
+    scalars: theta, Lipschitz estimate, unchanged, first.
     """
     n = b.size
     rms = 1.0 / np.sqrt(max(n, 1))
-    x_old, wx_old, y, wy, x, wx, best, history = loop_arrays(indptr, indices, values, z0, max_iter)
-    previous = np.zeros(n, dtype=np.bool_)
-    unchanged = -1
-    best_residual, first = np.inf, -1.0
-    products, theta, status, iterations = 1, 1.0, 1, max_iter
+    x = np.empty(n)
+    wx = np.empty(n)
+    best = x_old.copy()
+    history = np.empty(max_iter)
+    best_residual = np.inf
+    products, status, iterations = 0, 1, max_iter
     for k in range(max_iter):
         while True:
             for i in range(n):
@@ -141,22 +151,23 @@ def apgd_box(indptr, indices, values, b, lower, upper, ratio, sign, z0, tol, max
             projected = min(max(scaled - g / ratio[i], lower[i]), upper[i])
             squares += (scaled - projected) ** 2
             uphill += (wy[i] + b[i]) * (x[i] - x_old[i])
-            active = sign[i] == 0.0 or sign[i] * (x[i] - g) > 0.0
-            if active != previous[i]:
+            row_active = sign[i] == 0.0 or sign[i] * (x[i] - g) > 0.0
+            if row_active != active[i]:
                 changes += 1
-                previous[i] = active
+                active[i] = row_active
         best_residual, first, code = record_residual(k, np.sqrt(squares) * rms, x, history, best,
                                                      best_residual, first, tol, divergence)
         if code >= 0:
             status, iterations = code, k + 1
             break
-        unchanged = unchanged + 1 if changes == 0 else 0
-        if stable > 0 and unchanged >= stable:
-            status, iterations = 3, k + 1
-            break
         theta = extrapolate(theta, uphill, x, wx, x_old, wx_old, y, wy)
         lipschitz *= 0.9
-    return best, best_residual, history[:iterations], status, iterations, products, x, lipschitz
+        unchanged = unchanged + 1 if changes == 0 else 0
+        if stable > 0 and unchanged == stable:
+            status, iterations = 3, k + 1
+            break
+    return (best, best_residual, history[:iterations], status, iterations, products, theta,
+            lipschitz, unchanged, first)
 
 
 @numba.njit(cache=True, inline="always")
