@@ -184,11 +184,14 @@ def solve_native_coulomb(problem: ConicProblem, method: str, *, tol: float = 1e-
     Coulomb's. ``s*`` is a fixed point of ``s -> mu |g_T(s)|`` by construction
     (``g_T`` does not depend on ``s``): shift change 0.
 
-    UNION contacts (gluey + friction at gamma_min) are fixed on a piece, as in
-    :func:`solve_coulomb`, for methods that accept both pieces (COULOMB and
-    NONPOS): solve with the pieces fixed, flip the contacts the branch rule
-    says are on the wrong piece, re-solve from the last forces, until no
-    contact flips (at most ``max_outer`` solves; ``outer_iterations`` counts them).
+    UNION contacts (gluey + friction at gamma_min): a method that accepts
+    UNION solves the union law itself, once; its forces' signs then give each
+    contact's piece (pulled where ``lam_n < 0``) for the check at ``s*``. For
+    a method that accepts only both pieces (COULOMB and NONPOS) they are fixed
+    on a piece, as in :func:`solve_coulomb`: solve with the pieces fixed, flip
+    the contacts the branch rule says are on the wrong piece, re-solve from
+    the last forces, until no contact flips (at most ``max_outer`` solves;
+    ``outer_iterations`` counts them).
 
     Returns
     -------
@@ -198,7 +201,8 @@ def solve_native_coulomb(problem: ConicProblem, method: str, *, tol: float = 1e-
     """
     info = solver_info(method)
     branches = _Branches(problem, warm_start, threshold=max(1e3 * tol, 1e-7))
-    if branches.union.any() and not {ConeKind.COULOMB, ConeKind.NONPOS} <= info.cones:
+    native_union = ConeKind.UNION in info.cones
+    if branches.union.any() and not native_union and not {ConeKind.COULOMB, ConeKind.NONPOS} <= info.cones:
         raise ValueError(f"method: {method!r} cannot solve this problem: UNION contacts need "
                          "both pieces (COULOMB and NONPOS contacts)")
     unshifted = problem.with_shift(np.zeros(problem.cones.count))
@@ -212,16 +216,18 @@ def solve_native_coulomb(problem: ConicProblem, method: str, *, tol: float = 1e-
         kwargs["max_iter"] = max_iter
     iterations, settled = 0, False
     for outer in range(1, int(checks.positive("max_outer", max_outer, shape=())) + 1):  # noqa: B007
-        convex = branches.on(unshifted)
-        out = info.function(branches.on(scaled), warm_start=start, **kwargs)
+        out = info.function(scaled if native_union else branches.on(scaled), warm_start=start, **kwargs)
         iterations += out.iterations
         shift = np.zeros(problem.cones.count)
         if out.status == FAILED or not np.all(np.isfinite(out.forces)):
-            settled = True
+            convex, settled = branches.on(unshifted), True
             break
+        if native_union:                         # each contact's piece from its force's sign
+            branches.pulled = problem.cones.pulled(out.forces)
+        convex = branches.on(unshifted)
         shift = branches.restrict(coulomb_shift(convex, out.forces * force))
         start = out.forces
-        if not branches.update(convex.with_shift(shift), out.forces * force, length, force):
+        if native_union or not branches.update(convex.with_shift(shift), out.forces * force, length, force):
             settled = True
             break
     result = solve(convex.with_shift(shift), method, tol=tol, max_iter=max_iter,

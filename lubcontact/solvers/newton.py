@@ -9,9 +9,10 @@ frictionless force sets are the zeros of (Alart and Curnier, 1991)::
     phi(r) = r - P(y)
 
     P_n(y) = max(y_n, 0)                                     NONNEG and COULOMB normal rows
-    P_T(y) = projection of y_T onto the disk of radius       COULOMB tangential rows
+    P_T(y) = projection of y_T onto the disk of radius       COULOMB and UNION tangential rows
              mu max(y_n, 0)
     P_i(y) = clip(y_i, lo_i, hi_i)                           other rows: FREE (R), NONPOS,
+                                                             UNION normal rows (R),
                                                              tangential rows forced to 0
 
 ``phi = 0`` says: the normal force and the normal velocity are complementary,
@@ -20,6 +21,15 @@ opposes its sliding velocity; it is Coulomb's law itself, not the convex
 relaxation, so the method is registered with ``native_coulomb=True`` and the
 fixed point on ``s`` is not needed (:func:`~lubcontact.solvers.solve_coulomb`
 runs it once).
+
+UNION contacts (gluey + friction at ``gamma_min``) are solved natively too. At
+a solution of the union law the contact stays closed on either piece (pushed:
+a positive force keeps the gap at 0; pulled: the glue holds it at 0; a vanishing
+force on an opening contact is what the branch rule of the fixed point flips to
+the pulled piece), so its law is a bilateral normal row (``P_n(y) = y_n``, any
+normal force) with Coulomb's disk of radius ``mu max(y_n, 0)`` on its
+tangential rows: friction while pushed, none while pulled. One Newton solve
+replaces the branch rule's re-solves (``UNION`` is in the method's cones).
 
 Newton step. ``P`` is piecewise smooth; with ``G`` an element of its
 generalised Jacobian at ``y`` (block diagonal per contact: 0 or 1 on box rows,
@@ -57,7 +67,7 @@ import scipy.sparse.linalg as spla
 from ..problem.conic import ConicProblem
 from ..problem.metrics import coulomb_error
 from .coulomb import solve_coulomb
-from .registry import CONVEX_CONES, NEWTON, register
+from .registry import ALL_CONES, NEWTON, register
 from .result import CONVERGED, FAILED, INACCURATE, MAX_ITER, MethodOutput
 
 LINE_SEARCH_MEMORY = 5
@@ -108,12 +118,18 @@ class AlartCurnier:
     Parameters
     ----------
     problem : ConicProblem
-        Normalised, convex cones (no UNION); its shift is ignored.
+        Normalised; its shift is ignored.
 
     Attributes
     ----------
     rho : ndarray, shape (n_rows,)
         Per-row step ``1 / W_nn`` of the row's contact.
+    cone_n, cone_t, cone_mu : ndarray
+        Normal rows (nf,), tangential rows (nf, tangent_dim) and friction
+        coefficients (nf,) of the frictional contacts (COULOMB, then UNION).
+    unilateral : ndarray of bool, shape (nf,)
+        True where the normal row is ``max(y_n, 0)`` (COULOMB), False where it
+        is bilateral (UNION: a box row with no bounds).
     """
 
     def __init__(self, problem: ConicProblem):
@@ -125,9 +141,13 @@ class AlartCurnier:
         self.n_rows = problem.n_rows
         projector = cones.projector
         self.lower, self.upper = projector.lower.copy(), projector.upper.copy()
-        self.cone_n, self.cone_t, self.cone_mu = projector.pieces[0]
+        (coulomb_n, coulomb_t, coulomb_mu), (union_n, union_t, union_mu) = projector.pieces
+        self.cone_n = np.concatenate([coulomb_n, union_n])
+        self.cone_t = np.concatenate([coulomb_t, union_t])
+        self.cone_mu = np.concatenate([coulomb_mu, union_mu])
+        self.unilateral = np.arange(self.cone_n.size) < coulomb_n.size
         self.box = np.ones(self.n_rows, dtype=bool)
-        self.box[self.cone_n] = False
+        self.box[coulomb_n] = False
         self.box[self.cone_t.ravel()] = False
         diagonal = self.W.diagonal()[:nc]
         positive = diagonal[diagonal > 0]
@@ -157,7 +177,7 @@ class AlartCurnier:
             radius = self.cone_mu * np.maximum(y_n, 0.0)
             norm_t = np.linalg.norm(y_t, axis=1)
             scale = np.minimum(1.0, np.divide(radius, norm_t, out=np.ones_like(norm_t), where=norm_t > 0))
-            projected[self.cone_n] = np.maximum(y_n, 0.0)
+            projected[self.cone_n] = np.where(self.unilateral, np.maximum(y_n, 0.0), y_n)
             projected[self.cone_t] = scale[:, None] * y_t
         return forces - projected, y
 
@@ -171,9 +191,10 @@ class AlartCurnier:
         if self.cone_n.size:
             y_n, y_t = y[self.cone_n], y[self.cone_t]
             pushed = y_n > 0
-            rows.append(self.cone_n[pushed])
-            cols.append(self.cone_n[pushed])
-            vals.append(np.ones(int(pushed.sum())))
+            normal = pushed & self.unilateral          # bilateral normal rows are box rows
+            rows.append(self.cone_n[normal])
+            cols.append(self.cone_n[normal])
+            vals.append(np.ones(int(normal.sum())))
             radius = self.cone_mu * np.maximum(y_n, 0.0)
             norm_t = np.linalg.norm(y_t, axis=1)
             stick = pushed & (norm_t <= radius)
@@ -232,7 +253,7 @@ def _newton_direction(J: sp.csr_matrix, active: np.ndarray, phi: np.ndarray) -> 
     return None
 
 
-@register("newton-ac", kind=NEWTON, cones=CONVEX_CONES, warm_start=True, native_coulomb=True)
+@register("newton-ac", kind=NEWTON, cones=ALL_CONES, warm_start=True, native_coulomb=True)
 def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = 500,
                          warm_start: np.ndarray | None = None, fallback: str | None = "apgd-jacobi",
                          replay: MethodOutput | None = None) -> MethodOutput:

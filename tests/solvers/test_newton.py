@@ -118,22 +118,23 @@ def test_jacobian_matches_finite_differences_away_from_kinks():
     assert np.all(J[~active].toarray() == np.eye(problem.n_rows)[~active])
 
 
-def test_solves_coulomb_natively_and_rejects_the_union_cone():
+def test_solves_coulomb_natively_in_one_solve():
     info = solver_info("newton-ac")
-    assert info.native_coulomb and info.kind == "newton" and ConeKind.UNION not in info.cones
+    assert info.native_coulomb and info.kind == "newton" and ConeKind.UNION in info.cones
     problem = siconos_test_problem("FrictionContactProblem00237.dat")
     result = solve_coulomb(problem, "newton-ac", tol=1e-8)
     assert result.outer_iterations == 1 and result.fixed_point_converged
 
 
-def test_union_contacts_go_through_the_branch_rule():
-    """Gluey + friction at gamma_min (UNION): the pieces are fixed, flipped by the branch rule and
-    re-solved natively; the answer is Clarabel's fixed point on s."""
+def test_union_contacts_are_solved_natively_in_one_solve():
+    """Gluey + friction at gamma_min (UNION): one Newton solve of the union law (bilateral normal
+    row, friction while pushed) gives Clarabel's fixed point on s with its branch rule."""
     case = load_cases()["gamma_states_gluey_coulomb"]
-    assert np.any(case.problem.cones.kinds == ConeKind.UNION)
+    kinds = case.problem.cones.kinds
+    assert np.any(kinds == ConeKind.UNION)
     expected = expected_for(case, case.problem, fixed_point=True)
     result = solve_coulomb(case.problem, "newton-ac", tol=1e-10)
-    assert result.status == CONVERGED and result.outer_iterations >= 1
+    assert result.status == CONVERGED and result.outer_iterations == 1
     assert scaled_velocity_error(case.problem, result.velocities, expected.velocities) <= 1e-8
-    with pytest.raises(ValueError, match="UNION"):
-        solve(case.problem, "newton-ac")
+    pulled = case.problem.cones.pulled(result.forces)
+    assert np.any(pulled) and np.any(~pulled[kinds == ConeKind.UNION])   # both pieces occur
