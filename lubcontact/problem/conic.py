@@ -129,5 +129,5 @@ class ConicProblemMixin:
         return other
 
 
-MATRICES = ("delassus", "delassus_factor")
+MATRICES = ("delassus", "delassus_factor", "jacobian_transpose")
 """Cached matrices of a problem, independent of its shift and cones."""

@@ -78,22 +78,38 @@ class StepProblem(ConicProblemMixin):
         checks.as_array("shift", self.shift, shape=(self.cones.count,))
         if self.obstacle_offset is not None:
             checks.as_array("obstacle_offset", self.obstacle_offset, shape=(self.cones.n_rows,))
-        self.jacobian = sp.csr_matrix(self.jacobian)
+        if not isinstance(self.jacobian, sp.csr_matrix):   # a CSR matrix is kept, not re-wrapped
+            self.jacobian = sp.csr_matrix(self.jacobian)
 
     @property
     def n_dof(self) -> int:
         return self.mass.shape[0]
 
     @cached_property
+    def jacobian_transpose(self) -> sp.csc_matrix:
+        """``H^T`` (n_dof x n_rows) in CSC form, sharing ``H``'s arrays: the products ``H^T lam``."""
+        return self.jacobian.T
+
+    @cached_property
     def delassus_factor(self) -> sp.csr_matrix:
         """``L = dt M^-1/2 H^T`` (n_dof x n_rows), so that ``W = L^T L``."""
-        return sp.csr_matrix(sp.diags(self.dt / np.sqrt(self.mass)) @ self.jacobian.T)
+        weight = self._factor_weight
+        transpose = self.jacobian_transpose.tocsr()
+        return transpose if weight is None else diagonal_scaled(transpose, rows=weight)
 
     @cached_property
     def delassus(self) -> sp.csr_matrix:
-        """``W = dt^2 H M^-1 H^T`` (sparse, n_rows x n_rows)."""
-        factor = self.delassus_factor
-        return sp.csr_matrix(factor.T @ factor)
+        """``W = dt^2 H M^-1 H^T`` (sparse, n_rows x n_rows), as the product of the CSR forms of
+        ``L^T`` and ``L`` (no conversion)."""
+        weight = self._factor_weight
+        left = self.jacobian if weight is None else diagonal_scaled(self.jacobian, columns=weight)
+        return sp.csr_matrix(left @ self.delassus_factor)
+
+    @property
+    def _factor_weight(self) -> np.ndarray | None:
+        """``dt M^-1/2`` per degree of freedom, None where it is 1 (a normalised problem)."""
+        weight = self.dt / np.sqrt(self.mass)
+        return None if np.all(weight == 1.0) else weight
 
     @property
     def constant_rows(self) -> np.ndarray:
@@ -110,7 +126,7 @@ class StepProblem(ConicProblemMixin):
 
     def velocity(self, forces: np.ndarray) -> np.ndarray:
         """``v = U + dt M^-1 H^T lam``."""
-        return self.free_velocity + self.dt * (self.jacobian.T @ forces) / self.mass
+        return self.free_velocity + self.dt * (self.jacobian_transpose @ forces) / self.mass
 
     def constraint_values(self, velocity: np.ndarray) -> np.ndarray:
         """``g = [D + s, 0] + dt H v``, laid out like a force vector."""
@@ -126,7 +142,7 @@ class StepProblem(ConicProblemMixin):
     def gaps_after(self, velocity: np.ndarray) -> np.ndarray:
         """Gaps after the step, ``D + dt u_n`` (without the shift; ``u_n`` relative to a moving
         obstacle), shape (nc,)."""
-        gaps = self.gaps + self.dt * (self.jacobian[: self.n_contacts] @ velocity)
+        gaps = self.gaps + self.dt * (self.jacobian @ velocity)[: self.n_contacts]
         if self.obstacle_offset is not None:
             gaps += self.obstacle_offset[: self.n_contacts]
         return gaps
@@ -147,7 +163,7 @@ class StepProblem(ConicProblemMixin):
         velocity_scale = speed * np.sqrt(m_ref / self.mass)
         length = self.dt * speed
         scaling = Scaling(velocity=velocity_scale, force=m_ref * speed / self.dt, length=length)
-        jacobian = sp.csr_matrix(self.jacobian @ sp.diags(velocity_scale / speed))
+        jacobian = diagonal_scaled(self.jacobian, columns=velocity_scale / speed)
         return StepProblem(mass=np.ones(self.n_dof), free_velocity=self.free_velocity / velocity_scale,
                            jacobian=jacobian, gaps=self.gaps / length, cones=self.cones, dt=1.0,
                            shift=self.shift / length, keys=self.keys, scaling=scaling,
@@ -179,3 +195,34 @@ class StepProblem(ConicProblemMixin):
         return cls(mass=arrays["mass"], free_velocity=arrays["free_velocity"], jacobian=jacobian,
                    gaps=arrays["gaps"], cones=cones, dt=float(arrays["dt"]), shift=arrays["shift"],
                    **optional)
+
+
+def diagonal_scaled(matrix: sp.csr_matrix, rows: np.ndarray | None = None,
+                    columns: np.ndarray | None = None) -> sp.csr_matrix:
+    """``diag(rows) @ matrix @ diag(columns)`` for a CSR ``matrix``, by scaling its stored values.
+
+    Parameters
+    ----------
+    matrix : scipy.sparse.csr_matrix, shape (m, n)
+    rows : ndarray, shape (m,), optional
+        Row factors (none when None).
+    columns : ndarray, shape (n,), optional
+        Column factors (none when None).
+
+    Returns
+    -------
+    scipy.sparse.csr_matrix, shape (m, n)
+        The pattern of ``matrix`` (index arrays copied) with each value
+        ``(rows_i * value) * columns_j``, as the sparse products compute it,
+        and explicit zeros dropped, as they drop them. No sparse product (for
+        small problems, their fixed cost dominates).
+    """
+    values = matrix.data
+    if rows is not None:
+        values = np.repeat(rows, np.diff(matrix.indptr)) * values
+    if columns is not None:
+        values = values * columns[matrix.indices]
+    out = sp.csr_matrix((values, matrix.indices.copy(), matrix.indptr.copy()), shape=matrix.shape)
+    if not np.all(values):
+        out.eliminate_zeros()
+    return out

@@ -36,6 +36,7 @@ assemble ``S W S`` instead is said in :mod:`.gradient`.
 """
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -43,6 +44,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..problem.conic import ConicProblem
+from ..problem.step import diagonal_scaled
 from .result import CONVERGED, DIVERGED
 
 DIVERGENCE_FACTOR = 1e12
@@ -127,7 +129,7 @@ def jacobi_scale(problem: ConicProblem) -> np.ndarray:
     cones = problem.cones
     factor = problem.delassus_factor
     diagonal = np.asarray(problem.delassus.diagonal()) if factor is None \
-        else np.asarray(factor.multiply(factor).sum(axis=0)).ravel()
+        else np.bincount(factor.indices, weights=factor.data**2, minlength=problem.n_rows)
     nc = cones.count
     total = diagonal[:nc].copy()
     count = np.ones(nc)
@@ -171,20 +173,17 @@ def prepare(problem: ConicProblem, scaling: bool, operator: str = "auto") -> Dua
     has_factor = problem.delassus_factor is not None
     if operator == "factor" and not has_factor:
         raise ValueError("operator: 'factor' needs a problem with delassus_factor")
-    use_factor = has_factor and operator != "matrix"
     jacobi = jacobi_scale(problem)
     scale = jacobi if scaling else np.ones(problem.n_rows)
     offset = scale * problem.offset
-    if use_factor:
-        factor = sp.csr_matrix(problem.delassus_factor @ sp.diags(scale))
-        transposed = sp.csr_matrix(factor.T)
+    if has_factor and operator != "matrix":
+        factor = diagonal_scaled(problem.delassus_factor, columns=scale)
+        transposed = factor.T.tocsr()
         return DualData(apply=lambda z: transposed @ (factor @ z), offset=offset, scale=scale,
                         jacobi=jacobi, project=problem.cones.projector, factor=factor)
-    if has_factor:
-        factor = sp.csr_matrix(problem.delassus_factor @ sp.diags(scale))
-        matrix = sp.csr_matrix(factor.T @ factor)
-    else:
-        matrix = sp.csr_matrix(sp.diags(scale) @ problem.delassus @ sp.diags(scale))
+    # S W S from the problem's W (assembled once per problem, shared by its copies with
+    # another shift): no sparse product here
+    matrix = diagonal_scaled(problem.delassus, scale, scale) if scaling else problem.delassus
     return DualData(apply=matrix.dot, offset=offset, scale=scale, jacobi=jacobi,
                     project=problem.cones.projector, matrix=matrix)
 
@@ -268,7 +267,7 @@ def largest_eigenvalue(data: DualData, n: int, iterations: int) -> float:
     float
         The estimate (1.0 when a product vanishes).
     """
-    vector = np.random.default_rng(0).uniform(0.5, 1.5, n)
+    vector = _uniform(0.5, 1.5, n)
     value = 1.0
     for _ in range(iterations):
         image = data.product(vector)
@@ -297,6 +296,15 @@ def initial_lipschitz(data: DualData, z: np.ndarray, product: np.ndarray | None 
         The estimate, at least 1e-12.
     """
     product = data.product(z) if product is None else product
-    probe = z + np.random.default_rng(0).uniform(-1.0, 1.0, z.size)
+    probe = z + _uniform(-1.0, 1.0, z.size)
     return max(float(np.linalg.norm(data.product(probe) - product) /
                      np.linalg.norm(probe - z)), 1e-12)
+
+
+@functools.lru_cache(maxsize=16)
+def _uniform(low: float, high: float, n: int) -> np.ndarray:
+    """``np.random.default_rng(0).uniform(low, high, n)``, read-only, drawn once per size
+    (a generator costs more than a small solve's products)."""
+    vector = np.random.default_rng(0).uniform(low, high, n)
+    vector.flags.writeable = False
+    return vector

@@ -15,7 +15,7 @@ from lubcontact.problem.metrics import (
     scaled_velocity_error,
     velocity_error,
 )
-from lubcontact.solvers import CONVERGED, MAX_ITER, solve, solve_coulomb, solver_info
+from lubcontact.solvers import CONVERGED, MAX_ITER, solve_coulomb, solver_info
 from lubcontact.solvers.newton import AlartCurnier, _proximal_newton, newton_alart_curnier
 
 
