@@ -34,10 +34,12 @@ from __future__ import annotations
 
 import argparse
 import math
+import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
+import scipy.sparse as sp
 
 from ..problem.cones import ConeKind
 from ..problem.metrics import active_condition, velocity_error
@@ -141,11 +143,33 @@ class CaseResult:
         Method -> its row on the case's step.
     warm_iterations : dict
         Method -> (cold, warm) iterations on the next step.
+    product_s : float
+        Median time of one scipy sparse product ``W x`` on the case's step (s).
     """
 
     case: PileCase
     rows: dict[str, PileRow] = field(default_factory=dict)
     warm_iterations: dict[str, tuple[int, int]] = field(default_factory=dict)
+    product_s: float = float("nan")
+
+
+def product_seconds(matrix: sp.spmatrix, repeats: int = 50) -> float:
+    """Median wall-clock time of one scipy sparse product ``matrix @ x`` (s), after one untimed.
+
+    Parameters
+    ----------
+    matrix : scipy.sparse matrix, shape (n, n)
+    repeats : int
+        Timed products.
+    """
+    x = np.ones(matrix.shape[1])
+    matrix @ x
+    times = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        matrix @ x
+        times.append(time.perf_counter() - start)
+    return float(np.median(times))
 
 
 def _reference(problem: StepProblem, tol: float) -> tuple[str, TimedSolve]:
@@ -198,7 +222,7 @@ def run_case(case: PileCase, methods: list[str], tol: float, reference_tol: floa
         return SolveSettings(method=name, tol=tol if iterative(name) else reference_tol,
                              max_iter=max_iter, exact_coulomb=False)
 
-    measured = CaseResult(case)
+    measured = CaseResult(case, product_s=product_seconds(problem.delassus))
     forces = {}
     for name in methods:
         timed = timed_solve(problem, settings(name))
@@ -226,7 +250,9 @@ def run_case(case: PileCase, methods: list[str], tol: float, reference_tol: floa
 
 
 def summarise(measured: CaseResult, accuracy: float, out: Callable[[str], None] = print) -> None:
-    """Best iterative method against :data:`BASELINE`; warm against cold iterations."""
+    """Best iterative method against :data:`BASELINE`; per-iteration cost of each first-order
+    method (its solve time over its iterations) against one scipy product ``W x``; warm against
+    cold iterations."""
     case, rows = measured.case, measured.rows
     if BASELINE in rows:
         fast = {m: row for m, row in rows.items()
@@ -239,6 +265,12 @@ def summarise(measured: CaseResult, accuracy: float, out: Callable[[str], None] 
                 f"({baseline:.3f} s)")
         else:
             out(f"   N={case.n_grains} {case.label}: no fast method reached {accuracy:g}")
+    for method, row in rows.items():
+        if iterative(method) and row.iterations > 0 and math.isfinite(row.solve_s):
+            per_iteration = row.solve_s / row.iterations
+            out(f"   N={case.n_grains} {case.label}: {method} per iteration "
+                f"{per_iteration * 1e6:.1f} us = {per_iteration / measured.product_s:.2f} x one scipy "
+                f"product W x ({measured.product_s * 1e6:.1f} us)")
     for method, (cold, warm) in measured.warm_iterations.items():
         out(f"   N={case.n_grains} {case.label}: {method} next step warm/cold iterations "
             f"{warm}/{cold} = {warm / max(cold, 1):.2f}")

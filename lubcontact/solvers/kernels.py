@@ -24,12 +24,15 @@ import numpy as np
 
 @numba.njit(cache=True)
 def matvec(indptr, indices, values, x, out):
-    """``out = W x`` for W in CSR arrays."""
+    """``out = W x`` for W in CSR arrays (each row's end carried to the next row's start)."""
+    start = indptr[0]
     for i in range(out.size):
+        end = indptr[i + 1]
         total = 0.0
-        for k in range(indptr[i], indptr[i + 1]):
+        for k in range(start, end):
             total += values[k] * x[indices[k]]
         out[i] = total
+        start = end
 
 
 @numba.njit(cache=True, inline="always")

@@ -424,3 +424,6 @@ def test_bench_solvers_prints_the_condition_and_a_converged_row(capsys):
     assert 1e2 < float(condition[0].split("= ")[1].split()[0]) < 1e4        # 9.27e+02 measured
     row = next(line for line in lines if " apgd-as " in line)
     assert row.split()[8] == "converged" and float(row.split()[9]) <= ACCURACY
+    cost = next(line for line in lines if "apgd-as per iteration" in line)
+    ratio = float(cost.split(" us = ")[1].split(" x ")[0])
+    assert np.isfinite(ratio) and ratio > 0 and "one scipy product W x" in cost
