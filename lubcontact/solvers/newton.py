@@ -274,7 +274,9 @@ def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = 5
         (:func:`~lubcontact.solvers.solve_coulomb`) takes over from the best
         Newton iterate when every strategy stalls (the FCLIB error did not fall
         by :data:`STALL_FACTOR` in :data:`STALL_WINDOW` iterations), fails or
-        reaches ``max_iter``; None: no fallback. Newton stalls where the
+        reaches ``max_iter``; None: no fallback. The answer is the fallback's
+        (polished) forces only where their FCLIB error is below the best Newton
+        iterate's. Newton stalls where the
         generalised Jacobian is singular at the solution for every proximal
         weight tried (degenerate contacts, e.g. the 7002-contact Siconos
         granular file with its indefinite ``W``).
@@ -300,25 +302,27 @@ def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = 5
     forces = np.zeros(problem.n_rows) if warm_start is None else np.array(warm_start, dtype=float)
     setup_time = time.perf_counter() - start
     phase = _strategies(function, unshifted, forces, tol, max_iter)
-    forces, status, iterations = phase.forces, phase.status, phase.iterations
+    forces, iterations = phase.forces, phase.iterations
+    status = INACCURATE if phase.status == STALLED else phase.status
     info = {"newton_iterations": phase.iterations, "gradient_steps": phase.gradient_steps,
             "proximal_steps": phase.proximal_steps, "strategies": phase.strategies,
             "newton_status": phase.status, "error": phase.error}
-    if status != CONVERGED and fallback is not None:
+    if phase.status != CONVERGED and fallback is not None:
         rescue = solve_coulomb(problem, fallback, tol=tol, tol_fp=tol, warm_start=forces)
         iterations += rescue.iterations
         info.update(fallback_iterations=rescue.iterations, fallback_status=rescue.status)
+        status = INACCURATE if rescue.status == CONVERGED else rescue.status
         if np.all(np.isfinite(rescue.forces)):
             finish = _proximal_newton(function, unshifted, rescue.forces, tol, POLISH_ITERATIONS,
                                       STRATEGIES[0])
             iterations += finish.iterations
             info["newton_iterations"] += finish.iterations
-            forces = finish.forces
-            # newton-ac's test is the FCLIB error: a fallback "converged" by its own measure
-            # but above tol is inaccurate here
-            status = (CONVERGED if finish.error <= tol else
-                      INACCURATE if rescue.status == CONVERGED else rescue.status)
-            info["error"] = finish.error
+            if finish.error < phase.error:      # else Newton's best iterate stays the answer
+                forces = finish.forces
+                info["error"] = finish.error
+                # newton-ac's test is the FCLIB error: a fallback "converged" by its own
+                # measure but above tol is inaccurate here
+                status = CONVERGED if finish.error <= tol else status
     return MethodOutput(forces, status, iterations, setup_time=setup_time,
                         solve_time=time.perf_counter() - start - setup_time,
                         residual_history=phase.history, info=info)

@@ -15,8 +15,18 @@ from lubcontact.problem.metrics import (
     scaled_velocity_error,
     velocity_error,
 )
-from lubcontact.solvers import CONVERGED, MAX_ITER, solve_coulomb, solver_info
+from lubcontact.solvers import (
+    CONVERGED,
+    FIRST_ORDER,
+    INACCURATE,
+    MAX_ITER,
+    STATUSES,
+    solve_coulomb,
+    solver_info,
+)
 from lubcontact.solvers.newton import AlartCurnier, _proximal_newton, newton_alart_curnier
+from lubcontact.solvers.registry import ALL_CONES, register, unregister
+from lubcontact.solvers.result import MethodOutput
 
 
 def siconos_test_problem(name):
@@ -138,3 +148,40 @@ def test_union_contacts_are_solved_natively_in_one_solve():
     assert scaled_velocity_error(case.problem, result.velocities, expected.velocities) <= 1e-8
     pulled = case.problem.cones.pulled(result.forces)
     assert np.any(pulled) and np.any(~pulled[kinds == ConeKind.UNION])   # both pieces occur
+
+
+@pytest.fixture(scope="module")
+def stalling():
+    """Siconos' 2020-contact granular file at tol 1e-8: every Newton strategy stalls (indefinite
+    stored W, degenerate contacts; docs/records/siconos-testdata.md)."""
+    problem = read_problem(benchmark_file("siconos-fc2d", "fc2d_granularflowonwall_02020_00213.dat"))
+    alone = solve_coulomb(problem, "newton-ac", tol=1e-8, fallback=None)
+    return problem, alone
+
+
+def test_a_stalled_newton_without_fallback_is_inaccurate_with_its_best_iterate(stalling):
+    problem, alone = stalling
+    assert alone.info["newton_status"] == "stalled" and alone.status == INACCURATE
+    assert alone.status in STATUSES
+    assert scaled_coulomb_error(problem, alone.forces) == pytest.approx(alone.info["error"], rel=1e-6)
+    assert 1e-8 < alone.info["error"] < 1e-4
+
+
+def test_a_fallback_worse_than_newton_never_replaces_its_best_iterate(stalling):
+    """A fallback whose answer is worse than the best Newton iterate (here: zero forces said to be
+    converged) leaves that iterate as the answer; the status stays honest."""
+    problem, alone = stalling
+
+    @register("zero-forces-test", kind=FIRST_ORDER, cones=ALL_CONES)
+    def zero_forces(problem, *, tol, max_iter=1, warm_start=None):
+        return MethodOutput(np.zeros(problem.n_rows), CONVERGED, 1)
+
+    try:
+        result = solve_coulomb(problem, "newton-ac", tol=1e-8, fallback="zero-forces-test")
+    finally:
+        unregister("zero-forces-test")
+    assert result.info["fallback_iterations"] == 1    # it ran (its claim is rejected: inaccurate)
+    assert result.status == INACCURATE
+    error = scaled_coulomb_error(problem, result.forces)
+    assert error == pytest.approx(alone.info["error"], rel=1e-6)
+    assert error < scaled_coulomb_error(problem, np.zeros(problem.n_rows))
