@@ -2,8 +2,9 @@
 
 Every caller (the time stepper, ``compare``, ``check-hard``, ``bench
 friction``) solves through it, so the rule "exact Coulomb by the fixed point
-on s when the problem has friction and ``exact_coulomb`` is set, else one
-convex solve" is written once.
+on s when the problem has friction and ``exact_coulomb`` is set (one native
+solve for a method that solves exact Coulomb itself, whatever
+``exact_coulomb`` says), else one convex solve" is written once.
 """
 from __future__ import annotations
 
@@ -14,7 +15,7 @@ import numpy as np
 from .. import checks
 from ..problem.conic import ConicProblem
 from .coulomb import solve_coulomb
-from .registry import methods, solve
+from .registry import methods, solve, solver_info
 from .result import CoulombResult
 
 FIXED_POINT_OPTIONS = ("joint", "forcing", "anderson")
@@ -37,6 +38,8 @@ class SolveSettings:
         Solve frictional problems exactly by the fixed point on s
         (:func:`~lubcontact.solvers.solve_coulomb`); False solves the convex
         relaxation once (sliding contacts then separate by ``mu dt |u_T|``).
+        A method that solves exact Coulomb itself (``native_coulomb``, e.g.
+        ``newton-ac``) has no relaxation: it solves exact Coulomb either way.
     tol_fp : float
         Tolerance of the fixed point on s (relative change of s), > 0.
     max_outer : int
@@ -72,6 +75,11 @@ class SolveSettings:
                        "max_iter", "must be None or an integer >= 1", self.max_iter)
 
     @property
+    def native_coulomb(self) -> bool:
+        """Whether the method solves exact Coulomb itself (:class:`~lubcontact.solvers.SolverInfo`)."""
+        return solver_info(self.method).native_coulomb
+
+    @property
     def convex_options(self) -> dict:
         """``options`` without the fixed point's own."""
         return {k: v for k, v in self.options.items() if k not in FIXED_POINT_OPTIONS}
@@ -95,7 +103,7 @@ class SolveSettings:
         CoulombResult
             The fixed point's result, or one convex solve recorded as one outer iteration.
         """
-        if self.exact_coulomb and problem.cones.has_friction:
+        if problem.cones.has_friction and (self.exact_coulomb or self.native_coulomb):
             return solve_coulomb(problem, self.method, tol=self.tol, tol_fp=self.tol_fp,
                                  max_outer=self.max_outer, max_iter=self.max_iter,
                                  warm_start=warm_start, shift=shift, **self.options)

@@ -121,6 +121,18 @@ def test_convex_relaxation_lifts_by_mu_dt_slip():
     assert record["positions"][-1, 0, 1] - 0.5 > 0.05
 
 
+def test_a_native_coulomb_method_has_no_relaxation_to_fall_into():
+    """newton-ac solves exact Coulomb itself: with fixed_point=False it still does (one native
+    solve, checked at its own shift), where a convex method lifts the disk by mu dt |u_T|."""
+    mu, dt = 0.3, 1e-2
+    record, reports = run(sliding_disk(), Coulomb(mu), dt, t_end=0.3, fixed_point=False,
+                          solver="newton-ac", tol=1e-10)
+    assert all(report.result.status == "converged" for report in reports)
+    assert all(report.result.outer_iterations == 1 for report in reports)
+    assert np.max(np.abs([report.gaps_after[0] for report in reports])) <= 1e-9
+    assert abs(record["positions"][-1, 0, 1] - 0.5) <= 1e-9
+
+
 def test_fixed_point_reports_non_convergence():
     grains = Grains.create([[0.0, 0.5]], 0.5, masses=1.0, velocities=[[2.0, 0.0]])
     scene = Scene.create(grains, plane_points=[0.0, 0.0], plane_normals=[0.0, 1.0],
