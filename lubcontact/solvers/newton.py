@@ -89,7 +89,10 @@ STRATEGIES = (1e-3, 0.0, 1e-4)
 """Starting proximal weights ``sigma`` (units of the median diagonal of ``W``) tried in turn,
 each from the warm start, while the previous one stalled: 1e-3 solves the rank-deficient
 piles and the 3D Siconos files, plain Newton (0) spheres-in-a-box, 1e-4 the 2020-contact
-granular file (measured on Siconos' and FCLIB's test problems)."""
+granular file (measured on Siconos' and FCLIB's test problems). With a warm start, the first
+weight is also tried from zero forces, second: in the first steps of a flow the previous step's
+forces can be a start from which every weight stalls where a cold start converges (two of three
+such gluey steps of the demo's flow)."""
 SIGMA_MIN = 1e-10
 """Floor of the proximal weight, in units of the median diagonal of ``W``."""
 
@@ -290,7 +293,8 @@ def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = 5
         ``info``: ``newton_iterations`` (each one sparse LU, more where a
         singular block is regularised), ``gradient_steps``
         (steepest-descent steps taken where the Newton direction failed),
-        ``proximal_steps`` and ``strategies`` (the starting weights tried),
+        ``proximal_steps`` and ``strategies`` (the starting weights tried, each with
+        its start, ``"warm"`` or ``"cold"``),
         ``newton_status`` and ``error`` (the Newton phase's FCLIB error), and
         ``fallback_iterations`` / ``fallback_status`` when the fallback ran.
     """
@@ -332,12 +336,16 @@ def _strategies(function: AlartCurnier, unshifted: ConicProblem, forces: np.ndar
                 tol: float, max_iter: int) -> _Phase:
     """:func:`_proximal_newton` with each ``sigma`` of :data:`STRATEGIES` in turn, each from
     ``forces`` (a strategy's stalled iterate is a worse start than the warm start, measured),
-    until one converges or ``max_iter`` Newton iterations are spent; the best phase is returned."""
+    the first also from zero forces when ``forces`` is not zero, until one converges or
+    ``max_iter`` Newton iterations are spent; the best phase is returned."""
     best, history, tried = None, [], []
     iterations = gradient_steps = proximal_steps = 0
-    for sigma in STRATEGIES:
-        phase = _proximal_newton(function, unshifted, forces, tol, max_iter - iterations, sigma)
-        tried.append(sigma)
+    cold = np.zeros_like(forces)
+    starts = [(STRATEGIES[0], forces)] + ([(STRATEGIES[0], cold)] if np.any(forces) else []) \
+        + [(sigma, forces) for sigma in STRATEGIES[1:]]
+    for sigma, start in starts:
+        phase = _proximal_newton(function, unshifted, start, tol, max_iter - iterations, sigma)
+        tried.append((sigma, "warm" if start is forces and np.any(forces) else "cold"))
         iterations += phase.iterations
         gradient_steps += phase.gradient_steps
         proximal_steps += phase.proximal_steps

@@ -35,6 +35,7 @@ from lubcontact.bench.hard import (
     matrix,
     run_case,
     solve_case,
+    solves_exact_coulomb,
 )
 from lubcontact.model.laws import Coulomb, GlueyCoulomb, PairState
 from lubcontact.problem.metrics import scaled_velocity_error
@@ -57,10 +58,9 @@ FINDINGS: dict[tuple[str, str], str] = {}
 
 def _outside_domain(problem, method: str) -> bool:
     """Problems a method may legitimately reject with a ValueError: non-convex (UNION) cones for
-    the single-solve conic, QP and Newton methods (newton-ac takes them through the branch rule of
-    exact Coulomb only), second-order (3D) friction cones for the QP method."""
+    the single-solve conic and QP methods, second-order (3D) friction cones for the QP method."""
     cones = problem.cones
-    if method in ("clarabel-direct", "osqp", "scs", "newton-ac") and not cones.is_convex:
+    if method in ("clarabel-direct", "osqp", "scs") and not cones.is_convex:
         return True
     return method == "osqp" and cones.has_friction and cones.tangent_dim > 1
 
@@ -125,7 +125,7 @@ def _run(case, solver: str, fixed_point: bool) -> Cell:
     except ValueError as exc:
         return Cell(case.name, solver, REJECTED, message=str(exc))
     assert np.all(np.isfinite(result.forces)) and np.all(np.isfinite(result.velocities))
-    return judge(case, problem, _expected(case.name, fixed_point), result,
+    return judge(case, problem, _expected(case.name, solves_exact_coulomb(solver, fixed_point)), result,
                  time.perf_counter() - start)
 
 
