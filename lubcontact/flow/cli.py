@@ -140,7 +140,8 @@ def _add_common(parser: argparse.ArgumentParser, resume: bool) -> None:
              f"gravity g (1 - rho_f/rho_p) {_default('dt_fraction')}")
     add("--solver", default=None,
         help="step solver, a registered method name (an unknown name lists them) "
-             "(default: apgd when registered, else clarabel)")
+             "(default: newton-ac with --fixed-point, apgd without; clarabel when not "
+             "registered)")
     add("--tol", type=_number(float, 0, above=True), default=None,
         help=f"solver tolerance (normalised residual) {_default('tol')}")
     add("--fixed-point", action=argparse.BooleanOptionalAction, default=None,
@@ -254,7 +255,7 @@ def _fill_defaults(args: argparse.Namespace, parser: argparse.ArgumentParser) ->
     from .config import default_solver
 
     if args.solver is None:
-        args.solver = default_solver()
+        args.solver = default_solver(bool(args.fixed_point))
     elif args.solver not in methods():
         parser.error(f"argument --solver: unknown solver {args.solver!r}; registered: "
                      f"{', '.join(methods())}")

@@ -257,6 +257,19 @@ def test_names_known_to_the_parser_match_the_scenes():
     assert PRESET_NAMES == tuple(inclined.PRESETS) and MODEL_NAMES == inclined.MODELS
 
 
+def test_the_default_solver_follows_the_friction_model(tmp_path, capsys):
+    """The relaxation's fastest method by default (apgd), exact Coulomb's (newton-ac) with
+    --fixed-point; a solver given explicitly is kept; the checkpoint and summary record it."""
+    assert RunConfig().solver == "apgd" and RunConfig(fixed_point=True).solver == "newton-ac"
+    assert RunConfig(fixed_point=True, solver="apgd-jacobi").solver == "apgd-jacobi"
+    out = tmp_path / "exact"
+    assert flow_cli.run_main(["inclined_flow", "--n", "12", "--width", "8", "--steps", "2",
+                              "--settle-steps", "0", "--fixed-point", "--no-progress",
+                              "--out", str(out)]) == 0
+    assert stored(out)[1].solver == "newton-ac"
+    assert json.loads((out / "summary.json").read_text())["solver"] == "newton-ac"
+
+
 # -- sweeps in worker processes (issue 16) ---------------------------------------------------------
 SWEEP_SMALL = ["--models", "dry", "--angles", "20,24", "--n", "24", "--width", "12", "--dt", "0.05",
                "--settle-steps", "0", "--solver", "clarabel", "--checkpoint-every", "3",
