@@ -181,7 +181,7 @@ def prepare(problem: ConicProblem, scaling: bool, operator: str = "auto") -> Dua
         transposed = factor.T.tocsr()
         return DualData(apply=lambda z: transposed @ (factor @ z), offset=offset, scale=scale,
                         jacobi=jacobi, project=problem.cones.projector, factor=factor)
-    # S W S from the problem's W (assembled once per problem, shared by its copies with
+    # S W S from the problem's W (assembled once per problem, kept by its copies with
     # another shift): no sparse product here
     matrix = diagonal_scaled(problem.delassus, scale, scale) if scaling else problem.delassus
     return DualData(apply=matrix.dot, offset=offset, scale=scale, jacobi=jacobi,
