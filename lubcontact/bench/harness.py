@@ -25,7 +25,7 @@ import numpy as np
 from ..problem.conic import ConicProblem
 from ..problem.metrics import relative_error
 from ..problem.step import StepProblem
-from ..solvers import FIRST_ORDER, CoulombResult, SolveSettings, reference_method, solver_info
+from ..solvers import CONVERGED, FIRST_ORDER, CoulombResult, SolveSettings, reference_method, solver_info
 
 WARM_UP_TOL = 1e-2
 WARM_UP_ITERATIONS = 20
@@ -106,6 +106,28 @@ def warm_up(problem: ConicProblem, names: Sequence[str]) -> None:
 def iterative(method: str) -> bool:
     """Whether ``method`` is of the first-order family (its accuracy is bought by iterations)."""
     return solver_info(method).kind == FIRST_ORDER
+
+
+REFERENCE_TRUST = 1e-8
+"""Largest residual (the natural-map residual of the normalised problem, ``result.residual``)
+at which a reference solve is trusted as the answer others are measured against; above it
+the "errors" are distances to an inaccurate point (:func:`reference_distrust`)."""
+
+
+def reference_distrust(result: CoulombResult) -> str:
+    """Why a reference solve is not trusted ("" when it is): not converged, or its own residual
+    above :data:`REFERENCE_TRUST` (e.g. Clarabel's polishing failing on a 10^5-grain pile).
+
+    Parameters
+    ----------
+    result : CoulombResult
+        The reference's solve.
+    """
+    if result.status != CONVERGED:
+        return f"reference status {result.status}"
+    if not result.residual <= REFERENCE_TRUST:
+        return f"reference residual {result.residual:.1e} above {REFERENCE_TRUST:g}"
+    return ""
 
 
 def solve_reference(problem: ConicProblem, settings_for: Callable[[str], SolveSettings],

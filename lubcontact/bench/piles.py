@@ -46,7 +46,7 @@ from ..problem.metrics import active_condition, velocity_error
 from ..problem.step import StepProblem
 from ..solvers import CONVERGED, INTERIOR_POINT, SolveSettings, solver_info
 from ..solvers import methods as registered
-from .harness import TimedSolve, iterative, solve_reference, timed_solve, warm_up
+from .harness import TimedSolve, iterative, reference_distrust, solve_reference, timed_solve, warm_up
 from .options import check_methods, names, plain
 from .pile_problems import PILES, PileCase, matched_forces, next_step_problem, pile_cases
 
@@ -209,6 +209,10 @@ def run_case(case: PileCase, methods: list[str], tol: float, reference_tol: floa
     method, reference = _reference(problem, reference_tol)
     reference_velocities = reference.result.velocities
     out(PileRow.of(case, problem, f"{method} (ref)", reference, None).text())
+    distrust = reference_distrust(reference.result)
+    if distrust:
+        out(f"# {case.label} N={case.n_grains}: reference NOT trusted ({distrust}): the 'rel v "
+            "err' below are distances to it, not errors")
     reference_gaps = problem.gaps_after(reference_velocities)
     closed = np.abs(problem.gaps) <= 1e-9 * radius
     opening = closed & (reference_gaps > 1e-9 * radius)

@@ -427,3 +427,28 @@ def test_bench_solvers_prints_the_condition_and_a_converged_row(capsys):
     cost = next(line for line in lines if "apgd-as per iteration" in line)
     ratio = float(cost.split(" us = ")[1].split(" x ")[0])
     assert np.isfinite(ratio) and ratio > 0 and "one scipy product W x" in cost
+
+
+def test_bench_solvers_says_when_its_reference_is_not_trusted(capsys, monkeypatch):
+    """A reference whose own residual is above REFERENCE_TRUST (here: the real solve with its
+    residual raised to 8.2e-5, as Clarabel's failed polishing gave at 10^5 grains) is named as
+    not trusted; a trusted one is not."""
+    import dataclasses
+
+    from lubcontact.bench import piles
+
+    real = piles._reference
+
+    def inaccurate(problem, tol):
+        method, timed = real(problem, tol)
+        timed.result = dataclasses.replace(timed.result, residual=8.2e-5)
+        return method, timed
+
+    args = ["--sizes", "40", "--pile", "deposited", "--methods", "apgd-as", "--no-warm",
+            "--glued-fraction", "0"]
+    assert piles.solvers_main(args) == 0
+    assert "NOT trusted" not in capsys.readouterr().out
+    monkeypatch.setattr(piles, "_reference", inaccurate)
+    assert piles.solvers_main(args) == 0
+    lines = [line for line in capsys.readouterr().out.splitlines() if "NOT trusted" in line]
+    assert len(lines) == 1 and "reference residual 8.2e-05 above 1e-08" in lines[0]
