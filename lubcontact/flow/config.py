@@ -21,8 +21,8 @@ DEFAULT_FAST_SOLVER = "apgd"
 """The solver of runs with the convex relaxation of friction (the default), when registered."""
 DEFAULT_EXACT_SOLVER = "newton-ac"
 """The solver of runs with exact Coulomb friction (``fixed_point``), when registered: one native
-solve per step, 2.5-9x faster than ``apgd``/``apgd-jacobi`` with the fixed point on s on
-developed 300-grain flows, every step at FCLIB error <= 1e-6 where theirs end at ``max_iter``
+solve per step; on developed 300-grain flows 9.0x (dry) and 3.9x (gluey) faster than ``apgd``
+with its fixed point, every step at FCLIB error <= 1e-6 where apgd's end at ``max_iter``
 (docs/records/benchmarks.md)."""
 REFERENCE_SOLVER = "clarabel"
 """The default otherwise (always registered)."""
@@ -99,9 +99,10 @@ class RunConfig:
         :func:`default_solver` of ``fixed_point``).
     fixed_point : bool
         Exact Coulomb friction by the fixed point on s; default False: the
-        convex relaxation, one solve per step (the fixed point cost 3x more
-        and often hit its outer-iteration cap on flowing piles, see
-        docs/records/validation.md).
+        convex relaxation, one solve per step, for solvers that have one (a
+        native Coulomb solver such as ``newton-ac`` solves exact Coulomb
+        either way); with ``apgd`` the fixed point cost 3x more and often hit
+        its outer-iteration cap on flowing piles (docs/records/validation.md).
     tol_fp, max_outer : float, int
         Tolerance and outer-iteration cap of that fixed point.
     joint : int

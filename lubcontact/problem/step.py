@@ -95,7 +95,9 @@ class StepProblem(ConicProblemMixin):
         """``L = dt M^-1/2 H^T`` (n_dof x n_rows), so that ``W = L^T L``."""
         weight = self._factor_weight
         transpose = self.jacobian_transpose.tocsr()
-        return transpose if weight is None else diagonal_scaled(transpose, rows=weight)
+        factor = transpose if weight is None else diagonal_scaled(transpose, rows=weight)
+        factor.sum_duplicates()        # a Jacobian given with duplicate entries: one per position
+        return factor
 
     @cached_property
     def delassus(self) -> sp.csr_matrix:
@@ -217,7 +219,7 @@ def diagonal_scaled(matrix: sp.csr_matrix, rows: np.ndarray | None = None,
         and explicit zeros dropped, as they drop them. No sparse product (for
         small problems, their fixed cost dominates).
     """
-    values = matrix.data
+    values = matrix.data.copy()          # never the input's own array (eliminate_zeros compacts it)
     if rows is not None:
         values = np.repeat(rows, np.diff(matrix.indptr)) * values
     if columns is not None:

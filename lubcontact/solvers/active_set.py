@@ -27,7 +27,8 @@ from .result import CONVERGED
 MAX_FINISH_ATTEMPTS = 4
 """Finish attempts of one ``apgd-as`` solve (the initial guess's included) before it goes on as
 ``apgd-jacobi``. At exact rest the first attempt succeeds; off it (radii moved by 5e-7, gaps of
-~1e-6) every attempt can fail, and 4 attempts (at most 12 factorisations) cost 1.07x
+~1e-6) every attempt can fail, and 4 attempts (at most 12 factorisations; the exact finish of
+a converged result, :func:`finish_exactly`, may add one more) cost 1.07x
 ``apgd-jacobi``'s time on a settled 1000-grain pile, where unbounded attempts that restarted the
 loop ran into ``max_iter``."""
 

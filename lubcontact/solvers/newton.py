@@ -275,7 +275,7 @@ def _newton_direction(J: sp.csr_matrix, active: np.ndarray, phi: np.ndarray) -> 
 def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = 500,
                          warm_start: np.ndarray | None = None, fallback: str | None = "apgd-jacobi",
                          replay: MethodOutput | None = None) -> MethodOutput:
-    """Semismooth Newton on the Alart-Curnier function (exact Coulomb, sparse LU per iteration).
+    """Semismooth Newton on the Alart-Curnier function (exact Coulomb, one LU per iteration).
 
     Parameters
     ----------
@@ -284,7 +284,8 @@ def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = 5
     tol : float
         Stop when the FCLIB error is below it.
     max_iter : int
-        Cap on Newton iterations (one sparse LU each).
+        Cap on Newton iterations (one LU each: dense up to :data:`DENSE_LIMIT` active rows,
+        sparse above).
     warm_start : ndarray, shape (n_rows,), optional
         Initial forces (scaled); zero otherwise.
     fallback : str or None
@@ -305,7 +306,7 @@ def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = 5
     -------
     MethodOutput
         ``iterations``: Newton iterations plus the fallback's inner iterations.
-        ``info``: ``newton_iterations`` (each one sparse LU, more where a
+        ``info``: ``newton_iterations`` (each one LU, more where a
         singular block is regularised), ``gradient_steps``
         (steepest-descent steps taken where the Newton direction failed),
         ``proximal_steps`` and ``strategies`` (the starting weights tried, each with
@@ -330,18 +331,18 @@ def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = 5
         rescue = solve_coulomb(problem, fallback, tol=tol, tol_fp=tol, warm_start=forces)
         iterations += rescue.iterations
         info.update(fallback_iterations=rescue.iterations, fallback_status=rescue.status)
-        status = INACCURATE if rescue.status == CONVERGED else rescue.status
         if np.all(np.isfinite(rescue.forces)):
             finish = _proximal_newton(function, unshifted, rescue.forces, tol, POLISH_ITERATIONS,
                                       STRATEGIES[0])
             iterations += finish.iterations
             info["newton_iterations"] += finish.iterations
-            if finish.error < phase.error:      # else Newton's best iterate stays the answer
+            if finish.error < phase.error:      # else Newton's best iterate and status stay
                 forces = finish.forces
                 info["error"] = finish.error
                 # newton-ac's test is the FCLIB error: a fallback "converged" by its own
-                # measure but above tol is inaccurate here
-                status = CONVERGED if finish.error <= tol else status
+                # measure but above tol is inaccurate here; otherwise the iterations ran out
+                status = CONVERGED if finish.error <= tol else \
+                    INACCURATE if rescue.status == CONVERGED else MAX_ITER
     return MethodOutput(forces, status, iterations, setup_time=setup_time,
                         solve_time=time.perf_counter() - start - setup_time,
                         residual_history=phase.history, info=info)
