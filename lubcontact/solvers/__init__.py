@@ -9,6 +9,7 @@ This layer sees problems only (:mod:`lubcontact.problem`), never grains.
 """
 from . import (
     direct,  # noqa: F401  (registers clarabel-direct, osqp, scs)
+    gauss_seidel,  # noqa: F401  (registers nsgs)
     gradient,  # noqa: F401  (registers pgd, apgd, bb, apgd-jacobi, apgd-as)
     newton,  # noqa: F401  (registers newton-ac)
     reference,  # noqa: F401  (registers clarabel, clarabel-dual)

@@ -282,3 +282,78 @@ def apgd_cone2d(indptr, indices, values, b, base, lower, upper, cone_n, cone_t, 
         theta = extrapolate(theta, uphill, x, wx, x_old, wx_old, y, wy)
         lipschitz *= 0.9
     return best, best_residual, history[:iterations], status, iterations, products, x, lipschitz, b
+
+
+@numba.njit(cache=True, inline="always")
+def _row_product(indptr, indices, values, r, row):
+    """``(W r)_row``."""
+    total = 0.0
+    for k in range(indptr[row], indptr[row + 1]):
+        total += values[k] * r[indices[k]]
+    return total
+
+
+@numba.njit(cache=True, inline="always")
+def local_coulomb_2d(a, c, c2, d, b_n, b_t, mu, unilateral, r_n, r_t):
+    """Exact solution of one 2D contact's Coulomb law with the others frozen.
+
+    The local velocity is ``u = [[a, c], [c2, d]] r + b``. Cases in turn: open
+    (``b_n >= 0``, unilateral: ``r = 0``); stick (``u = 0``, ``r_n > 0``,
+    ``|r_t| <= mu r_n``); pulled (bilateral only: ``u_n = 0``, ``r_t = 0``,
+    ``r_n <= 0``); slide (``u_n = 0``, ``r_t = -s mu r_n`` with ``s u_t >= 0``).
+    When none is consistent (a local matrix far from symmetric), one local
+    Alart-Curnier projection step from ``(r_n, r_t)``. Returns ``(r_n, r_t)``.
+    """
+    if unilateral and b_n >= 0.0:
+        return 0.0, 0.0
+    det = a * d - c * c2
+    if det > 0.0:
+        n = (-b_n * d + c * b_t) / det
+        t = (-a * b_t + c2 * b_n) / det
+        if n > 0.0 and abs(t) <= mu * n:
+            return n, t
+    if not unilateral and a > 0.0 and -b_n / a <= 0.0:
+        return -b_n / a, 0.0
+    for s in (1.0, -1.0):
+        denominator = a - s * mu * c
+        if denominator > 0.0:
+            n = -b_n / denominator
+            if n >= 0.0:
+                t = -s * mu * n
+                if s * (c2 * n + d * t + b_t) >= 0.0:
+                    return n, t
+    u_n = a * r_n + c * r_t + b_n
+    u_t = c2 * r_n + d * r_t + b_t
+    n = r_n - u_n / a
+    if unilateral:
+        n = max(n, 0.0)
+    radius = mu * max(n, 0.0)
+    t = min(max(r_t - u_t / d, -radius), radius)
+    return n, t
+
+
+@numba.njit(cache=True)
+def gauss_seidel_2d(indptr, indices, values, q, lower, upper, box_rows, box_diagonal, cone_n,
+                    cone_t, cone_mu, unilateral, local, r, sweeps):
+    """``sweeps`` non-smooth Gauss-Seidel sweeps on ``W r + q`` in place of ``r`` (exact Coulomb).
+
+    Each sweep visits the box rows (``r_i`` in ``[lower_i, upper_i]``: the
+    clipped minimiser of row ``i`` with the others frozen) and then the 2D
+    frictional contacts (rows ``cone_n[j]``, ``cone_t[j]``; ``local[j]`` the
+    2x2 block ``W_nn, W_nt, W_tn, W_tt``; :func:`local_coulomb_2d`).
+    """
+    for _ in range(sweeps):
+        for k in range(box_rows.size):
+            i = box_rows[k]
+            diagonal = box_diagonal[k]
+            if diagonal <= 0.0:
+                continue
+            u = _row_product(indptr, indices, values, r, i) + q[i]
+            r[i] = min(max(r[i] - u / diagonal, lower[i]), upper[i])
+        for j in range(cone_n.size):
+            n, t = cone_n[j], cone_t[j]
+            a, c, c2, d = local[j, 0], local[j, 1], local[j, 2], local[j, 3]
+            b_n = _row_product(indptr, indices, values, r, n) + q[n] - a * r[n] - c * r[t]
+            b_t = _row_product(indptr, indices, values, r, t) + q[t] - c2 * r[n] - d * r[t]
+            r[n], r[t] = local_coulomb_2d(a, c, c2, d, b_n, b_t, cone_mu[j], unilateral[j],
+                                          r[n], r[t])

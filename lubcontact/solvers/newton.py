@@ -52,7 +52,8 @@ the error halves (:func:`_proximal_newton`). The starting ``sigma`` values of
 :data:`STRATEGIES` are tried in turn while one stalls. Stopping: the FCLIB
 error (:func:`~lubcontact.problem.metrics.coulomb_error`, the measure every
 report uses) below ``tol``. When every strategy stalls, the best iterate goes
-to a first-order fallback (``fallback``), its status then being the result's.
+to fallbacks in turn (``fallback``; in 2D Gauss-Seidel, then apgd-jacobi's fixed
+point), each answer polished by Newton and kept when it beats the best so far.
 """
 from __future__ import annotations
 
@@ -108,6 +109,15 @@ POLISH_ITERATIONS = 10
 FINISH_ITERATIONS = 2
 """Plain Newton iterations after the proximal loop converged (kept where they lower the error):
 quadratic convergence takes a solution at ``tol`` to round-off where the Jacobian is regular."""
+
+FALLBACKS_2D = ("nsgs", "apgd-jacobi")
+FALLBACKS_3D = ("apgd-jacobi",)
+"""Fallbacks (``fallback="auto"``) tried in turn from the best iterate so far when every Newton
+strategy stalls, until one's polished answer is below tol. In 2D first Gauss-Seidel with exact
+local solves (:mod:`.gauss_seidel`): on gluey flow steps where Newton stalled at FCLIB errors
+2e-5 to 1e-4 it reached 1e-6 in 0.3 s, or 5e-6 at its cap, where apgd-jacobi's fixed point ran
+out at 1e-4; then apgd-jacobi's fixed point on ``s``, which solves Siconos' 2020-contact file
+to 1e-8 where Gauss-Seidel stops at 2.8e-7 (docs/records/benchmarks.md)."""
 
 DENSE_LIMIT = 300
 """Active rows up to which a Newton system is factorised dense: a dense LU of 100-250 rows
@@ -273,7 +283,7 @@ def _newton_direction(J: sp.csr_matrix, active: np.ndarray, phi: np.ndarray) -> 
 
 @register("newton-ac", kind=NEWTON, cones=ALL_CONES, warm_start=True, native_coulomb=True)
 def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = 500,
-                         warm_start: np.ndarray | None = None, fallback: str | None = "apgd-jacobi",
+                         warm_start: np.ndarray | None = None, fallback: str | None = "auto",
                          replay: MethodOutput | None = None) -> MethodOutput:
     """Semismooth Newton on the Alart-Curnier function (exact Coulomb, one LU per iteration).
 
@@ -289,7 +299,8 @@ def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = 5
     warm_start : ndarray, shape (n_rows,), optional
         Initial forces (scaled); zero otherwise.
     fallback : str or None
-        Registered method whose fixed point on ``s``
+        Registered method (``"auto"``: the chain :data:`FALLBACKS_2D` on 2D
+        problems, :data:`FALLBACKS_3D` on 3D ones) whose exact-Coulomb solve
         (:func:`~lubcontact.solvers.solve_coulomb`) takes over from the best
         Newton iterate when every strategy stalls (the FCLIB error did not fall
         by :data:`STALL_FACTOR` in :data:`STALL_WINDOW` iterations), fails or
@@ -312,7 +323,8 @@ def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = 5
         ``proximal_steps`` and ``strategies`` (the starting weights tried, each with
         its start, ``"warm"`` or ``"cold"``),
         ``newton_status`` and ``error`` (the Newton phase's FCLIB error), and
-        ``fallback_iterations`` / ``fallback_status`` when the fallback ran.
+        ``fallbacks`` (the methods run), ``fallback_iterations`` (summed) and
+        ``fallback_status`` (the last one's) when a fallback ran.
     """
     if replay is not None:
         return replay
@@ -327,22 +339,32 @@ def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = 5
     info = {"newton_iterations": phase.iterations, "gradient_steps": phase.gradient_steps,
             "proximal_steps": phase.proximal_steps, "strategies": phase.strategies,
             "newton_status": phase.status, "error": phase.error}
-    if phase.status != CONVERGED and fallback is not None:
-        rescue = solve_coulomb(problem, fallback, tol=tol, tol_fp=tol, warm_start=forces)
+    if fallback == "auto":
+        chain = FALLBACKS_2D if problem.cones.tangent_dim == 1 else FALLBACKS_3D
+    else:
+        chain = () if fallback is None else (fallback,)
+    best_error = phase.error
+    for name in chain if phase.status != CONVERGED else ():
+        rescue = solve_coulomb(problem, name, tol=tol, tol_fp=tol, warm_start=forces)
         iterations += rescue.iterations
-        info.update(fallback_iterations=rescue.iterations, fallback_status=rescue.status)
-        if np.all(np.isfinite(rescue.forces)):
-            finish = _proximal_newton(function, unshifted, rescue.forces, tol, POLISH_ITERATIONS,
-                                      STRATEGIES[0])
-            iterations += finish.iterations
-            info["newton_iterations"] += finish.iterations
-            if finish.error < phase.error:      # else Newton's best iterate and status stay
-                forces = finish.forces
-                info["error"] = finish.error
-                # newton-ac's test is the FCLIB error: a fallback "converged" by its own
-                # measure but above tol is inaccurate here; otherwise the iterations ran out
-                status = CONVERGED if finish.error <= tol else \
-                    INACCURATE if rescue.status == CONVERGED else MAX_ITER
+        info["fallback_iterations"] = info.get("fallback_iterations", 0) + rescue.iterations
+        info["fallback_status"] = rescue.status
+        info["fallbacks"] = [*info.get("fallbacks", []), name]
+        if not np.all(np.isfinite(rescue.forces)):
+            continue
+        finish = _proximal_newton(function, unshifted, rescue.forces, tol, POLISH_ITERATIONS,
+                                  STRATEGIES[0])
+        iterations += finish.iterations
+        info["newton_iterations"] += finish.iterations
+        if finish.error < best_error:           # else the best iterate so far and its status stay
+            forces, best_error = finish.forces, finish.error
+            info["error"] = finish.error
+            # newton-ac's test is the FCLIB error: a fallback "converged" by its own
+            # measure but above tol is inaccurate here; otherwise the iterations ran out
+            status = CONVERGED if finish.error <= tol else \
+                INACCURATE if rescue.status == CONVERGED else MAX_ITER
+        if status == CONVERGED:
+            break
     return MethodOutput(forces, status, iterations, setup_time=setup_time,
                         solve_time=time.perf_counter() - start - setup_time,
                         residual_history=phase.history, info=info)

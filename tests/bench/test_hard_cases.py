@@ -58,11 +58,12 @@ FINDINGS: dict[tuple[str, str], str] = {}
 
 def _outside_domain(problem, method: str) -> bool:
     """Problems a method may legitimately reject with a ValueError: non-convex (UNION) cones for
-    the single-solve conic and QP methods, second-order (3D) friction cones for the QP method."""
+    the single-solve conic and QP methods, second-order (3D) friction cones for the QP method and
+    the 2D Gauss-Seidel method."""
     cones = problem.cones
     if method in ("clarabel-direct", "osqp", "scs") and not cones.is_convex:
         return True
-    return method == "osqp" and cones.has_friction and cones.tangent_dim > 1
+    return method in ("osqp", "nsgs") and cones.has_friction and cones.tangent_dim > 1
 
 
 @cache

@@ -1,0 +1,133 @@
+"""``nsgs``: non-smooth Gauss-Seidel with exact local Coulomb solves (2D), as in Siconos' NSGS.
+
+Contact by contact, with the others' forces frozen, each 2D frictional contact
+gets the exact solution of its own Coulomb law (open, stick, pulled for UNION
+contacts, slide: :func:`.kernels.local_coulomb_2d`) and each other row its
+clipped minimiser; a sweep visits every contact once. This solves exact
+Coulomb itself (the law is local, no shift ``s``: ``native_coulomb``), UNION
+contacts as in ``newton-ac`` (bilateral normal row, friction while pushed).
+It needs no factorisation and no regular Jacobian, so it goes on where
+Newton methods stall (degenerate contacts, rank-deficient ``W``), at the
+price of many sweeps on jammed piles: it is the robust, slow end of the
+family. Stopping test (:func:`_settled`), every :data:`CHECK_EVERY` sweeps: the FCLIB error
+(:func:`~lubcontact.problem.metrics.coulomb_error`) and the estimated distance still to go of
+the velocities.
+"""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from ..problem.conic import ConicProblem
+from ..problem.metrics import coulomb_error
+from .registry import ALL_CONES, FIRST_ORDER, register
+from .result import CONVERGED, DIVERGED, MAX_ITER, MethodOutput
+
+CHECK_EVERY = 10
+"""Sweeps between two evaluations of the FCLIB error (one costs about one sweep)."""
+SWEEPS_AHEAD = 1e4
+"""Cap on the sweeps still to go that the stopping test (:func:`_settled`) assumes: a change
+at round-off level, whose ratio between checks is about 1, still stops the sweeps."""
+
+
+@register("nsgs", kind=FIRST_ORDER, cones=ALL_CONES, second_order=False, warm_start=True,
+          native_coulomb=True,
+          description="Non-smooth Gauss-Seidel, exact local Coulomb solves (2D, as Siconos' NSGS).")
+def nonsmooth_gauss_seidel(problem: ConicProblem, *, tol: float, max_iter: int = 20_000,
+                           warm_start: np.ndarray | None = None,
+                           replay: MethodOutput | None = None) -> MethodOutput:
+    """Sweeps until the FCLIB error is below ``tol`` (module docstring).
+
+    Parameters
+    ----------
+    problem : ConicProblem
+        Normalised, 2D (tangent dimension 1); read as the Coulomb problem with
+        ``q = b - [s, 0]`` (its shift is ignored).
+    tol : float
+        Stop when the FCLIB error is below it.
+    max_iter : int
+        Cap on sweeps.
+    warm_start : ndarray, shape (n_rows,), optional
+        Initial forces (scaled), projected onto the box rows' bounds; zero otherwise.
+    replay : MethodOutput, optional
+        Returned as is (``native_coulomb``, :class:`~lubcontact.solvers.SolverInfo`).
+
+    Returns
+    -------
+    MethodOutput
+        ``iterations``: sweeps; ``residual_history``: the FCLIB error at each
+        check; ``info["error"]``: the last one.
+    """
+    from .kernels import gauss_seidel_2d
+
+    if replay is not None:
+        return replay
+    start = time.perf_counter()
+    cones = problem.cones
+    nc = cones.count
+    W = problem.delassus.tocsr()
+    W.sort_indices()
+    q = problem.offset.copy()
+    q[:nc] -= problem.shift
+    unshifted = problem.with_shift(np.zeros(nc))
+    projector = cones.projector
+    (coulomb_n, coulomb_t, coulomb_mu), (union_n, union_t, union_mu) = projector.pieces
+    cone_n = np.concatenate([coulomb_n, union_n]).astype(np.int64)
+    cone_t = np.concatenate([coulomb_t[:, 0], union_t[:, 0]]).astype(np.int64)
+    mu = np.concatenate([coulomb_mu, union_mu]).astype(float)
+    unilateral = np.arange(cone_n.size) < coulomb_n.size
+    box = np.ones(problem.n_rows, dtype=bool)
+    box[cone_n] = False
+    box[cone_t] = False
+    box_rows = np.flatnonzero(box & (projector.lower < projector.upper)).astype(np.int64)
+    diagonal = W.diagonal()
+    local = np.zeros((cone_n.size, 4))
+    if cone_n.size:
+        local = np.stack([diagonal[cone_n], np.asarray(W[cone_n, cone_t]).ravel(),
+                          np.asarray(W[cone_t, cone_n]).ravel(), diagonal[cone_t]], axis=1)
+    forces = np.zeros(problem.n_rows) if warm_start is None else \
+        np.array(warm_start, dtype=float)
+    forces[box] = np.clip(forces[box], projector.lower[box], projector.upper[box])
+    arrays = (W.indptr.astype(np.int64), W.indices.astype(np.int64), W.data, q, projector.lower,
+              projector.upper, box_rows, diagonal[box_rows], cone_n, cone_t, mu, unilateral,
+              local)
+    setup_time = time.perf_counter() - start
+    history = [coulomb_error(unshifted, forces)]
+    velocity = W @ forces + q
+    sweeps, status, changes = 0, MAX_ITER, [np.inf, np.inf]
+    while not _settled(history[-1], changes, velocity, tol) and sweeps < max_iter:
+        count = min(CHECK_EVERY, max_iter - sweeps)
+        gauss_seidel_2d(*arrays, forces, count)
+        sweeps += count
+        previous, velocity = velocity, W @ forces + q
+        changes = [changes[1], float(np.max(np.abs(velocity - previous), initial=0.0))]
+        history.append(coulomb_error(unshifted, forces))
+        if not np.isfinite(history[-1]):
+            status = DIVERGED
+            break
+    if _settled(history[-1], changes, velocity, tol):
+        status = CONVERGED
+    return MethodOutput(forces, status, sweeps, setup_time=setup_time,
+                        solve_time=time.perf_counter() - start - setup_time,
+                        residual_history=np.asarray(history), info={"error": history[-1]})
+
+
+def _settled(error: float, changes: list[float], velocity: np.ndarray, tol: float) -> bool:
+    """The stopping test: FCLIB error below ``tol``, and the distance still to go of the local
+    velocities ``W r + q`` below ``tol`` times their largest value, estimated from their largest
+    change ``c`` over the last :data:`CHECK_EVERY` sweeps and the contraction ``q`` between the
+    last two such changes as ``c q / (1 - q)`` (the factor capped by :data:`SWEEPS_AHEAD`).
+
+    Gauss-Seidel creeps on ill-conditioned contacts (a grain in a 1e-3 wedge: 11 630 sweeps to
+    FCLIB error 7.7e-10, still 1.4e-6 from the solution in velocity): the FCLIB error alone
+    stopped it there. Velocities, not forces: on a hyperstatic pile the forces are not unique
+    and the sweeps can move them along the null space of ``W`` without changing any velocity.
+    """
+    previous, change = changes
+    if not error <= tol or not np.isfinite(change):
+        return False
+    ahead = SWEEPS_AHEAD / CHECK_EVERY
+    rate = min(change / previous, ahead / (1.0 + ahead)) if previous > 0 else ahead / (1.0 + ahead)
+    scale = max(1.0, float(np.max(np.abs(velocity), initial=0.0)))
+    return change * rate / (1.0 - rate) <= tol * scale

@@ -1,0 +1,72 @@
+"""nsgs, non-smooth Gauss-Seidel with exact local 2D Coulomb solves, against the stored references,
+Clarabel's fixed point on s and its own domain; and as newton-ac's first 2D fallback."""
+import numpy as np
+import pytest
+
+from lubcontact.bench.cases.reference import CASES as REFERENCE_CASES
+from lubcontact.bench.cases.reference import load as load_reference
+from lubcontact.bench.hard import expected_for, load_cases
+from lubcontact.problem.cones import ConeKind
+from lubcontact.problem.metrics import scaled_coulomb_error, scaled_velocity_error, velocity_error
+from lubcontact.solvers import CONVERGED, MAX_ITER, solve, solve_coulomb, solver_info
+from lubcontact.solvers.kernels import local_coulomb_2d
+
+#: the reference cases a Gauss-Seidel method reaches to 1e-8 within its default 20 000 sweeps
+#: (the jammed 200-grain piles need more: pgd needs 1.2 million iterations on one)
+REACHED = sorted(name for name in REFERENCE_CASES if not name.startswith("pile"))
+
+
+@pytest.mark.parametrize("name", REACHED)
+def test_agrees_with_the_stored_reference(name):
+    problem, solution = load_reference(name)
+    result = solve_coulomb(problem, "nsgs", tol=1e-12)
+    assert result.status == CONVERGED
+    assert velocity_error(problem, result.velocities, solution["velocities"]) <= 1e-8
+
+
+@pytest.mark.parametrize("name", ["radius_ratio_100_friction", "mu_zero_friction",
+                                  "hex_box_lid_friction", "cone_apex_2d", "dt_large_friction",
+                                  "gamma_states_gluey_coulomb"])
+def test_exact_coulomb_and_union_contacts_natively(name):
+    """Exact answers where the case has one, else Clarabel's fixed point on s with its branch
+    rule (the gluey + friction case has UNION contacts on both pieces)."""
+    case = load_cases()[name]
+    expected = expected_for(case, case.problem, fixed_point=True)
+    result = solve_coulomb(case.problem, "nsgs", tol=1e-10)
+    assert result.status == CONVERGED and result.outer_iterations == 1
+    assert scaled_velocity_error(case.problem, result.velocities, expected.velocities) <= 1e-8
+
+
+def test_local_solve_covers_each_case_of_the_law():
+    """The 2x2 local problem u = A r + b: open, stick, slide both ways, pulled (bilateral)."""
+    a, c, d, mu = 2.0, 0.3, 1.5, 0.5
+    assert local_coulomb_2d(a, c, c, d, 1.0, 5.0, mu, True, 0.0, 0.0) == (0.0, 0.0)   # opening
+    n, t = local_coulomb_2d(a, c, c, d, -1.0, 0.1, mu, True, 0.0, 0.0)                 # stick
+    assert abs(a * n + c * t - 1.0) < 1e-14 and abs(c * n + d * t + 0.1) < 1e-14
+    assert n > 0 and abs(t) <= mu * n
+    for b_t in (5.0, -5.0):                                                            # slide
+        n, t = local_coulomb_2d(a, c, c, d, -1.0, b_t, mu, True, 0.0, 0.0)
+        u_n, u_t = a * n + c * t - 1.0, c * n + d * t + b_t
+        assert abs(u_n) < 1e-14 and n > 0 and t == pytest.approx(-np.sign(u_t) * mu * n)
+    n, t = local_coulomb_2d(a, c, c, d, 1.0, 5.0, mu, False, 0.0, 0.0)                # pulled
+    assert n == pytest.approx(-0.5) and t == 0.0
+
+
+def test_three_dimensional_friction_is_rejected_and_max_iter_is_honest():
+    with pytest.raises(ValueError, match="nsgs"):
+        solve(load_cases()["tetrahedron_3d_friction"].problem, "nsgs")
+    assert solver_info("nsgs").native_coulomb and ConeKind.UNION in solver_info("nsgs").cones
+    problem, _ = load_reference("pile200_inelastic")
+    result = solve(problem, "nsgs", tol=1e-12, max_iter=30)
+    assert result.status == MAX_ITER and result.iterations == 30
+    assert result.residual_history.size == 4          # the start and three checks
+
+
+def test_newton_ac_falls_back_on_gauss_seidel_first_in_2d():
+    """One Newton iteration cannot solve the lidded hexagonal box; the 2D fallback chain starts
+    with nsgs, which solves it (apgd-jacobi is not needed)."""
+    case = load_cases()["hex_box_lid_friction"]
+    result = solve_coulomb(case.problem, "newton-ac", tol=1e-9, max_iter=1)
+    assert result.info["newton_status"] == MAX_ITER and result.info["fallbacks"] == ["nsgs"]
+    assert result.status == CONVERGED
+    assert scaled_coulomb_error(case.problem, result.forces) <= 1e-9
