@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import argparse
 import pathlib
+import resource
 import time
 from typing import Any
 
@@ -33,12 +34,20 @@ from .harness import warm_up
 from .options import check_methods, names
 from .tables import format_table
 
-COLUMNS = ("n_grains", "model", "method", "contacts", "s_per_step", "iterations", "max_fclib_error",
+COLUMNS = ("n_grains", "model", "method", "contacts", "s_per_step", "iterations", "warm_cold",
+           "max_fclib_error", "contacts_pc", "assembly_pc", "solve_pc", "update_pc", "peak_mb",
            "statuses")
-"""``contacts``: mean per step; ``s_per_step``: median solve time (the whole step: contacts,
-assembly, the exact-Coulomb solve); ``iterations``: median per step (Newton iterations for
-``newton-ac``, inner first-order iterations for the others)."""
+"""``contacts``: mean per step; ``s_per_step``: median time of the whole step (contacts,
+assembly, the exact-Coulomb solve, update); ``iterations``: median per step (Newton iterations
+for ``newton-ac``, sweeps for ``nsgs``, inner first-order iterations for the others);
+``warm_cold``: iterations of the first timed step warm-started from the previous step (pair
+keys) over those of the same step started cold; ``*_pc``: percentage of the steps' total time
+in each phase (:attr:`~lubcontact.sim.trajectory.StepReport.timings`); ``peak_mb``: the
+process's peak resident memory so far (MB)."""
 
+
+PHASES = ("contacts", "assembly", "solve", "update")
+"""The phases of a step (:attr:`~lubcontact.sim.trajectory.StepReport.timings`)."""
 
 DEVELOP_SOLVER = "newton-ac"
 """Solver of the flow steps before the timed ones (exact Coulomb): on a dense 1000-grain bed,
@@ -90,7 +99,11 @@ def time_method(sim: Simulation, method: str, steps: int, tol: float) -> dict[st
     start = sim.state
     settings = SolveSettings(method=method, tol=tol, exact_coulomb=True)
     sim.step(settings)                       # untimed: compilation, caches
+    _, _, problem, guess, shift = sim.next_problem()
+    cold = settings.solve(problem).iterations
+    warm = settings.solve(problem, guess, shift).iterations
     times, iterations, errors, contacts, statuses = [], [], [], [], set()
+    phases = dict.fromkeys(PHASES, 0.0)
     for _ in range(steps):
         clock = time.perf_counter()
         report = sim.step(settings)
@@ -99,9 +112,15 @@ def time_method(sim: Simulation, method: str, steps: int, tol: float) -> dict[st
         contacts.append(report.problem.n_contacts)
         statuses.add(report.result.status)
         errors.append(scaled_coulomb_error(report.problem, report.result.forces))
+        for phase in PHASES:
+            phases[phase] += report.timings[phase]
     sim.restore(start)
+    total = sum(times)
     return {"method": method, "contacts": int(np.mean(contacts)), "s_per_step": float(np.median(times)),
-            "iterations": float(np.median(iterations)), "max_fclib_error": float(max(errors)),
+            "iterations": float(np.median(iterations)), "warm_cold": warm / max(cold, 1),
+            "max_fclib_error": float(max(errors)),
+            **{f"{phase}_pc": 100.0 * phases[phase] / total for phase in PHASES},
+            "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
             "statuses": ",".join(sorted(statuses))}
 
 

@@ -11,6 +11,7 @@ say, and the state a step takes and returns is a :class:`SimulationState`.
 """
 from __future__ import annotations
 
+import time
 import warnings
 from collections.abc import Callable
 from dataclasses import replace
@@ -173,15 +174,25 @@ class Simulation:
             forces and shift matched by pair key (None without a previous step
             or with ``warm_start=False``).
         """
+        return self._build_problem({})
+
+    def _build_problem(self, timings: dict) -> tuple[Contacts, np.ndarray, StepProblem,
+                                                     np.ndarray | None, np.ndarray | None]:
+        """:meth:`next_problem`, with the seconds of its phases put in ``timings``
+        (``contacts``, ``assembly``)."""
         scene = self.scene
+        start = time.perf_counter()
         contacts = find_contacts(scene, self.search_distance())
+        timings["contacts"] = time.perf_counter() - start
         gamma = self.state.pairs.lookup(contacts.keys)
         problem = assemble(scene, contacts, self.law.cones(contacts, gamma), self.dt,
                            rotations=self.law.needs_rotation)
         previous = self.state.previous
-        if not self.warm_start or previous is None or problem.n_contacts == 0:
-            return contacts, gamma, problem, None, None
-        return (contacts, gamma, problem, *previous.warm_start(problem))
+        guess = shift = None
+        if self.warm_start and previous is not None and problem.n_contacts:
+            guess, shift = previous.warm_start(problem)
+        timings["assembly"] = time.perf_counter() - start - timings["contacts"]
+        return contacts, gamma, problem, guess, shift
 
     def search_distance(self) -> float:
         """The candidate-contact distance of the coming step: ``d_max``, widened to cover the step.
@@ -213,7 +224,9 @@ class Simulation:
             pile collapses, a fast one once it settles); default :attr:`settings`.
         """
         settings = self.settings if settings is None else settings
-        contacts, gamma, problem, guess, shift = self.next_problem()
+        timings: dict[str, float] = {}
+        contacts, gamma, problem, guess, shift = self._build_problem(timings)
+        start = time.perf_counter()
         result = settings.solve(problem, guess, shift)
         if not result.success and self.on_failure == "fallback" \
                 and self.fallback_solver != settings.method:
@@ -221,6 +234,8 @@ class Simulation:
             fallback = replace(settings, method=self.fallback_solver, max_iter=None, options={})
             result = fallback.solve(problem, guess, shift)
             result.info["fallback_from"] = (failed.method, failed.status, failed.residual)
+        timings["solve"] = time.perf_counter() - start
+        start = time.perf_counter()
         check_status(result, "raise" if self.on_failure == "fallback" else self.on_failure)
         if self.verify_every and (self.steps_done + 1) % self.verify_every == 0:
             self._verify(problem, result)
@@ -233,10 +248,11 @@ class Simulation:
         self._advance(problem, result, PairState.from_contacts(contacts.keys, new_gamma))
         self._check_missed_contacts(contacts, speed, searched)
         report = StepReport(contacts=contacts, problem=problem, result=result, gamma=new_gamma,
-                            gaps_after=problem.gaps_after(result.velocities))
+                            gaps_after=problem.gaps_after(result.velocities), timings=timings)
         if self.keep_trajectory:
             self.trajectory.record_state(self.scene)
             self.trajectory.record_step(report)
+        timings["update"] = time.perf_counter() - start
         return report
 
     def _check_missed_contacts(self, contacts: Contacts, speed_before: float, searched: float) -> None:

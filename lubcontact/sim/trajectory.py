@@ -25,6 +25,11 @@ class StepReport:
         Glue state of each contact after the step.
     gaps_after : ndarray, shape (nc,)
         ``D + dt u_n`` after the step.
+    timings : dict
+        Wall-clock seconds of the step's phases: ``contacts`` (the candidate
+        search), ``assembly`` (the step problem and its warm start), ``solve``
+        (set-up, iterations, finish, fixed point) and ``update`` (glue states,
+        integration, checks, records).
     """
 
     contacts: Contacts
@@ -32,6 +37,7 @@ class StepReport:
     result: CoulombResult
     gamma: np.ndarray
     gaps_after: np.ndarray
+    timings: dict = field(default_factory=dict)
 
 
 @dataclass

@@ -10,11 +10,14 @@ def test_bench_flow_prints_a_row_per_method_and_reuses_its_cache(tmp_path, capsy
     assert flow_steps.main(argv) == 0
     table = capsys.readouterr().out.splitlines()[-4:]
     assert table[0].split() == list(flow_steps.COLUMNS)
-    rows = [line.split() for line in table[2:]]
-    assert [row[2] for row in rows] == ["apgd-jacobi", "newton-ac"]
+    rows = [dict(zip(flow_steps.COLUMNS, line.split(), strict=True)) for line in table[2:]]
+    assert [row["method"] for row in rows] == ["apgd-jacobi", "newton-ac"]
     for row in rows:
-        assert int(row[3]) > 20                       # a bed: contacts, not falling grains
-        assert float(row[6]) <= 1e-5 and row[7] == "converged"
+        assert int(row["contacts"]) > 20              # a bed: contacts, not falling grains
+        assert float(row["max_fclib_error"]) <= 1e-5 and row["statuses"] == "converged"
+        shares = [float(row[f"{phase}_pc"]) for phase in flow_steps.PHASES]
+        assert all(share >= 0 for share in shares) and 95.0 <= sum(shares) <= 100.0 + 1e-6
+        assert 0 < float(row["warm_cold"]) and float(row["peak_mb"]) > 50
     cached = list(tmp_path.glob("flow-40-dry-*.npz"))
     assert len(cached) == 1
     stamp = cached[0].stat().st_mtime_ns
