@@ -44,7 +44,6 @@ from ..solvers import (
     SolveSettings,
     methods,
     reference_method,
-    solver_info,
 )
 from .harness import timed_solve
 from .options import check_methods, names, plain
@@ -96,13 +95,6 @@ class Expected:
     velocities: np.ndarray | None
     source: str                  # "exact", "reference" or "none"
     reference: CoulombResult | None
-
-
-def solves_exact_coulomb(method: str, fixed_point: bool) -> bool:
-    """Whether ``method`` solves a frictional case as exact Coulomb: with ``fixed_point``, and
-    always for a method that solves exact Coulomb itself (``native_coulomb``: it has no convex
-    relaxation), whose answer is judged against the exact-Coulomb expectation."""
-    return fixed_point or solver_info(method).native_coulomb
 
 
 def case_settings(method: str, tol: float, max_iter: int | None = None,
@@ -180,9 +172,10 @@ def run_case(case: HardCase, solvers: list[str], tol: float, max_iter: int | Non
     expected = {}
     cells = []
     for name in solvers:
-        timed = timed_solve(problem, case_settings(name, tol, max_iter, fixed_point))
+        settings = case_settings(name, tol, max_iter, fixed_point)
+        timed = timed_solve(problem, settings)
         if timed.result is not None:
-            exact = problem.cones.has_friction and solves_exact_coulomb(name, fixed_point)
+            exact = settings.solves_exact_coulomb(problem)
             if exact not in expected:
                 expected[exact] = expected_for(case, problem, exact)
             cells.append(judge(case, problem, expected[exact], timed.result, timed.seconds))

@@ -67,7 +67,6 @@ def nonsmooth_gauss_seidel(problem: ConicProblem, *, tol: float, max_iter: int =
     cones = problem.cones
     nc = cones.count
     W = problem.delassus.tocsr()
-    W.sort_indices()
     q = problem.offset.copy()
     q[:nc] -= problem.shift
     unshifted = problem.with_shift(np.zeros(nc))

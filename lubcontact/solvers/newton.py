@@ -339,12 +339,14 @@ def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = 5
     info = {"newton_iterations": phase.iterations, "gradient_steps": phase.gradient_steps,
             "proximal_steps": phase.proximal_steps, "strategies": phase.strategies,
             "newton_status": phase.status, "error": phase.error}
-    if fallback == "auto":
+    if phase.status == CONVERGED or fallback is None:
+        chain = ()
+    elif fallback == "auto":
         chain = FALLBACKS_2D if problem.cones.tangent_dim == 1 else FALLBACKS_3D
     else:
-        chain = () if fallback is None else (fallback,)
+        chain = (fallback,)
     best_error = phase.error
-    for name in chain if phase.status != CONVERGED else ():
+    for name in chain:
         rescue = solve_coulomb(problem, name, tol=tol, tol_fp=tol, warm_start=forces)
         iterations += rescue.iterations
         info["fallback_iterations"] = info.get("fallback_iterations", 0) + rescue.iterations

@@ -74,10 +74,12 @@ class SolveSettings:
                                                  and self.max_iter >= 1),
                        "max_iter", "must be None or an integer >= 1", self.max_iter)
 
-    @property
-    def native_coulomb(self) -> bool:
-        """Whether the method solves exact Coulomb itself (:class:`~lubcontact.solvers.SolverInfo`)."""
-        return solver_info(self.method).native_coulomb
+    def solves_exact_coulomb(self, problem: ConicProblem) -> bool:
+        """Whether :meth:`solve` gives ``problem`` exact Coulomb friction: it has friction, and
+        ``exact_coulomb`` is set or the method solves exact Coulomb itself (``native_coulomb``
+        in :class:`~lubcontact.solvers.SolverInfo`: such a method has no relaxation)."""
+        return problem.cones.has_friction and (self.exact_coulomb
+                                               or solver_info(self.method).native_coulomb)
 
     @property
     def convex_options(self) -> dict:
@@ -103,7 +105,7 @@ class SolveSettings:
         CoulombResult
             The fixed point's result, or one convex solve recorded as one outer iteration.
         """
-        if problem.cones.has_friction and (self.exact_coulomb or self.native_coulomb):
+        if self.solves_exact_coulomb(problem):
             return solve_coulomb(problem, self.method, tol=self.tol, tol_fp=self.tol_fp,
                                  max_outer=self.max_outer, max_iter=self.max_iter,
                                  warm_start=warm_start, shift=shift, **self.options)

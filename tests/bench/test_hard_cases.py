@@ -28,6 +28,7 @@ from lubcontact.bench.hard import (
     REJECTED,
     WRONG,
     Cell,
+    case_settings,
     expected_for,
     judge,
     load_cases,
@@ -35,7 +36,6 @@ from lubcontact.bench.hard import (
     matrix,
     run_case,
     solve_case,
-    solves_exact_coulomb,
 )
 from lubcontact.model.laws import Coulomb, GlueyCoulomb, PairState
 from lubcontact.problem.metrics import scaled_velocity_error
@@ -126,7 +126,8 @@ def _run(case, solver: str, fixed_point: bool) -> Cell:
     except ValueError as exc:
         return Cell(case.name, solver, REJECTED, message=str(exc))
     assert np.all(np.isfinite(result.forces)) and np.all(np.isfinite(result.velocities))
-    return judge(case, problem, _expected(case.name, solves_exact_coulomb(solver, fixed_point)), result,
+    exact = case_settings(solver, 1e-9, fixed_point=fixed_point).solves_exact_coulomb(problem)
+    return judge(case, problem, _expected(case.name, exact), result,
                  time.perf_counter() - start)
 
 
