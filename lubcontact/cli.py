@@ -15,6 +15,8 @@ COMMANDS = {
     "bench": ("lubcontact.bench.commands", "main", "benchmarks (e.g. 'bench solvers'); prints tables"),
     "run": ("lubcontact.flow.cli", "run_main", "run a scene with checkpoints"),
     "sweep": ("lubcontact.flow.cli", "sweep_main", "inclined-flow sweep over angles"),
+    "hysteresis": ("lubcontact.flow.cli", "hysteresis_main",
+                   "theta_start / theta_stop: angle ramps up and down"),
     "compare": ("lubcontact.bench.compare", "main", "solver-comparison report"),
     "check-hard": ("lubcontact.bench.hard", "main", "run every solver on the hard-case suite"),
     "verify": ("lubcontact.bench.verify", "main",

@@ -77,7 +77,8 @@ def settle(config: RunConfig, scene: Scene, progress: bool = False) -> Scene:
         The settled scene, its time reset to 0.
     """
     settling = replace(config, scene="sedimentation", model=config.settle_model,
-                       steps=config.settle_steps, cross_check_every=0, frame_every=0)
+                       steps=config.settle_steps, cross_check_every=0, frame_every=0,
+                       ramp_step=0.0, ramp_stages=0, hold_steps=0)
     run = FlowRun(settling, scene)
     run.advance(settling.steps, progress)
     settled = run.sim.scene.copy()

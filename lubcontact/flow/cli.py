@@ -41,7 +41,8 @@ FLAGS = {"scene": "SCENE", "n_grains": "--n", "preset": "--preset", "model": "--
          "checkpoint_every": "--checkpoint-every", "sample_every": "--sample-every",
          "frame_every": "--frame-every", "cross_check_every": "--cross-check-every",
          "settle_steps": "--settle-steps", "settle_model": "--settle-model", "bed": "--bed",
-         "width": "--width", "seed": "--seed"}
+         "width": "--width", "seed": "--seed", "viscosity": "--viscosity",
+         "roughness": "--roughness"}
 """The option of each :class:`RunConfig` field (the name used in error messages)."""
 DEFAULTS = {f.name: f.default for f in fields(RunConfig) if f.name in FLAGS and f.name != "solver"}
 """Real defaults of the config options (``solver``: :func:`~lubcontact.flow.config.default_solver`)."""
@@ -119,10 +120,12 @@ def _default(name: str) -> str:
         f"(default: {DEFAULTS[name]})"
 
 
-def _add_common(parser: argparse.ArgumentParser, resume: bool) -> None:
-    """The options ``run`` and ``sweep`` share (defaults: :class:`RunConfig`, filled after parsing).
+def _add_common(parser: argparse.ArgumentParser, resume: bool, steps: bool = True) -> None:
+    """The options ``run``, ``sweep`` and ``hysteresis`` share (defaults: :class:`RunConfig`,
+    filled after parsing).
 
-    ``resume``: the parser has ``--resume`` (the help says what it does to ``--steps`` and ``--mu``).
+    ``resume``: the parser has ``--resume`` (the help says what it does to ``--steps`` and
+    ``--mu``); ``steps``: it has ``--steps`` (a ramp's length follows from its stages).
     """
     add = parser.add_argument
     add("--n", dest="n_grains", type=_number(int, 1), default=None, metavar="N",
@@ -130,10 +133,11 @@ def _add_common(parser: argparse.ArgumentParser, resume: bool) -> None:
     add("--preset", choices=PRESET_NAMES, default=None,
         help="physical parameters: poster (SI units, r = 1 mm, water-like fluid) or "
              f"dimensionless (r = g' = rho_p = 1) {_default('preset')}")
-    add("--steps", type=_number(int, 1), default=None,
-        help=(f"total steps of the run {_default('steps')}; with --resume: the new total "
-              "(default there: the checkpoint's)") if resume else
-             f"total steps of each run {_default('steps')}")
+    if steps:
+        add("--steps", type=_number(int, 1), default=None,
+            help=(f"total steps of the run {_default('steps')}; with --resume: the new total "
+                  "(default there: the checkpoint's)") if resume else
+                 f"total steps of each run {_default('steps')}")
     add("--dt", "--dt-fraction", dest="dt_fraction", type=_number(float, 0, above=True),
         default=None, metavar="FRACTION",
         help=f"time step in units of {DT_UNIT}, d the mean grain diameter and g' the reduced "
@@ -176,6 +180,12 @@ def _add_common(parser: argparse.ArgumentParser, resume: bool) -> None:
         help=f"period along x in mean grain radii {_default('width')}")
     add("--seed", type=_number(int, 0), default=None,
         help=f"seed of the grain sizes, the bed and the initial jitter {_default('seed')}")
+    add("--viscosity", type=_number(float, 0, above=True), default=None, metavar="ETA",
+        help="fluid viscosity eta (Pa s) of the poster preset: sets gamma_min (default: the "
+             "preset's, 1e-3)")
+    add("--roughness", type=_number(float, 0, above=True), default=None, metavar="EPS",
+        help="asperity height eps (m) of the poster preset: sets gamma_min (default: the "
+             "preset's, 1e-6)")
     add("--no-progress", dest="progress", action="store_false",
         help="no progress bar (default: a bar when stderr is a terminal, none otherwise)")
 
@@ -230,6 +240,14 @@ def sweep_parser() -> argparse.ArgumentParser:
                              "(default: dry,gluey)")
     parser.add_argument("--out", type=pathlib.Path, default=pathlib.Path("out/sweep"),
                         help="output folder (default: out/sweep)")
+    _add_parallel(parser)
+    _add_axes(parser)
+    _add_common(parser, resume=False)
+    return parser
+
+
+def _add_parallel(parser: argparse.ArgumentParser) -> None:
+    """``--workers`` and ``--scheduler``: where the independent runs go."""
     parser.add_argument("--workers", type=int, default=1, metavar="N",
                         help="runs at once, each in its own process; the results do not "
                              "depend on it (default: 1)")
@@ -237,8 +255,84 @@ def sweep_parser() -> argparse.ArgumentParser:
                         help="run the runs on the Dask cluster of this scheduler "
                              "(tcp://host:port; its workers must see --out; needs the optional "
                              "dependency distributed) (default: none, local processes)")
-    _add_common(parser, resume=False)
+
+
+def hysteresis_parser() -> argparse.ArgumentParser:
+    """The parser of ``lubcontact hysteresis`` (its options' defaults are None: see the module)."""
+    from .hysteresis import FLOW_SPEED
+
+    parser = _Parser(
+        prog="lubcontact hysteresis",
+        description="Hysteresis of the flow angle: for each model and seed, a settled bed tilted "
+                    "to --from, held --hold steps at each angle and turned by --step degrees "
+                    "up to --to, then back down. theta_start: the first angle of the way up "
+                    "where the layer flows (mean downhill velocity above --flow-speed at the end "
+                    "of the hold); theta_stop: the first angle of the way down where it no "
+                    "longer flows. Writes hysteresis.csv, stages.csv and ramp.png in OUT; the "
+                    "runs are resumable (run the same command again).")
+    parser.add_argument("--models", default="dry,gluey",
+                        help="comma list of contact models among dry, gluey, frictionless "
+                             "(default: dry,gluey)")
+    parser.add_argument("--seeds", default="0", metavar="LIST",
+                        help="comma list of seeds, each with its own bed (default: 0)")
+    parser.add_argument("--from", dest="start", type=_angle, default=14.0, metavar="DEGREES",
+                        help="first angle of the ramp (default: 14)")
+    parser.add_argument("--to", dest="stop", type=_angle, default=28.0, metavar="DEGREES",
+                        help="turning angle of the ramp (default: 28)")
+    parser.add_argument("--step", type=_number(float, 0, above=True), default=1.0,
+                        metavar="DEGREES", help="degrees per stage (default: 1)")
+    parser.add_argument("--hold", type=_number(int, 1), default=200, metavar="STEPS",
+                        help="steps at each angle (default: 200)")
+    parser.add_argument("--flow-speed", type=_number(float, 0, above=True), default=FLOW_SPEED,
+                        metavar="SPEED",
+                        help="a layer flows when its mean downhill velocity exceeds this, in "
+                             f"units of sqrt(g' d) (default: {FLOW_SPEED:g})")
+    parser.add_argument("--out", type=pathlib.Path, default=pathlib.Path("out/hysteresis"),
+                        help="output folder (default: out/hysteresis)")
+    _add_parallel(parser)
+    _add_common(parser, resume=False, steps=False)
     return parser
+
+
+AXIS_FLAGS = {"seed": "--seeds", "viscosity": "--viscosities", "roughness": "--roughnesses"}
+"""The list option of each axis a sweep can vary (:data:`lubcontact.flow.sweep.AXES`)."""
+
+
+def _add_axes(parser: argparse.ArgumentParser) -> None:
+    """``--seeds``, ``--viscosities``, ``--roughnesses``: comma lists, one sub-folder per combination."""
+    add = parser.add_argument
+    add("--seeds", default=None, metavar="LIST",
+        help="comma list of seeds: each gets its own bed and runs in OUT/seed_<k>/, and "
+             "sweep_means.csv gives the means over seeds with their spread (default: --seed's)")
+    add("--viscosities", default=None, metavar="LIST",
+        help="comma list of fluid viscosities eta (Pa s, poster preset), runs in OUT/eta_<eta>/ "
+             "(default: --viscosity's)")
+    add("--roughnesses", default=None, metavar="LIST",
+        help="comma list of asperity heights eps (m, poster preset), runs in OUT/eps_<eps>/ "
+             "(default: --roughness's)")
+
+
+def _axis_values(args: argparse.Namespace, parser: argparse.ArgumentParser
+                 ) -> dict[str, list | None]:
+    """The values of ``--seeds``, ``--viscosities`` and ``--roughnesses`` (None: not given)."""
+    values: dict[str, list | None] = {}
+    for name, flag in AXIS_FLAGS.items():
+        text = getattr(args, flag[2:])
+        if text is None:
+            values[name] = None
+            continue
+        if getattr(args, name, None) is not None:
+            parser.error(f"argument {flag}: not with {FLAGS[name]}")
+        kind = _number(int, 0) if name == "seed" else _number(float, 0, above=True)
+        try:
+            items = [kind(item.strip()) for item in text.split(",") if item.strip()]
+        except argparse.ArgumentTypeError as exc:
+            parser.error(f"argument {flag}: {exc}")
+        if not items or len(set(items)) != len(items):
+            parser.error(f"argument {flag}: expected distinct comma-separated values, "
+                         f"got {text!r}")
+        values[name] = items
+    return values
 
 
 def _given(args: argparse.Namespace) -> set[str]:
@@ -398,6 +492,81 @@ def run_main(argv: list[str] | None = None) -> int:
     return 0
 
 
+def _check_runs(runs: list, parser: argparse.ArgumentParser) -> None:
+    """Refuse, before any work, run folders of other runs and unfinished runs past ``--steps``."""
+    from .sweep import folder_conflicts, stored_steps
+
+    for config, run_dir in runs:
+        changed = folder_conflicts(run_dir, config)
+        done = stored_steps(run_dir / "checkpoint.npz")
+        if done > config.steps and not (run_dir / "summary.json").exists():
+            parser.error(f"argument --steps: {config.steps} is below the step {done} that "
+                         f"the unfinished run in {run_dir} has reached")
+        if changed:
+            parser.error(f"argument --out: {run_dir} holds a run made with "
+                         + ", ".join(_show(name, old) for name, (old, _) in changed.items())
+                         + " (here: " + ", ".join(_show(name, new) for name, (_, new)
+                                                  in changed.items())
+                         + "): use another --out")
+
+
+def _models(text: str, parser: argparse.ArgumentParser) -> list[str]:
+    """The models of ``--models`` (a usage error names an unknown one)."""
+    models = [m.strip() for m in text.split(",") if m.strip()]
+    unknown = [m for m in models if m not in MODEL_NAMES]
+    if unknown or not models:
+        parser.error(f"argument --models: unknown model(s) {', '.join(unknown) or '(none given)'}; "
+                     f"choose from {', '.join(MODEL_NAMES)}")
+    return models
+
+
+def _guarded(work: Callable[[], Any], resume: str, scheduler: str | None) -> tuple[Any, int]:
+    """Run a sweep's ``work`` (inside :func:`~lubcontact.flow.interrupt.stop_on_signals`).
+
+    Returns
+    -------
+    (object, int)
+        ``work()``'s result and 0, or None and the exit status after one line
+        on stderr: 130 when stopped by a signal (the runs under way are
+        checkpointed; ``resume`` continues them), 2 when ``scheduler`` cannot
+        be reached, 1 when a worker process died.
+    """
+    from concurrent.futures.process import BrokenProcessPool
+
+    try:
+        with interrupt.stop_on_signals():
+            return work(), 0
+    except interrupt.Interrupted as exc:
+        print(_interrupted_line(exc, resume), file=sys.stderr)
+        return None, interrupt.EXIT_STATUS
+    except KeyboardInterrupt:
+        print(f"interrupted again: stopped at once; the last checkpoints resume: {resume}",
+              file=sys.stderr)
+        return None, interrupt.EXIT_STATUS
+    except OSError as exc:              # --scheduler: no cluster at that address
+        if scheduler is None:
+            raise
+        print(f"lubcontact: argument --scheduler: cannot reach {scheduler}: {exc}",
+              file=sys.stderr)
+        return None, 2
+    except BrokenProcessPool:
+        print(f"a worker process died (killed or out of memory); the runs resume from their last "
+              f"checkpoints: {resume}", file=sys.stderr)
+        return None, 1
+
+
+def _check_parallel(args: argparse.Namespace, parser: argparse.ArgumentParser) -> None:
+    """``--workers`` >= 1; ``--scheduler`` only with the optional dependency installed."""
+    if args.workers < 1:
+        parser.error(f"argument --workers: must be >= 1, got {args.workers}")
+    if args.scheduler is not None:
+        try:
+            import distributed  # noqa: F401
+        except ImportError:
+            parser.error("argument --scheduler: needs the optional dependency distributed "
+                         "(pip install lubcontact[dask])")
+
+
 def sweep_main(argv: list[str] | None = None) -> int:
     """``lubcontact sweep --angles 15:28:1``: Q(theta) and contact states for both models.
 
@@ -421,73 +590,100 @@ def sweep_main(argv: list[str] | None = None) -> int:
         angles = parse_angles(args.angles)
     except ValueError as exc:
         parser.error(f"argument --angles: {str(exc).partition(': ')[2]}")
-    models = [m.strip() for m in args.models.split(",") if m.strip()]
-    unknown = [m for m in models if m not in MODEL_NAMES]
-    if unknown or not models:
-        parser.error(f"argument --models: unknown model(s) {', '.join(unknown) or '(none given)'}; "
-                     f"choose from {', '.join(MODEL_NAMES)}")
+    models = _models(args.models, parser)
     if angles.size == 0:
         parser.error(f"argument --angles: no angle in {args.angles!r}")
-    if args.workers < 1:
-        parser.error(f"argument --workers: must be >= 1, got {args.workers}")
-    if args.scheduler is not None:
-        try:
-            import distributed  # noqa: F401
-        except ImportError:
-            parser.error("argument --scheduler: needs the optional dependency distributed "
-                         "(pip install lubcontact[dask])")
+    _check_parallel(args, parser)
     for angle in angles:
         if not -90 < angle < 90:
             parser.error(f"argument --angles: {angle:g} is not in (-90, 90) degrees")
+    axes = _axis_values(args, parser)
     _fill_defaults(args, parser)
     config = _config(args, parser, scene="inclined_flow", model=models[0],
                      angle=float(angles[0]))
-    progress = args.progress and sys.stderr.isatty()
-    from dataclasses import replace
+    from .sweep import axis_groups, sweep_runs
 
-    from .sweep import folder_conflicts, run_folder, stored_steps, sweep
-
-    for model in models:                # a folder of another sweep: refused before any work
-        for angle in angles:
-            run_dir = run_folder(args.out, model, angle)
-            changed = folder_conflicts(run_dir, replace(config, model=model, angle=float(angle)))
-            done = stored_steps(run_dir / "checkpoint.npz")
-            if done > config.steps and not (run_dir / "summary.json").exists():
-                parser.error(f"argument --steps: {config.steps} is below the step {done} that "
-                             f"the unfinished run in {run_dir} has reached")
-            if changed:
-                parser.error(f"argument --out: {run_dir} holds a run made with "
-                             + ", ".join(_show(name, old) for name, (old, _) in changed.items())
-                             + " (here: " + ", ".join(_show(name, new) for name, (_, new)
-                                                      in changed.items())
-                             + "): use another --out")
-
-    resume = "lubcontact sweep " + shlex.join(argv)
-    from concurrent.futures.process import BrokenProcessPool
-
+    groups = axis_groups(**axes)
     try:
-        with interrupt.stop_on_signals():
-            rows = sweep(config, angles, models, args.out, progress and args.workers == 1,
-                         workers=args.workers, scheduler=args.scheduler)
-    except interrupt.Interrupted as exc:
-        print(_interrupted_line(exc, resume), file=sys.stderr)
-        return interrupt.EXIT_STATUS
-    except KeyboardInterrupt:
-        print(f"interrupted again: stopped at once; the last checkpoints resume: {resume}",
-              file=sys.stderr)
-        return interrupt.EXIT_STATUS
-    except OSError as exc:              # --scheduler: no cluster at that address
-        if args.scheduler is None:
-            raise
-        print(f"lubcontact sweep: argument --scheduler: cannot reach {args.scheduler}: {exc}",
-              file=sys.stderr)
-        return 2
-    except BrokenProcessPool:
-        print(f"a worker process died (killed or out of memory); the runs resume from their last "
-              f"checkpoints: {resume}", file=sys.stderr)
-        return 1
+        runs = sweep_runs(config, angles, models, args.out, groups)
+    except ValueError as exc:              # e.g. --viscosities with the dimensionless preset
+        field, _, message = str(exc).partition(": ")
+        parser.error(f"argument {AXIS_FLAGS.get(field, FLAGS.get(field, field))}: {message}")
+    _check_runs(runs, parser)
+    progress = args.progress and sys.stderr.isatty()
+    resume = "lubcontact sweep " + shlex.join(argv)
+    from .sweep import sweep
+
+    rows, status = _guarded(lambda: sweep(config, angles, models, args.out,
+                                          progress and args.workers == 1, workers=args.workers,
+                                          scheduler=args.scheduler, groups=groups),
+                            resume, args.scheduler)
+    if rows is None:
+        return status
     from . import plots
 
-    plots.sweep_figures(rows, args.out, config.preset)
+    plots.sweep_figures(rows, args.out, config.preset, groups)
     print(f"wrote {args.out / 'sweep.csv'}")
+    return 0
+
+
+def hysteresis_main(argv: list[str] | None = None) -> int:
+    """``lubcontact hysteresis --from 14 --to 28``: theta_start and theta_stop per model and seed.
+
+    Parameters
+    ----------
+    argv : list of str, optional
+        The arguments after ``hysteresis`` (default: the command line's).
+
+    Returns
+    -------
+    int
+        Exit status: 0, 130 when stopped by SIGINT / SIGTERM (the runs under
+        way are checkpointed; the same command continues), 2 for a usage error.
+    """
+    argv = sys.argv[2:] if argv is None else list(argv)
+    parser = hysteresis_parser()
+    args = parser.parse_args(argv)
+    models = _models(args.models, parser)
+    _check_parallel(args, parser)
+    if args.seed is not None:
+        parser.error("argument --seed: use --seeds")
+    args.seed = None
+    seeds = _axis_values(argparse.Namespace(seeds=args.seeds, viscosities=None,
+                                            roughnesses=None), parser)["seed"]
+    _fill_defaults(args, parser)
+    from .hysteresis import hysteresis, model_means, ramp_config
+
+    base = _config(args, parser, scene="inclined_flow", model=models[0], angle=args.start)
+    try:
+        config = ramp_config(base, args.start, args.stop, args.step, args.hold)
+    except ValueError as exc:
+        field, _, message = str(exc).partition(": ")
+        parser.error(f"argument {({'stop': '--to', 'step': '--step'}).get(field, field)}: "
+                     f"{message}")
+    from dataclasses import replace
+
+    from .sweep import group_folder
+
+    _check_runs([(replace(config, model=model, seed=seed),
+                  group_folder(args.out, {"seed": seed}) / model / "ramp")
+                 for model in models for seed in seeds], parser)
+    progress = args.progress and sys.stderr.isatty()
+    outcome, status = _guarded(lambda: hysteresis(
+        config, models, seeds, args.out, flow_speed=args.flow_speed,
+        progress=progress and args.workers == 1, workers=args.workers, scheduler=args.scheduler),
+        "lubcontact hysteresis " + shlex.join(argv), args.scheduler)
+    if outcome is None:
+        return status
+    from . import plots
+
+    results, stage_rows = outcome
+    plots.ramp_curves(stage_rows, args.out / "ramp.png", args.flow_speed)
+    for model, entry in model_means(results).items():
+        print(f"{model:6s} theta_start {entry['theta_start']:.4g} +/- {entry['theta_start_sd']:.2g}"
+              f" ({entry['theta_start_n']} of {entry['seeds']} seeds)  theta_stop "
+              f"{entry['theta_stop']:.4g} +/- {entry['theta_stop_sd']:.2g} "
+              f"({entry['theta_stop_n']})  width {entry['width']:.3g} +/- "
+              f"{entry['width_sd']:.2g} deg")
+    print(f"wrote {args.out / 'hysteresis.csv'}")
     return 0

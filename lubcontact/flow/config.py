@@ -28,7 +28,8 @@ REFERENCE_SOLVER = "clarabel"
 """The default otherwise (always registered)."""
 
 DEFINING_FIELDS = ("scene", "n_grains", "preset", "model", "angle", "dt_fraction", "width", "seed",
-                   "bed", "settle_steps", "settle_model", "bins_per_radius")
+                   "bed", "settle_steps", "settle_model", "bins_per_radius", "viscosity",
+                   "roughness", "ramp_step", "ramp_stages", "hold_steps")
 """Fields that define a run's scene or physics: a resumed run keeps its checkpoint's.
 
 The state in a checkpoint was made by them (the grains, the bed, the tilt, the
@@ -112,6 +113,18 @@ class RunConfig:
         0: plain outer loop).
     friction : float or None
         Coulomb coefficient overriding the preset's ``mu`` (None: the preset's).
+    viscosity, roughness : float or None
+        Fluid viscosity ``eta`` (Pa s) and asperity height ``eps`` (m)
+        overriding the ``poster`` preset's (None: the preset's); they set
+        each contact's ``gamma_min``. The ``dimensionless`` preset gives
+        ``gamma_min`` directly and takes neither.
+    ramp_step, ramp_stages, hold_steps : float, int, int
+        An angle ramp (``inclined_flow`` only; ``ramp_stages = 0``: a fixed
+        angle): the incline starts at ``angle``, turns by ``ramp_step``
+        degrees every ``hold_steps`` steps for ``ramp_stages`` stages, then
+        back down the same stages to ``angle`` (:meth:`angle_at`); the
+        grains keep their velocities and contacts their gluey state across
+        a change. ``steps`` is then ``(2 ramp_stages + 1) hold_steps``.
     checkpoint_every, sample_every, frame_every : int
         Periods (in steps) of checkpoints, measurement samples and frames
         (0: no frames).
@@ -153,6 +166,11 @@ class RunConfig:
     max_outer: int = 50
     joint: int = 0
     friction: float | None = None
+    viscosity: float | None = None
+    roughness: float | None = None
+    ramp_step: float = 0.0
+    ramp_stages: int = 0
+    hold_steps: int = 0
     checkpoint_every: int = 200
     sample_every: int = 10
     frame_every: int = 0
@@ -194,14 +212,67 @@ class RunConfig:
             raise ValueError(f"friction: must be >= 0, got {self.friction}")
         if not 0 <= self.average_from < 1:
             raise ValueError(f"average_from: must be in [0, 1), got {self.average_from}")
+        for name in ("viscosity", "roughness"):
+            value = getattr(self, name)
+            if value is not None and not float(value) > 0:
+                raise ValueError(f"{name}: must be > 0, got {value}")
+            if value is not None and self.preset != "poster":
+                raise ValueError(f"{name}: only the poster preset takes it (the {self.preset} "
+                                 f"preset sets gamma_min directly), got {value}")
+        self._check_ramp()
+
+    def _check_ramp(self) -> None:
+        """The ramp fields: consistent with each other, the scene, ``steps`` and the angle range."""
+        if int(self.ramp_stages) < 0 or int(self.hold_steps) < 0:
+            raise ValueError(f"ramp_stages: must be >= 0 with hold_steps >= 0, got "
+                             f"{self.ramp_stages} and {self.hold_steps}")
+        if not self.ramp_stages:
+            return
+        if self.scene != "inclined_flow":
+            raise ValueError(f"ramp_stages: a ramp needs scene inclined_flow, got {self.scene!r}")
+        if int(self.hold_steps) < 1 or not self.ramp_step:
+            raise ValueError(f"hold_steps: a ramp needs hold_steps >= 1 and a nonzero ramp_step, "
+                             f"got {self.hold_steps} and {self.ramp_step}")
+        if self.steps != self.ramp_total_steps:
+            raise ValueError(f"steps: a ramp of {self.ramp_stages} stages up and down, "
+                             f"{self.hold_steps} steps each, takes {self.ramp_total_steps}, "
+                             f"got {self.steps}")
+        top = float(self.angle) + self.ramp_stages * float(self.ramp_step)
+        if not -90 < top < 90:
+            raise ValueError(f"ramp_step: the ramp's far end {top:g} is not in (-90, 90) degrees")
+
+    @property
+    def ramp_total_steps(self) -> int:
+        """Steps of the whole ramp, up and down: ``(2 ramp_stages + 1) hold_steps``."""
+        return (2 * int(self.ramp_stages) + 1) * int(self.hold_steps)
+
+    def ramp_stage(self, step: int) -> tuple[int, float]:
+        """The stage of a ramp (0-based) that step ``step`` (0-based) belongs to, and its angle.
+
+        Stages ``0..ramp_stages`` go up by ``ramp_step`` each, the next
+        ``ramp_stages`` come back down; without a ramp there is one stage.
+
+        Returns
+        -------
+        (int, float)
+            The stage and its incline angle (degrees; NaN for ``sedimentation``).
+        """
+        if not self.ramp_stages:
+            return 0, float("nan") if self.angle is None else float(self.angle)
+        stage = min(int(step) // int(self.hold_steps), 2 * int(self.ramp_stages))
+        level = min(stage, 2 * int(self.ramp_stages) - stage)
+        return stage, float(self.angle) + level * float(self.ramp_step)
 
     @property
     def params(self) -> FlowParameters:
-        """The preset's physical parameters, with ``friction`` applied when set."""
+        """The preset's physical parameters, with ``friction``, ``viscosity`` and ``roughness``
+        applied when set."""
         from ..scenes import inclined
 
         params = inclined.PRESETS[self.preset]()
-        return params if self.friction is None else replace(params, friction=self.friction)
+        changes = {name: getattr(self, name) for name in ("friction", "viscosity", "roughness")
+                   if getattr(self, name) is not None}
+        return replace(params, **changes) if changes else params
 
     @classmethod
     def field_names(cls) -> set[str]:

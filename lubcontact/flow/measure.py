@@ -204,6 +204,12 @@ def flow_rate(scene: Scene) -> float:
     return float(np.pi * grains.radii**2 @ grains.velocities[:, 0] / _period(scene))
 
 
+def mean_velocity(scene: Scene) -> float:
+    """Area-weighted (mass-weighted) mean downhill velocity of the free grains (length / time)."""
+    area = scene.grains.radii**2
+    return float(area @ scene.grains.velocities[:, 0] / np.sum(area))
+
+
 def kinetic_energy(scene: Scene) -> float:
     """Translational plus rotational kinetic energy of the free grains.
 
@@ -217,8 +223,8 @@ def kinetic_energy(scene: Scene) -> float:
                  + 0.5 * grains.inertias @ np.sum(grains.spins**2, axis=1))
 
 
-def contact_states(gamma: np.ndarray, gamma_min: np.ndarray, active: np.ndarray) -> np.ndarray:
-    """Counts of active contacts per state ``(unglued, glued, frictional)``, shape (3,).
+def state_masks(gamma: np.ndarray, gamma_min: np.ndarray, active: np.ndarray) -> np.ndarray:
+    """Which active contacts are in each state ``(unglued, glued, frictional)``, shape (3, nc).
 
     Parameters
     ----------
@@ -230,8 +236,27 @@ def contact_states(gamma: np.ndarray, gamma_min: np.ndarray, active: np.ndarray)
     frictional = active & np.isfinite(gamma_min) & (gamma <= gamma_min)
     glued = active & (gamma < 0) & ~frictional
     unglued = active & (gamma == 0)
-    return np.array([np.count_nonzero(unglued), np.count_nonzero(glued),
-                     np.count_nonzero(frictional)])
+    return np.stack([unglued, glued, frictional])
+
+
+def coordination(masks: np.ndarray, body_a: np.ndarray, n_grains: int) -> np.ndarray:
+    """Contacts per free grain in each state, shape (len(masks),).
+
+    A contact between two free grains counts for both, one with a fixed
+    grain for its free grain only (``body_b`` is always free; bodies from
+    ``n_grains`` on are fixed).
+
+    Parameters
+    ----------
+    masks : ndarray of bool, shape (k, nc)
+        Contacts in each state (:func:`state_masks`).
+    body_a : ndarray of int, shape (nc,)
+        First body of each contact (global numbering).
+    n_grains : int
+        Number of free grains.
+    """
+    ends = 1.0 + (np.asarray(body_a) < n_grains)
+    return (masks @ ends) / max(int(n_grains), 1)
 
 
 def gamma_histogram(gamma: np.ndarray, gamma_min: np.ndarray, bins: int = 20) -> np.ndarray:

@@ -26,7 +26,7 @@ from ..scenes import inclined  # noqa: E402
 from ..sim import Simulation, StepReport  # noqa: E402
 from . import measure  # noqa: E402
 from .config import Q_UNIT  # noqa: E402
-from .sweep import run_folder  # noqa: E402
+from .sweep import AXES, MEAN_KEYS, group_folder, run_folder, seed_means  # noqa: E402
 
 GAMMA_COLORMAP = "plasma"
 
@@ -190,36 +190,82 @@ def profiles(curves: list[tuple[str, measure.Profile]], path: pathlib.Path,
     _save(fig, path)
 
 
-def _by_model(rows: list[dict]) -> dict[str, list[dict]]:
-    """Rows grouped by model, each group sorted by angle."""
-    models: dict[str, list[dict]] = {}
-    for row in rows:
-        models.setdefault(row["model"], []).append(row)
-    return {m: sorted(r, key=lambda row: float(row["angle"])) for m, r in models.items()}
+def _curves(rows: list[dict]) -> dict[str, list[dict]]:
+    """Sweep rows averaged over seeds (:func:`~lubcontact.flow.sweep.seed_means`), grouped into
+    curves by model and the varied viscosity / roughness, each curve sorted by angle.
+
+    A curve's label is its model, with ``eta`` and ``eps`` when they vary
+    among the rows. The means keep ``flow_rate_std`` (the time fluctuation
+    over a run's window, averaged over seeds) beside the spread over seeds.
+    """
+    means = seed_means(rows)
+    for mean in means:
+        members = [r for r in rows if all(r.get(k) == mean[k] for k in MEAN_KEYS)]
+        mean["flow_rate_std"] = float(np.mean([r.get("flow_rate_std", np.nan) for r in members]))
+    varied = [key for key in ("viscosity", "roughness")
+              if len({mean.get(key) for mean in means}) > 1]
+    curves: dict[str, list[dict]] = {}
+    for mean in means:
+        label = " ".join([mean["model"]] + [f"{AXES[key]} {mean[key]:g}" for key in varied])
+        curves.setdefault(label, []).append(mean)
+    return {label: sorted(c, key=lambda row: float(row["angle"])) for label, c in curves.items()}
 
 
 def flow_rate_curve(rows: list[dict], path: pathlib.Path) -> None:
-    """Q(theta) per model with its standard deviation, Q in units of ``d sqrt(g' d)``.
+    """Q(theta) per model (and varied viscosity / roughness), Q in units of ``d sqrt(g' d)``.
+
+    With several seeds a point is the mean over seeds and its error bar the
+    standard deviation over seeds; with one seed, the standard deviation of
+    Q over the run's averaging window.
 
     Parameters
     ----------
     rows : list of dict
-        Sweep rows (``model``, ``angle``, ``flow_rate``, ``flow_rate_std``;
-        the flow rates in units of ``d sqrt(g' d)``, as run summaries give them).
+        Sweep rows (``model``, ``angle``, ``seed``, ``viscosity``,
+        ``roughness``, ``flow_rate``, ``flow_rate_std``; the flow rates in
+        units of ``d sqrt(g' d)``, as run summaries give them).
     path : pathlib.Path
         The image file.
     """
     fig, ax = plt.subplots(figsize=(6, 4.5))
-    for model, group in _by_model(rows).items():
-        angles = [float(r["angle"]) for r in group]
-        rates = [float(r["flow_rate"]) for r in group]
-        errors = [float(r["flow_rate_std"]) for r in group]
-        ax.errorbar(angles, rates, yerr=errors, marker="o", capsize=3, label=model)
+    seeds = 1
+    for label, curve in _curves(rows).items():
+        seeds = max(seeds, max(int(row["seeds"]) for row in curve))
+        errors = [row["flow_rate_sd"] if row["seeds"] > 1 else row["flow_rate_std"]
+                  for row in curve]
+        ax.errorbar([float(r["angle"]) for r in curve], [r["flow_rate"] for r in curve],
+                    yerr=errors, marker="o", capsize=3, label=label)
     ax.set_xlabel("incline angle theta (degrees)")
     ax.set_ylabel(f"flow rate Q / ({Q_UNIT})")
-    ax.legend()
+    ax.set_title(f"mean over {seeds} seeds, bars: standard deviation over seeds" if seeds > 1
+                 else "bars: standard deviation of Q over the averaging window", fontsize=9)
+    ax.legend(fontsize=8)
     ax.grid(alpha=0.3)
     _save(fig, path)
+
+
+STATE_COLOURS = {"unglued": "tab:blue", "glued": "tab:orange", "frictional": "tab:red"}
+
+
+def _state_plot(rows: list[dict], quantity: str, ylabel: str) -> tuple[Figure, Axes]:
+    """``<quantity>_<state>`` per state against the angle, one line style per curve of
+    :func:`_curves`, seed means with their standard deviation over seeds as error bars."""
+    fig, ax = plt.subplots(figsize=(6.5, 4.5))
+    styles = ["-", "--", ":", "-."]
+    for index, (label, curve) in enumerate(_curves(rows).items()):
+        states = ("frictional",) if label.split()[0] == "dry" else measure.STATES
+        for state in states:                               # dry: every contact is Coulomb
+            values = [r[f"{quantity}_{state}"] for r in curve]
+            errors = [r[f"{quantity}_{state}_sd"] for r in curve]
+            ax.errorbar([float(r["angle"]) for r in curve], values,
+                        yerr=None if np.all(np.isnan(errors)) else errors,
+                        linestyle=styles[index % len(styles)], color=STATE_COLOURS[state],
+                        marker="o", markersize=4, capsize=2, label=f"{label}: {state}")
+    ax.set_xlabel("incline angle theta (degrees)")
+    ax.set_ylabel(ylabel)
+    ax.legend(fontsize=7)
+    ax.grid(alpha=0.3)
+    return fig, ax
 
 
 def state_fractions(rows: list[dict], path: pathlib.Path) -> None:
@@ -232,28 +278,74 @@ def state_fractions(rows: list[dict], path: pathlib.Path) -> None:
     path : pathlib.Path
         The image file.
     """
-    fig, ax = plt.subplots(figsize=(6, 4.5))
-    styles = {"dry": "--", "gluey": "-"}
-    for model, group in _by_model(rows).items():
-        angles = [float(r["angle"]) for r in group]
-        states = ("frictional",) if model == "dry" else measure.STATES   # dry: all Coulomb
-        for state in states:
-            colour = {"unglued": "tab:blue", "glued": "tab:orange", "frictional": "tab:red"}[state]
-            ax.plot(angles, [float(r[f"fraction_{state}"]) for r in group], styles.get(model, ":"),
-                    color=colour, marker="o", label=f"{model}: {state}")
-    ax.set_xlabel("incline angle theta (degrees)")
-    ax.set_ylabel("fraction of active contacts (-)")
+    fig, ax = _state_plot(rows, "fraction", "fraction of active contacts (-)")
     ax.set_ylim(-0.03, 1.03)                  # fractions of 0 and 1 stay off the frame
-    ax.legend(fontsize=8)
-    ax.grid(alpha=0.3)
     _save(fig, path)
 
 
-def sweep_figures(rows: list[dict], out_dir: pathlib.Path, preset: str = "dimensionless") -> None:
-    """Q(theta), contact-state fractions and the profiles of every run of a sweep.
+def coordination_curve(rows: list[dict], path: pathlib.Path) -> None:
+    """Contacts per free grain in each state against the angle.
 
-    Writes ``flow_rate.png``, ``contact_states.png`` and ``profiles_<model>.png``
-    (from the runs' ``measurements.npz``) in ``out_dir``.
+    Parameters
+    ----------
+    rows : list of dict
+        Sweep rows (``model``, ``angle``, ``coordination_<state>``).
+    path : pathlib.Path
+        The image file.
+    """
+    fig, _ = _state_plot(rows, "coordination", "active contacts per grain (-)")
+    _save(fig, path)
+
+
+def regime_map(rows: list[dict], path: pathlib.Path) -> None:
+    """The gluey model's contact regime over (angle, viscosity): frictional and glued fractions.
+
+    Two panels of colour maps, the fraction of active contacts at ``gamma_min``
+    (frictional) and strictly between ``gamma_min`` and 0 (glued,
+    lubricated), seed means, with the angle along x and ``eta`` (log scale)
+    along y.
+
+    Parameters
+    ----------
+    rows : list of dict
+        Sweep rows of the ``gluey`` model with several viscosities.
+    path : pathlib.Path
+        The image file.
+    """
+    means = [m for m in seed_means(rows) if m["model"] == "gluey"]
+    angles = sorted({float(m["angle"]) for m in means})
+    etas = sorted({float(m["viscosity"]) for m in means})
+    fig, axes = plt.subplots(1, 2, figsize=(10, 4), sharey=True)
+    for ax, state in zip(axes, ("frictional", "glued")):
+        grid = np.full((len(etas), len(angles)), np.nan)
+        for m in means:
+            grid[etas.index(float(m["viscosity"])), angles.index(float(m["angle"]))] = \
+                m[f"fraction_{state}"]
+        image = ax.pcolormesh(_cell_edges(np.array(angles)), _cell_edges(np.log10(etas)), grid,
+                              vmin=0.0, vmax=1.0, cmap="viridis")
+        ax.set_xlabel("incline angle theta (degrees)")
+        ax.set_title(f"{state} fraction of active contacts")
+        fig.colorbar(image, ax=ax, label="fraction (-)")
+    axes[0].set_ylabel("log10 of the viscosity eta / (Pa s)")
+    _save(fig, path)
+
+
+def _cell_edges(centres: np.ndarray) -> np.ndarray:
+    """Edges of cells centred on sorted ``centres`` (a lone centre gets width 1)."""
+    if centres.size == 1:
+        return np.array([centres[0] - 0.5, centres[0] + 0.5])
+    middle = 0.5 * (centres[1:] + centres[:-1])
+    return np.concatenate([[2 * centres[0] - middle[0]], middle, [2 * centres[-1] - middle[-1]]])
+
+
+def sweep_figures(rows: list[dict], out_dir: pathlib.Path, preset: str = "dimensionless",
+                  groups: list[dict] | None = None) -> None:
+    """Q(theta), contact states, coordination, the regime map and the profiles of a sweep.
+
+    Writes ``flow_rate.png``, ``contact_states.png`` and ``coordination.png``
+    (seed means) and, with several viscosities, ``regime_map.png`` in
+    ``out_dir``; ``profiles_<model>.png`` (from the runs' ``measurements.npz``)
+    in each group's folder.
 
     Parameters
     ----------
@@ -263,18 +355,67 @@ def sweep_figures(rows: list[dict], out_dir: pathlib.Path, preset: str = "dimens
         The sweep's folder.
     preset : str
         Parameter preset of the runs (units of the axes).
+    groups : list of dict, optional
+        The sweep's combinations of varied axes (default: none varied).
     """
     out_dir = pathlib.Path(out_dir)
     params = inclined.PRESETS[preset]()
     flow_rate_curve(rows, out_dir / "flow_rate.png")
     state_fractions(rows, out_dir / "contact_states.png")
-    for model, group in _by_model(rows).items():
-        curves = []
-        for row in group:
-            path = run_folder(out_dir, model, row["angle"]) / "measurements.npz"
-            if path.exists():
-                with np.load(path) as data:
-                    curves.append((f"{float(row['angle']):g} deg", measure.Profile(
-                        data["profile.edges"], data["profile.packing"], data["profile.velocity"])))
-        if curves:
-            profiles(curves, out_dir / f"profiles_{model}.png", params)
+    coordination_curve(rows, out_dir / "coordination.png")
+    if len({row.get("viscosity") for row in rows if row["model"] == "gluey"}) > 1:
+        regime_map([row for row in rows if row["model"] == "gluey"], out_dir / "regime_map.png")
+    for group in groups or [{}]:
+        folder = group_folder(out_dir, group)
+        mine = [row for row in rows if all(row.get(k) == v for k, v in group.items())]
+        for model in dict.fromkeys(row["model"] for row in mine):
+            curves = []
+            for row in sorted((r for r in mine if r["model"] == model),
+                              key=lambda r: float(r["angle"])):
+                path = run_folder(folder, model, row["angle"]) / "measurements.npz"
+                if path.exists():
+                    with np.load(path) as data:
+                        curves.append((f"{float(row['angle']):g} deg", measure.Profile(
+                            data["profile.edges"], data["profile.packing"],
+                            data["profile.velocity"])))
+            if curves:
+                profiles(curves, folder / f"profiles_{model}.png", params)
+
+
+def ramp_curves(stage_rows: list[dict], path: pathlib.Path, flow_speed: float) -> None:
+    """Mean downhill velocity at the end of each hold of angle ramps, up and down.
+
+    Parameters
+    ----------
+    stage_rows : list of dict
+        Rows of ``stages.csv`` (:func:`lubcontact.flow.hysteresis.hysteresis`):
+        ``model``, ``seed``, ``leg``, ``angle``, ``mean_velocity``.
+    path : pathlib.Path
+        The image file.
+    flow_speed : float
+        The threshold of a flowing layer (``sqrt(g' d)``), drawn as a line.
+    """
+    fig, ax = plt.subplots(figsize=(6.5, 4.5))
+    colours: dict[str, str] = {}
+    labelled: set[tuple[str, str]] = set()
+    floor = 1e-7                        # a layer at rest: drawn at the bottom of the log axis
+    for (model, seed) in dict.fromkeys((r["model"], r["seed"]) for r in stage_rows):
+        colour = colours.setdefault(model, f"C{len(colours)}")
+        mine = [r for r in stage_rows if r["model"] == model and r["seed"] == seed]
+        up = [r for r in mine if r["leg"] == "up"]
+        for leg, rows, style in (("up", up, "-"),       # the down leg starts from the top hold
+                                 ("down", up[-1:] + [r for r in mine if r["leg"] == "down"], "--")):
+            ax.plot([float(r["angle"]) for r in rows],
+                    [max(abs(float(r["mean_velocity"])), floor) for r in rows], style,
+                    color=colour, marker="o", markersize=3, alpha=0.8,
+                    label=None if (model, leg) in labelled else f"{model}, {leg}")
+            labelled.add((model, leg))
+    ax.axhline(flow_speed, color="grey", linewidth=1, linestyle=":",
+               label=f"flowing above {flow_speed:g}")
+    ax.set_yscale("log")
+    ax.set_xlabel("incline angle theta (degrees)")
+    ax.set_ylabel("mean downhill velocity at the end of a hold / sqrt(g' d)")
+    ax.set_title("angle ramps: up (solid) then down (dashed), one line per seed", fontsize=9)
+    ax.legend(fontsize=8)
+    ax.grid(alpha=0.3, which="both")
+    _save(fig, path)

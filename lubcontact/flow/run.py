@@ -51,8 +51,13 @@ if TYPE_CHECKING:
     from tqdm import tqdm
 
 SERIES = ("step", "time", "kinetic_energy", "flow_rate", "contacts", "unglued", "glued",
-          "frictional", "residual", "iterations", "converged")
-"""Time series sampled every ``sample_every`` steps (``measurements.npz``: ``series.<name>``)."""
+          "frictional", "residual", "iterations", "converged", "angle", "mean_velocity",
+          "coordination_unglued", "coordination_glued", "coordination_frictional")
+"""Time series sampled every ``sample_every`` steps (``measurements.npz``: ``series.<name>``):
+``flow_rate`` in units of ``d sqrt(g' d)``, ``mean_velocity`` (downhill, mass-weighted) in
+``sqrt(g' d)``, ``angle`` in degrees, the contact counts per state and the contacts per free
+grain per state (``coordination_<state>``). Checkpoints written before a series existed give
+it NaN samples."""
 GAMMA_BINS = 20
 """Bins of the gamma / gamma_min histogram over [0, 1]."""
 WARM_UP_TOL = 1e-2
@@ -162,6 +167,8 @@ class FlowRun:
             while self.steps_done < end:
                 if interrupt.requested():
                     raise self._interrupted()
+                if self.config.ramp_stages:
+                    self._tilt()
                 start, start_cpu = time.perf_counter(), time.process_time()
                 report = self.sim.step()
                 self.wall_time += time.perf_counter() - start
@@ -176,6 +183,13 @@ class FlowRun:
         finally:
             if bar is not None:
                 bar.close()
+
+    def _tilt(self) -> None:
+        """Set the incline of the coming step's ramp stage (:meth:`RunConfig.ramp_stage`)."""
+        scene = self.sim.scene
+        angle = self.config.ramp_stage(self.steps_done)[1]
+        scene.gravity = inclined.tilted_gravity(float(np.linalg.norm(scene.gravity)), angle)
+        scene.metadata["angle_deg"] = angle
 
     def warm_up(self) -> None:
         """Solve, untimed, a small problem of each cone family the run's law can produce.
@@ -244,13 +258,16 @@ class FlowRun:
         normal = report.result.forces[: contacts.count]
         active = (report.gamma < 0) | (normal > self.config.tol * report.result.force_scale)
         if self.config.model == "dry":       # every active contact is a Coulomb contact
-            states = np.array([0, 0, np.count_nonzero(active)])
+            masks = np.stack([np.zeros_like(active), np.zeros_like(active), active])
         else:
-            states = measure.contact_states(report.gamma, gamma_min, active)
+            masks = measure.state_masks(report.gamma, gamma_min, active)
         values = (self.steps_done, scene.time, measure.kinetic_energy(scene),
                   measure.flow_rate(scene) / flow_rate_unit(self.params),
-                  int(np.count_nonzero(active)), *states,
-                  report.result.residual, report.result.iterations, report.result.success)
+                  int(np.count_nonzero(active)), *np.count_nonzero(masks, axis=1),
+                  report.result.residual, report.result.iterations, report.result.success,
+                  self.config.ramp_stage(self.steps_done - 1)[1],
+                  measure.mean_velocity(scene) / self.params.velocity_scale,
+                  *measure.coordination(masks, contacts.body_a, scene.grains.count))
         for name, value in zip(SERIES, values):
             self.series[name].append(value)
         if self.averaging:
@@ -374,7 +391,9 @@ class FlowRun:
 
     def _restore_measurements(self, data: dict[str, np.ndarray]) -> None:
         """Take the accumulators back from :meth:`measurements` arrays."""
-        self.series = {name: list(data[f"series.{name}"]) for name in SERIES}
+        samples = data["series.step"].size
+        self.series = {name: list(data.get(f"series.{name}", np.full(samples, np.nan)))
+                       for name in SERIES}
         if "units" not in data:                  # older checkpoints: flow rate in length^2 / time
             scale = flow_rate_unit(self.params)
             self.series["flow_rate"] = [value / scale for value in self.series["flow_rate"]]
@@ -404,7 +423,12 @@ class FlowRun:
             :func:`~lubcontact.flow.measure.classify_flow` (``state``,
             ``energy_ratio``, ``relative_change``; NaN when there are fewer
             than 4 samples); ``fraction_<state>`` of the active contacts per
-            contact state; ``unconverged_steps`` (None if unknown),
+            contact state; ``mean_velocity`` (downhill, in ``sqrt(g' d)``) and
+            ``coordination_<state>`` (contacts per free grain per state),
+            means over the window (NaN when the checkpoint predates them);
+            ``seed``, ``friction``, ``viscosity`` and ``roughness`` (the
+            parameters in force; the last two None when the preset sets
+            ``gamma_min`` directly); ``unconverged_steps`` (None if unknown),
             ``step_statuses``, ``unconverged_samples``; ``max_cross_check``
             (NaN without cross-checks); ``wall_time`` and ``cpu_time``
             (seconds, the steps only), ``steps_per_second``,
@@ -438,6 +462,11 @@ class FlowRun:
                 "energy_ratio": verdict.energy_ratio if verdict else float("nan"),
                 "relative_change": verdict.relative_change if verdict else float("nan"),
                 **{f"fraction_{k}": v for k, v in fractions.items()},
+                "mean_velocity": _window_mean(series["mean_velocity"], window),
+                **{f"coordination_{k}": _window_mean(series[f"coordination_{k}"], window)
+                   for k in measure.STATES},
+                "seed": self.config.seed, "friction": self.params.friction,
+                "viscosity": self.params.viscosity, "roughness": self.params.roughness,
                 "unconverged_steps": (None if self.statuses is None else
                                       sum(n for s, n in self.statuses.items() if s != CONVERGED)),
                 "step_statuses": self.statuses,
@@ -451,6 +480,11 @@ class FlowRun:
                 "warm_up_time": self.warm_up_time,
                 "solver": self.config.solver, "tol": self.config.tol,
                 "units": units(self.params)}
+
+
+def _window_mean(values: np.ndarray, window: np.ndarray) -> float:
+    """Mean of a series over the averaging window (NaN without samples there)."""
+    return float(np.mean(values[window])) if window.any() else float("nan")
 
 
 def units(params: inclined.FlowParameters) -> dict[str, str]:
@@ -469,7 +503,8 @@ def units(params: inclined.FlowParameters) -> dict[str, str]:
         ``wall_time`` and ``d`` / ``g'`` (what the symbols stand for).
     """
     si = params.units == "SI"
-    return {"flow_rate": Q_UNIT, "dt_fraction": DT_UNIT,
+    return {"flow_rate": Q_UNIT, "dt_fraction": DT_UNIT, "mean_velocity": "sqrt(g' d)",
+            "angle": "deg", "coordination": "contacts per free grain",
             "d": "mean grain diameter", "g'": "reduced gravity g (1 - rho_f / rho_p)",
             "time": "s" if si else "sqrt(r/g') (r = g' = 1)",
             "kinetic_energy": "J/m (per unit depth)" if si else "rho_p g' r^3 (r = g' = rho_p = 1)",

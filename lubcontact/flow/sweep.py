@@ -1,8 +1,12 @@
-"""The angle sweep: one settled bed, an inclined-flow run per model and angle, ``sweep.csv``.
+"""The angle sweep: settled beds, an inclined-flow run per model and angle, ``sweep.csv``.
 
 In the sweep's folder: ``bed.npz`` (the bed every run tilts), one folder per run
 ``<model>/angle_<angle>/`` (the files of :mod:`lubcontact.flow.run`) and
-``sweep.csv`` with one row per run (:data:`SWEEP_COLUMNS`). Each run is
+``sweep.csv`` with one row per run (:data:`SWEEP_COLUMNS`). A sweep over seeds
+or physical parameters (:data:`AXES`) repeats that layout in one folder per
+combination, ``seed_<k>/eta_<eta>/eps_<eps>/`` (only the axes it varies), each
+with its own bed, and adds ``sweep_means.csv``: the means over seeds and their
+spread (:func:`seed_means`). Each run is
 resumable: a finished one (its ``summary.json`` exists) is read back, an
 interrupted one continues from its checkpoint. A folder holding a run that
 another scene or physics made (:data:`~lubcontact.flow.config.DEFINING_FIELDS`)
@@ -32,14 +36,17 @@ from .bed import initial_scene
 from .config import DEFINING_FIELDS, Q_UNIT, RunConfig, flow_rate_unit
 from .run import FlowRun
 
-SWEEP_COLUMNS = ("model", "angle", "flow_rate", "flow_rate_std", "state", "energy_ratio",
-                 "relative_change", "fraction_unglued", "fraction_glued", "fraction_frictional",
+SWEEP_COLUMNS = ("model", "angle", "seed", "viscosity", "roughness", "flow_rate", "flow_rate_std",
+                 "state", "energy_ratio", "relative_change", "fraction_unglued", "fraction_glued",
+                 "fraction_frictional", "mean_velocity", "coordination_unglued",
+                 "coordination_glued", "coordination_frictional",
                  "kinetic_energy", "steps", "time", "unconverged_steps", "max_cross_check",
                  "wall_time", "steps_per_second", "cpu_time", "steps_per_cpu_second",
                  "warm_up_time", "solver", "tol")
 """Columns of ``sweep.csv``: keys of :meth:`lubcontact.flow.run.FlowRun.summary`."""
 COLUMN_UNITS = {"angle": "deg", "flow_rate": Q_UNIT, "flow_rate_std": Q_UNIT, "wall_time": "s",
-                "cpu_time": "s", "warm_up_time": "s"}
+                "cpu_time": "s", "warm_up_time": "s", "viscosity": "Pa s", "roughness": "m",
+                "mean_velocity": "sqrt(g' d)"}
 """Units written in the header of ``sweep.csv``: ``flow_rate [d sqrt(g' d)]``."""
 
 
@@ -49,9 +56,69 @@ def csv_header(column: str) -> str:
     return column if unit is None else f"{column} [{unit}]"
 
 
+AXES = {"seed": "seed", "viscosity": "eta", "roughness": "eps"}
+"""The :class:`RunConfig` fields a sweep can vary besides model and angle, and the prefix of
+their folder names."""
+MEAN_KEYS = ("model", "angle", "viscosity", "roughness")
+"""What a row of ``sweep_means.csv`` is for: the runs that differ only by their seed."""
+MEAN_COLUMNS = ("flow_rate", "mean_velocity", "fraction_unglued", "fraction_glued",
+                "fraction_frictional", "coordination_unglued", "coordination_glued",
+                "coordination_frictional")
+"""The quantities averaged over seeds in ``sweep_means.csv`` (each with ``_sd``, its sample
+standard deviation over seeds, and ``_se``, the standard error of the mean)."""
+
+
 def run_folder(out_dir: pathlib.Path, model: str, angle: float) -> pathlib.Path:
     """The folder of one run of a sweep: ``out_dir/<model>/angle_<angle, 05.2f>``."""
     return pathlib.Path(out_dir) / model / f"angle_{float(angle):05.2f}"
+
+
+def group_folder(out_dir: pathlib.Path, group: dict[str, Any]) -> pathlib.Path:
+    """The folder of one combination of the varied :data:`AXES`: ``out_dir/seed_1/eta_0.01``.
+
+    Parameters
+    ----------
+    out_dir : pathlib.Path
+        The sweep's folder.
+    group : dict of str to value
+        The values of the varied axes (an empty dict: ``out_dir`` itself).
+    """
+    folder = pathlib.Path(out_dir)
+    for name, prefix in AXES.items():
+        if name in group:
+            folder = folder / f"{prefix}_{group[name]:g}"
+    return folder
+
+
+def axis_groups(**axes: list | None) -> list[dict[str, Any]]:
+    """Every combination of the given axes' values, the first axis of :data:`AXES` outermost.
+
+    Parameters
+    ----------
+    **axes : list or None
+        Values of the fields of :data:`AXES`; None or absent: not varied.
+
+    Returns
+    -------
+    list of dict
+        ``[{}]`` when nothing varies.
+
+    Raises
+    ------
+    ValueError
+        Naming an axis that is not in :data:`AXES`, or an axis with no value or a repeated one.
+    """
+    groups: list[dict[str, Any]] = [{}]
+    for name in axes:
+        checks.require(name in AXES, name, f"not a sweep axis (axes: {', '.join(AXES)})", None)
+    for name in AXES:
+        values = axes.get(name)
+        if values is None:
+            continue
+        checks.require(len(values) > 0 and len(set(values)) == len(values), name,
+                       "needs distinct values", values)
+        groups = [{**group, name: value} for group in groups for value in values]
+    return groups
 
 
 def stored_config(checkpoint: pathlib.Path) -> RunConfig:
@@ -108,31 +175,90 @@ def check_folder(run_dir: pathlib.Path, config: RunConfig) -> None:
 
 
 def sweep(config: RunConfig, angles: np.ndarray, models: list[str], out_dir: pathlib.Path,
-          progress: bool = False, workers: int = 1, scheduler: str | None = None) -> list[dict[str, Any]]:
-    """Every (model, angle) run from one settled bed; finished runs are read back, not redone.
+          progress: bool = False, workers: int = 1, scheduler: str | None = None,
+          groups: list[dict[str, Any]] | None = None) -> list[dict[str, Any]]:
+    """Every (group, model, angle) run; finished runs are read back, not redone.
 
-    Prints one line per run it finishes, then writes ``out_dir/sweep.csv``.
+    Prints one line per run it finishes, then writes ``out_dir/sweep.csv``
+    and, when ``groups`` vary the seed, ``out_dir/sweep_means.csv``.
 
     Parameters
     ----------
     config : RunConfig
-        Settings of every run (``model``, ``angle`` and ``bed`` are set per run).
+        Settings of every run (``model``, ``angle``, ``bed`` and the fields
+        of ``groups`` are set per run).
     angles : ndarray, shape (n,)
         Incline angles (degrees).
     models : list of str
         Models of :data:`lubcontact.scenes.inclined.MODELS`.
     out_dir : pathlib.Path
         The sweep's folder.
+    progress, workers, scheduler
+        As :func:`run_all`.
+    groups : list of dict, optional
+        Combinations of the :data:`AXES` to run (:func:`axis_groups`), each
+        in its :func:`group_folder` with its own bed (default: ``[{}]``, the
+        config's values, in ``out_dir``).
+
+    Returns
+    -------
+    list of dict
+        The runs' summaries: groups outer, then models, then angles.
+
+    Raises
+    ------
+    ValueError
+        As :func:`run_all`.
+    Interrupted
+        As :func:`run_all`.
+    """
+    out_dir = pathlib.Path(out_dir)
+    print(f"Q: time-averaged flow rate per unit depth, in units of {Q_UNIT} "
+          "(d: mean grain diameter, g': reduced gravity)", flush=True)
+    rows = run_all(sweep_runs(config, angles, models, out_dir, groups), progress, workers,
+                   scheduler)
+    write_csv(out_dir / "sweep.csv", rows, SWEEP_COLUMNS)
+    if any("seed" in group for group in groups or [{}]):
+        write_csv(out_dir / "sweep_means.csv", seed_means(rows), _mean_columns())
+    return rows
+
+
+def sweep_runs(config: RunConfig, angles: np.ndarray, models: list[str], out_dir: pathlib.Path,
+               groups: list[dict[str, Any]] | None = None) -> list[tuple[RunConfig, pathlib.Path]]:
+    """The runs of :func:`sweep` (same parameters): each config and folder, in sweep order."""
+    runs = []
+    for group in groups or [{}]:
+        folder = group_folder(out_dir, group)
+        for model in models:
+            for angle in angles:
+                runs.append((replace(config, **group, model=model, angle=float(angle),
+                                     bed=str(folder / "bed.npz")),
+                             run_folder(folder, model, angle)))
+    return runs
+
+
+def run_all(runs: list[tuple[RunConfig, pathlib.Path]], progress: bool = False, workers: int = 1,
+            scheduler: str | None = None) -> list[dict[str, Any]]:
+    """Independent runs, each in its folder, from the beds their configs name.
+
+    The beds that unfinished runs need are settled first, here, one after
+    the other (:func:`~lubcontact.flow.bed.initial_scene`); then the runs go
+    out. Runs are deterministic, so the results do not depend on
+    ``workers`` or ``scheduler``.
+
+    Parameters
+    ----------
+    runs : list of (RunConfig, pathlib.Path)
+        Each run's config (its ``bed`` a path, settled there when absent)
+        and folder.
     progress : bool
-        Show progress bars (sequential sweeps only).
+        Show progress bars (sequential runs only).
     workers : int
         Runs at once, each in its own process (1: one after the other, here).
-        The bed is settled first, here; the runs are independent and
-        deterministic, so the results do not depend on ``workers``.
     scheduler : str, optional
         Address of a Dask distributed scheduler (``tcp://host:port``): the
         runs become tasks of that cluster instead (``workers`` is then
-        ignored). Its workers must read and write ``out_dir`` (one file
+        ignored). Its workers must read and write the run folders (one file
         system for all) and have lubcontact installed. A worker lost mid-run
         loses at most one checkpoint interval: Dask gives its task to another
         worker, which continues the run from its checkpoint. Needs the
@@ -141,7 +267,7 @@ def sweep(config: RunConfig, angles: np.ndarray, models: list[str], out_dir: pat
     Returns
     -------
     list of dict
-        The runs' summaries, models outer, angles inner.
+        The runs' summaries, in the order of ``runs``.
 
     Raises
     ------
@@ -150,38 +276,30 @@ def sweep(config: RunConfig, angles: np.ndarray, models: list[str], out_dir: pat
         or ``workers`` is not a positive integer.
     Interrupted
         When a stop is requested (:mod:`lubcontact.flow.interrupt`): the runs
-        under way are checkpointed; running the sweep again continues them.
+        under way are checkpointed; running again continues them.
     """
     workers = int(checks.positive("workers", workers, shape=()))
-    out_dir = pathlib.Path(out_dir)
-    print(f"Q: time-averaged flow rate per unit depth, in units of {Q_UNIT} "
-          "(d: mean grain diameter, g': reduced gravity)", flush=True)
-    runs = []
-    for model in models:
-        for angle in angles:
-            run_config = replace(config, model=model, angle=float(angle),
-                                 bed=str(out_dir / "bed.npz"))
-            run_dir = run_folder(out_dir, model, angle)
-            check_folder(run_dir, run_config)
-            runs.append((run_config, run_dir))
-    if any(not (run_dir / "summary.json").exists() for _, run_dir in runs):
-        initial_scene(runs[0][0], out_dir, progress)      # the common bed: settled once, saved
+    for run_config, run_dir in runs:
+        check_folder(run_dir, run_config)
+    beds = {}
+    for run_config, run_dir in runs:
+        if not (run_dir / "summary.json").exists():
+            beds.setdefault(run_config.bed, run_config)
+    for run_config in beds.values():      # each bed settled once, saved, before the runs
+        initial_scene(run_config, None, progress)
     if scheduler is not None:
-        rows = _on_dask(runs, out_dir, scheduler)
-    elif workers == 1 or len(runs) == 1:
-        rows = [_report(run_sweep_point(run_config, run_dir, out_dir, progress))
+        return _on_dask(runs, scheduler)
+    if workers == 1 or len(runs) == 1:
+        return [_report(run_sweep_point(run_config, run_dir, progress))
                 for run_config, run_dir in runs]
-    else:
-        rows = _in_processes(runs, out_dir, workers)
-    write_csv(out_dir / "sweep.csv", rows)
-    return rows
+    return _in_processes(runs, workers)
 
 
-def run_sweep_point(config: RunConfig, run_dir: pathlib.Path, out_dir: pathlib.Path,
+def run_sweep_point(config: RunConfig, run_dir: pathlib.Path,
                     progress: bool = False) -> tuple[dict[str, Any], bool]:
     """One run of a sweep: read back when finished, continued from its checkpoint, or started.
 
-    ``out_dir`` is the sweep's folder (its ``bed.npz`` is the bed, settled when absent).
+    A new run starts from the bed at ``config.bed`` (settled there when absent).
 
     Returns
     -------
@@ -196,27 +314,24 @@ def run_sweep_point(config: RunConfig, run_dir: pathlib.Path, out_dir: pathlib.P
         changes = {name: getattr(config, name) for name in RunConfig.field_names() - set(DEFINING_FIELDS)}
         run = FlowRun.resume(checkpoint, run_dir, **changes)
     else:
-        run = FlowRun(config, initial_scene(config, out_dir, progress), run_dir)
+        run = FlowRun(config, initial_scene(config, None, progress), run_dir)
     return run.finish(progress), True
 
 
-def _worker_point(config: RunConfig, run_dir: pathlib.Path,
-                  out_dir: pathlib.Path) -> tuple[dict[str, Any], bool]:
+def _worker_point(config: RunConfig, run_dir: pathlib.Path) -> tuple[dict[str, Any], bool]:
     """:func:`run_sweep_point` in a worker process: a signal checkpoints the run under way."""
     with interrupt.stop_on_signals():
-        return run_sweep_point(config, run_dir, out_dir)
+        return run_sweep_point(config, run_dir)
 
 
-def _in_processes(runs: list[tuple[RunConfig, pathlib.Path]], out_dir: pathlib.Path,
-                  workers: int) -> list[dict[str, Any]]:
+def _in_processes(runs: list[tuple[RunConfig, pathlib.Path]], workers: int) -> list[dict[str, Any]]:
     """The runs in ``workers`` processes (spawned: they start from a fresh interpreter), in order."""
     context = multiprocessing.get_context("spawn")
     with ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool:
-        return _gather(pool.submit, as_completed, runs, out_dir)
+        return _gather(pool.submit, as_completed, runs)
 
 
-def _on_dask(runs: list[tuple[RunConfig, pathlib.Path]], out_dir: pathlib.Path,
-             scheduler: str) -> list[dict[str, Any]]:
+def _on_dask(runs: list[tuple[RunConfig, pathlib.Path]], scheduler: str) -> list[dict[str, Any]]:
     """The runs as tasks of the Dask cluster at ``scheduler``, in order."""
     try:
         from distributed import Client
@@ -225,15 +340,15 @@ def _on_dask(runs: list[tuple[RunConfig, pathlib.Path]], out_dir: pathlib.Path,
         raise ValueError("scheduler: a Dask cluster needs the optional dependency 'distributed' "
                          "(pip install lubcontact[dask])") from exc
     with Client(scheduler) as client:
-        return _gather(partial(client.submit, pure=False), dask_completed, runs, out_dir)
+        return _gather(partial(client.submit, pure=False), dask_completed, runs)
 
 
-def _gather(submit: Callable, completed: Callable, runs: list[tuple[RunConfig, pathlib.Path]],
-            out_dir: pathlib.Path) -> list[dict[str, Any]]:
+def _gather(submit: Callable, completed: Callable, runs: list[tuple[RunConfig, pathlib.Path]]
+            ) -> list[dict[str, Any]]:
     """Submit every run (``submit(function, *args)`` returns a future), report each as
     ``completed(futures)`` yields it, return the summaries in the order of ``runs``."""
     rows: list[dict[str, Any] | None] = [None] * len(runs)
-    futures = {submit(_worker_point, run_config, run_dir, out_dir): index
+    futures = {submit(_worker_point, run_config, run_dir): index
                for index, (run_config, run_dir) in enumerate(runs)}
     for future in completed(list(futures)):
         rows[futures[future]] = _report(future.result())
@@ -244,8 +359,11 @@ def _report(outcome: tuple[dict[str, Any], bool]) -> dict[str, Any]:
     """Print the line of a run computed now; return its summary."""
     summary, computed = outcome
     if computed:
-        print(f"{summary['model']:6s} {summary['angle']:5.1f} deg  Q = {summary['flow_rate']:.4g} "
-              f"{Q_UNIT}  {summary['state']}  {summary['steps_per_second']:.1f} steps/s", flush=True)
+        where = "".join(f"{prefix} {summary[name]:g}  " for name, prefix in AXES.items()
+                        if summary.get(name) is not None)
+        print(f"{summary['model']:6s} {summary['angle']:5.1f} deg  {where}"
+              f"Q = {summary['flow_rate']:.4g} {Q_UNIT}  {summary['state']}  "
+              f"{summary['steps_per_second']:.1f} steps/s", flush=True)
     return summary
 
 
@@ -260,8 +378,9 @@ def _read_summary(path: pathlib.Path, config: RunConfig) -> dict[str, Any]:
     return row
 
 
-def write_csv(path: pathlib.Path, rows: list[dict[str, Any]]) -> None:
-    """Write sweep rows as CSV (atomically), the :data:`SWEEP_COLUMNS` only.
+def write_csv(path: pathlib.Path, rows: list[dict[str, Any]],
+              columns: tuple[str, ...] = SWEEP_COLUMNS) -> None:
+    """Write rows as CSV (atomically), the ``columns`` only.
 
     The header names each column with its unit (:func:`csv_header`); a
     quantity without a value (None, NaN) is an empty cell.
@@ -272,12 +391,53 @@ def write_csv(path: pathlib.Path, rows: list[dict[str, Any]]) -> None:
         The ``.csv`` file.
     rows : list of dict
         Run summaries (other keys are left out).
+    columns : tuple of str
+        The keys written, in order (default :data:`SWEEP_COLUMNS`).
     """
     with atomic_path(path) as temporary, open(temporary, "w", newline="") as stream:
         writer = csv.writer(stream)
-        writer.writerow([csv_header(column) for column in SWEEP_COLUMNS])
+        writer.writerow([csv_header(column) for column in columns])
         for row in rows:
-            writer.writerow([_cell(row.get(column)) for column in SWEEP_COLUMNS])
+            writer.writerow([_cell(row.get(column)) for column in columns])
+
+
+def _mean_columns() -> tuple[str, ...]:
+    """Columns of ``sweep_means.csv``."""
+    return (*MEAN_KEYS, "seeds", *(f"{name}{suffix}" for name in MEAN_COLUMNS
+                                   for suffix in ("", "_sd", "_se")))
+
+
+def seed_means(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Means over seeds of the runs that differ only by their seed (:data:`MEAN_KEYS`).
+
+    Parameters
+    ----------
+    rows : list of dict
+        Run summaries.
+
+    Returns
+    -------
+    list of dict
+        One per (model, angle, viscosity, roughness), in order of first
+        appearance: those keys, ``seeds`` (how many runs), and for each of
+        :data:`MEAN_COLUMNS` its mean, ``_sd`` (sample standard deviation over
+        the seeds, NaN for one seed) and ``_se`` (``sd / sqrt(seeds)``).
+        Missing values (None) are left out of a mean.
+    """
+    groups: dict[tuple, list[dict[str, Any]]] = {}
+    for row in rows:
+        groups.setdefault(tuple(row.get(key) for key in MEAN_KEYS), []).append(row)
+    means = []
+    for key, members in groups.items():
+        mean = dict(zip(MEAN_KEYS, key), seeds=len(members))
+        for name in MEAN_COLUMNS:
+            values = np.array([m[name] for m in members if m.get(name) is not None], dtype=float)
+            sd = float(np.std(values, ddof=1)) if values.size > 1 else float("nan")
+            mean.update({name: float(np.mean(values)) if values.size else float("nan"),
+                         f"{name}_sd": sd, f"{name}_se": sd / np.sqrt(values.size)
+                         if values.size > 1 else float("nan")})
+        means.append(mean)
+    return means
 
 
 def _cell(value: Any) -> Any:

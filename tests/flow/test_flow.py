@@ -147,7 +147,7 @@ def test_contact_states_and_gamma_histogram():
     gamma = np.array([0.0, 0.0, -0.5, -1.0, -0.2, 0.0])
     floor = np.array([-1.0, -1.0, -1.0, -1.0, -np.inf, -1.0])
     active = np.array([True, True, True, True, True, False])
-    np.testing.assert_array_equal(measure.contact_states(gamma, floor, active), [2, 2, 1])
+    np.testing.assert_array_equal(measure.state_masks(gamma, floor, active).sum(axis=1), [2, 2, 1])
     hist = measure.gamma_histogram(gamma, floor, bins=4)
     np.testing.assert_array_equal(hist, [0, 0, 1, 1])     # 0.5 and 1.0 (the -inf floor is skipped)
 

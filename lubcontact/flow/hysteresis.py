@@ -1,0 +1,240 @@
+"""Hysteresis of the flow angle: an angle ramp up from rest and back down, theta_start and theta_stop.
+
+A ramp run (:class:`~lubcontact.flow.config.RunConfig` with ``ramp_stages``)
+tilts a settled bed to ``angle``, holds every angle ``hold_steps`` steps and
+turns the incline by ``ramp_step`` degrees between holds, up for
+``ramp_stages`` stages, then back down; the grains keep their velocities and
+the contacts their gluey state across a change. At the end of each hold the
+layer is *flowing* when its mean downhill velocity (mass-weighted, averaged
+over the last :data:`END_FRACTION` of the hold) exceeds ``flow_speed``
+(:data:`FLOW_SPEED` ``sqrt(g' d)`` by default):
+
+- ``theta_start``: the first angle of the way up at which the layer flows;
+- ``theta_stop``: the first angle of the way down at which it no longer
+  flows (only when it flowed at the top);
+
+so a stage's angle is an upper bound of the transition it shows: the layer
+started (stopped) somewhere within one ``ramp_step`` below (above) it.
+
+In the output folder: the runs ``seed_<k>/<model>/ramp/`` (the files of
+:mod:`lubcontact.flow.run`), ``stages.csv`` (every hold of every run),
+``hysteresis.csv`` (one row per model and seed) and ``ramp.png``.
+"""
+from __future__ import annotations
+
+import pathlib
+from dataclasses import dataclass, replace
+from typing import Any
+
+import numpy as np
+
+from .. import checks
+from .config import RunConfig
+from .sweep import group_folder, run_all, write_csv
+
+FLOW_SPEED = 0.01
+"""Default threshold of a flowing layer: mean downhill velocity in units of ``sqrt(g' d)``."""
+END_FRACTION = 0.25
+"""The part of a hold (its last quarter) whose samples give the hold's end velocity."""
+STAGE_COLUMNS = ("model", "seed", "stage", "leg", "angle", "mean_velocity", "flowing")
+RESULT_COLUMNS = ("model", "seed", "theta_start", "theta_stop", "width", "ramp_step",
+                  "hold_steps", "flow_speed")
+
+
+@dataclass
+class Stage:
+    """One hold of a ramp.
+
+    Attributes
+    ----------
+    stage : int
+        Its index (0-based).
+    leg : str
+        ``"up"`` (including the top) or ``"down"``.
+    angle : float
+        Incline angle (degrees).
+    mean_velocity : float
+        Mean downhill velocity over the end of the hold (``sqrt(g' d)``).
+    """
+
+    stage: int
+    leg: str
+    angle: float
+    mean_velocity: float
+
+
+def ramp_config(config: RunConfig, start: float, stop: float, step: float, hold: int) -> RunConfig:
+    """``config`` made a ramp from ``start`` to ``stop`` degrees and back, ``step`` per hold.
+
+    Parameters
+    ----------
+    config : RunConfig
+        The other settings (model, seed, solver, ...).
+    start, stop : float
+        First and turning angle (degrees); ``stop`` is reached only if it is
+        a whole number of ``step`` from ``start``, else the ramp turns below it.
+    step : float
+        Degrees per stage (> 0; the sign follows ``stop - start``).
+    hold : int
+        Steps per angle.
+
+    Raises
+    ------
+    ValueError
+        Naming ``step`` or ``stop`` when the ramp has no stage, or a field
+        :class:`RunConfig` refuses.
+    """
+    step = checks.positive_scalar("step", step)
+    stages = int(np.floor(abs(stop - start) / step + 1e-9))
+    checks.require(stages >= 1, "stop", f"must be at least one step ({step:g}) from start "
+                   f"({start:g})", stop)
+    signed = step if stop > start else -step
+    ramp = replace(config, scene="inclined_flow", angle=float(start), ramp_step=float(signed),
+                   ramp_stages=stages, hold_steps=int(hold), steps=(2 * stages + 1) * int(hold))
+    return ramp
+
+
+def stages(series: dict[str, np.ndarray], config: RunConfig) -> list[Stage]:
+    """The holds of a ramp run and the velocity at the end of each.
+
+    Parameters
+    ----------
+    series : dict of str to ndarray
+        The run's time series (``step``, ``mean_velocity``; :data:`lubcontact.flow.run.SERIES`).
+    config : RunConfig
+        The ramp's config.
+
+    Returns
+    -------
+    list of Stage
+        The holds that have samples in their last :data:`END_FRACTION`, in order.
+    """
+    steps = np.asarray(series["step"], dtype=float)
+    velocity = np.asarray(series["mean_velocity"], dtype=float)
+    hold = int(config.hold_steps)
+    out = []
+    for stage in range(2 * int(config.ramp_stages) + 1):
+        first = stage * hold
+        end = (steps > first + (1.0 - END_FRACTION) * hold) & (steps <= first + hold)
+        if not end.any():
+            continue
+        angle = config.ramp_stage(first)[1]
+        out.append(Stage(stage=stage, leg="up" if stage <= config.ramp_stages else "down",
+                         angle=angle, mean_velocity=float(np.mean(velocity[end]))))
+    return out
+
+
+def onset_angles(holds: list[Stage], flow_speed: float = FLOW_SPEED) -> tuple[float, float]:
+    """``theta_start`` and ``theta_stop`` of a ramp (see the module).
+
+    Parameters
+    ----------
+    holds : list of Stage
+        The ramp's holds (:func:`stages`).
+    flow_speed : float
+        Threshold of a flowing layer (``sqrt(g' d)``).
+
+    Returns
+    -------
+    (float, float)
+        The angles (degrees); NaN when the layer never flowed on the way up
+        (``theta_start``), or did not flow at the top or never stopped on the
+        way down (``theta_stop``).
+    """
+    up = [h for h in holds if h.leg == "up"]
+    down = [h for h in holds if h.leg == "down"]
+    start = next((h.angle for h in up if abs(h.mean_velocity) > flow_speed), float("nan"))
+    stop = float("nan")
+    if up and abs(up[-1].mean_velocity) > flow_speed:
+        stop = next((h.angle for h in down if abs(h.mean_velocity) <= flow_speed), float("nan"))
+    return start, stop
+
+
+def hysteresis(config: RunConfig, models: list[str], seeds: list[int], out_dir: pathlib.Path, *,
+               flow_speed: float = FLOW_SPEED, progress: bool = False, workers: int = 1,
+               scheduler: str | None = None) -> tuple[list[dict[str, Any]], list[dict[str, Any]]]:
+    """The ramp of ``config`` for every model and seed; ``stages.csv``, ``hysteresis.csv``.
+
+    Each seed's runs start from its own settled bed (``seed_<k>/bed.npz``).
+    Finished runs are read back, interrupted ones continue from their
+    checkpoints (:func:`~lubcontact.flow.sweep.run_all`).
+
+    Parameters
+    ----------
+    config : RunConfig
+        A ramp (:func:`ramp_config`); ``model``, ``seed`` and ``bed`` are set per run.
+    models : list of str
+        Contact models.
+    seeds : list of int
+        Seeds (the grain sizes and the bed).
+    out_dir : pathlib.Path
+        The output folder.
+    flow_speed : float
+        Threshold of a flowing layer (``sqrt(g' d)``).
+    progress, workers, scheduler
+        As :func:`~lubcontact.flow.sweep.run_all`.
+
+    Returns
+    -------
+    (list of dict, list of dict)
+        One row per (model, seed), models outer: the :data:`RESULT_COLUMNS`;
+        and one per hold of each run: the :data:`STAGE_COLUMNS`.
+    """
+    checks.require(config.ramp_stages > 0, "config", "must be a ramp (ramp_stages > 0)",
+                   config.ramp_stages)
+    flow_speed = checks.positive_scalar("flow_speed", flow_speed)
+    out_dir = pathlib.Path(out_dir)
+    runs = []
+    for model in models:
+        for seed in seeds:
+            folder = group_folder(out_dir, {"seed": seed})
+            runs.append((replace(config, model=model, seed=int(seed),
+                                 bed=str(folder / "bed.npz")), folder / model / "ramp"))
+    run_all(runs, progress, workers, scheduler)
+    stage_rows, results = [], []
+    for run_config, run_dir in runs:
+        with np.load(run_dir / "measurements.npz") as data:
+            series = {name[len("series."):]: data[name] for name in data.files
+                      if name.startswith("series.")}
+        holds = stages(series, run_config)
+        start, stop = onset_angles(holds, flow_speed)
+        where = {"model": run_config.model, "seed": run_config.seed}
+        stage_rows += [{**where, "stage": h.stage, "leg": h.leg, "angle": h.angle,
+                        "mean_velocity": h.mean_velocity,
+                        "flowing": int(abs(h.mean_velocity) > flow_speed)} for h in holds]
+        results.append({**where, "theta_start": start, "theta_stop": stop,
+                        "width": start - stop, "ramp_step": abs(run_config.ramp_step),
+                        "hold_steps": run_config.hold_steps, "flow_speed": flow_speed})
+    write_csv(out_dir / "stages.csv", stage_rows, STAGE_COLUMNS)
+    write_csv(out_dir / "hysteresis.csv", results, RESULT_COLUMNS)
+    return results, stage_rows
+
+
+def model_means(results: list[dict[str, Any]]) -> dict[str, dict[str, float]]:
+    """Mean and standard deviation over seeds of ``theta_start``, ``theta_stop`` and ``width``.
+
+    Parameters
+    ----------
+    results : list of dict
+        Rows of :func:`hysteresis`.
+
+    Returns
+    -------
+    dict of str to dict
+        Per model: ``<name>`` and ``<name>_sd`` (sample standard deviation,
+        NaN for one seed) for each quantity, over the seeds where it is
+        defined, and ``seeds`` (rows) and ``<name>_n`` (defined values).
+    """
+    out: dict[str, dict[str, float]] = {}
+    for model in dict.fromkeys(row["model"] for row in results):
+        rows = [row for row in results if row["model"] == model]
+        entry: dict[str, float] = {"seeds": len(rows)}
+        for name in ("theta_start", "theta_stop", "width"):
+            values = np.array([row[name] for row in rows], dtype=float)
+            values = values[np.isfinite(values)]
+            entry[name] = float(np.mean(values)) if values.size else float("nan")
+            entry[f"{name}_sd"] = float(np.std(values, ddof=1)) if values.size > 1 \
+                else float("nan")
+            entry[f"{name}_n"] = int(values.size)
+        out[model] = entry
+    return out
