@@ -259,7 +259,7 @@ def _add_parallel(parser: argparse.ArgumentParser) -> None:
 
 def hysteresis_parser() -> argparse.ArgumentParser:
     """The parser of ``lubcontact hysteresis`` (its options' defaults are None: see the module)."""
-    from .hysteresis import FLOW_SPEED
+    from .config import FLOW_SPEED
 
     parser = _Parser(
         prog="lubcontact hysteresis",

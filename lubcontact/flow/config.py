@@ -41,6 +41,9 @@ run is resumed.
 
 Q_UNIT = "d sqrt(g' d)"
 """Unit of the flow rate in every output: ``d`` the mean grain diameter, ``g'`` the reduced gravity."""
+FLOW_SPEED = 0.01
+"""Default threshold of a flowing layer in a ramp (:mod:`lubcontact.flow.hysteresis`): mean
+downhill velocity in units of ``sqrt(g' d)``."""
 DT_UNIT = "sqrt(d/g')"
 """Unit of ``dt_fraction``: the time step is ``dt_fraction x sqrt(d / g')``."""
 

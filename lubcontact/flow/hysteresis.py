@@ -29,11 +29,9 @@ from typing import Any
 import numpy as np
 
 from .. import checks
-from .config import RunConfig
+from .config import FLOW_SPEED, RunConfig
 from .sweep import group_folder, run_all, write_csv
 
-FLOW_SPEED = 0.01
-"""Default threshold of a flowing layer: mean downhill velocity in units of ``sqrt(g' d)``."""
 END_FRACTION = 0.25
 """The part of a hold (its last quarter) whose samples give the hold's end velocity."""
 STAGE_COLUMNS = ("model", "seed", "stage", "leg", "angle", "mean_velocity", "flowing")

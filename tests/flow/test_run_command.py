@@ -185,9 +185,10 @@ def help_blocks(text):
     return blocks
 
 
-@pytest.mark.parametrize("command", ["run", "sweep"])
+@pytest.mark.parametrize("command", ["run", "sweep", "hysteresis"])
 def test_help_gives_a_text_and_the_default_of_every_option(command, capsys):
-    main = {"run": flow_cli.run_main, "sweep": flow_cli.sweep_main}[command]
+    main = {"run": flow_cli.run_main, "sweep": flow_cli.sweep_main,
+            "hysteresis": flow_cli.hysteresis_main}[command]
     with pytest.raises(SystemExit) as exit_:
         main(["--help"])
     assert exit_.value.code == 0
@@ -213,15 +214,29 @@ RUN_ERRORS = [(["--n", "0"], "--n", "n_grains"), (["--angle", "abc"], "--angle",
               (["--width", "-2"], "--width", None), (["--max-outer", "0"], "--max-outer", "max_outer")]
 SWEEP_ERRORS = [(["--angles", "15:28"], "--angles", None), (["--models", "dry,wet"], "--models", None),
                 (["--n", "0"], "--n", "n_grains"), (["--tol-fp", "0"], "--tol-fp", "tol_fp"),
-                (["--workers", "0"], "--workers", None)]
+                (["--workers", "0"], "--workers", None), (["--seeds", "1,x"], "--seeds", None),
+                (["--seeds", "1,1"], "--seeds", None), (["--seeds", "1", "--seed", "2"], "--seeds",
+                                                        None),
+                (["--viscosities", "1e-3"], "--viscosities", "viscosity"),
+                (["--viscosity", "1e-3"], "--viscosity", None),
+                (["--preset", "poster", "--roughnesses", "0,1e-6"], "--roughnesses", None)]
+HYSTERESIS_ERRORS = [(["--to", "14.5"], "--to", None), (["--seed", "1"], "--seed", None),
+                     (["--step", "0"], "--step", None), (["--hold", "0"], "--hold", None),
+                     (["--models", "wet"], "--models", None),
+                     (["--flow-speed", "-1"], "--flow-speed", None)]
 
 
 def test_bad_values_are_one_line_errors_naming_the_flag(tmp_path, capsys):
     run_base = ["inclined_flow", "--out", str(tmp_path / "run"), *SMALL, "--steps", "1"]
     sweep_base = ["--out", str(tmp_path / "sweep"), *SMALL, "--steps", "1", "--angles", "22",
                   "--models", "dry"]
+    ramp_base = ["--out", str(tmp_path / "ramp"), *SMALL, "--from", "14", "--to", "16",
+                 "--hold", "1", "--models", "dry"]
+    ramp_base.remove("--model")
+    ramp_base.remove("dry")
     cases = ([(flow_cli.run_main, run_base, *case) for case in RUN_ERRORS]
-             + [(flow_cli.sweep_main, sweep_base, *case) for case in SWEEP_ERRORS])
+             + [(flow_cli.sweep_main, sweep_base, *case) for case in SWEEP_ERRORS]
+             + [(flow_cli.hysteresis_main, ramp_base, *case) for case in HYSTERESIS_ERRORS])
     for main, base, bad, flag, field in cases:
         capsys.readouterr()
         with pytest.raises(SystemExit) as exit_:
@@ -239,7 +254,7 @@ def test_no_progress_bar_when_stderr_is_not_a_terminal(tmp_path, capsys):
     assert capsys.readouterr().err == ""
 
 
-@pytest.mark.parametrize("command", ["run", "sweep"])
+@pytest.mark.parametrize("command", ["run", "sweep", "hysteresis"])
 def test_help_imports_no_solver_plotting_or_scipy(command):
     """``lubcontact run --help`` must stay instant: nothing heavy is imported to parse."""
     done = subprocess.run([sys.executable, "-X", "importtime", "-m", "lubcontact.cli", command,

@@ -1,0 +1,193 @@
+"""Sweeps over seeds, viscosity and roughness; angle ramps and the hysteresis of the flow angle."""
+import csv
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from lubcontact.flow import cli as flow_cli
+from lubcontact.flow import hysteresis, measure, sweep
+from lubcontact.flow.bed import initial_scene
+from lubcontact.flow.config import RunConfig
+from lubcontact.flow.run import FlowRun
+from lubcontact.scenes import inclined
+
+TINY = ["--n", "16", "--width", "10", "--dt", "0.05", "--settle-steps", "10", "--solver",
+        "clarabel", "--checkpoint-every", "3", "--sample-every", "2", "--no-progress"]
+
+
+def read_csv(path):
+    with open(path, newline="") as stream:
+        return list(csv.DictReader(stream))
+
+
+def final_state(run_dir):
+    with np.load(run_dir / "checkpoint.npz") as data:
+        return {key: data[key] for key in data.files if key.startswith("scene")}
+
+
+# -- the axes ---------------------------------------------------------------------------------------
+def test_axis_groups_are_the_product_of_the_given_axes_seed_outermost():
+    groups = sweep.axis_groups(roughness=[1e-7, 1e-6], seed=[0, 3])
+    assert groups == [{"seed": 0, "roughness": 1e-7}, {"seed": 0, "roughness": 1e-6},
+                      {"seed": 3, "roughness": 1e-7}, {"seed": 3, "roughness": 1e-6}]
+    assert sweep.axis_groups() == [{}] and sweep.axis_groups(viscosity=None) == [{}]
+    assert str(sweep.group_folder("out", {"seed": 3, "viscosity": 0.01})) == "out/seed_3/eta_0.01"
+    with pytest.raises(ValueError, match="friction"):
+        sweep.axis_groups(friction=[0.3])
+    with pytest.raises(ValueError, match="seed"):
+        sweep.axis_groups(seed=[1, 1])
+
+
+def test_viscosity_and_roughness_set_gamma_min_of_the_poster_preset():
+    """gamma_min = 6 pi eta r_eff^2 ln(eps / r_eff): linear in eta, through ln(eps) in eps."""
+    base = RunConfig(preset="poster").params
+    thicker = RunConfig(preset="poster", viscosity=0.1, roughness=1e-5).params
+    assert (base.viscosity, base.roughness) == (1e-3, 1e-6)
+    assert (thicker.viscosity, thicker.roughness) == (0.1, 1e-5)
+    contacts = SimpleNamespace(effective_radius=np.array([0.5e-3, 0.4e-3]), count=2)
+    r_eff = contacts.effective_radius
+    np.testing.assert_allclose(thicker.law("gluey").gamma_min(contacts),
+                               6 * np.pi * 0.1 * r_eff**2 * np.log(1e-5 / r_eff), rtol=1e-12)
+    np.testing.assert_allclose(base.law("gluey").gamma_min(contacts),
+                               6 * np.pi * 1e-3 * r_eff**2 * np.log(1e-6 / r_eff), rtol=1e-12)
+    with pytest.raises(ValueError, match="viscosity: only the poster preset"):
+        RunConfig(viscosity=0.1)
+    with pytest.raises(ValueError, match="roughness: must be > 0"):
+        RunConfig(preset="poster", roughness=0.0)
+
+
+def test_seed_means_give_the_mean_and_the_spread_over_seeds():
+    rows = [{"model": "dry", "angle": 20.0, "seed": s, "viscosity": None, "roughness": None,
+             "flow_rate": q, "fraction_glued": None} for s, q in ((0, 1.0), (1, 2.0), (2, 6.0))]
+    rows.append({"model": "dry", "angle": 22.0, "seed": 0, "viscosity": None, "roughness": None,
+                 "flow_rate": 5.0})
+    means = sweep.seed_means(rows)
+    assert [(m["angle"], m["seeds"]) for m in means] == [(20.0, 3), (22.0, 1)]
+    assert means[0]["flow_rate"] == pytest.approx(3.0)
+    assert means[0]["flow_rate_sd"] == pytest.approx(np.sqrt(7.0))      # (4 + 1 + 9) / 2
+    assert means[0]["flow_rate_se"] == pytest.approx(np.sqrt(7.0 / 3.0))
+    assert np.isnan(means[0]["fraction_glued"]) and np.isnan(means[1]["flow_rate_sd"])
+
+
+def test_a_seed_of_a_seed_sweep_is_the_plain_sweep_of_that_seed(tmp_path, capsys):
+    """--seeds 0,2 puts each seed in seed_<k>/ with its own bed; the seed-2 runs are bit for bit
+    the runs of --seed 2; sweep_means.csv averages the two seeds."""
+    common = [*TINY, "--models", "dry", "--angles", "22", "--steps", "4"]
+    assert flow_cli.sweep_main([*common, "--seeds", "0,2", "--out", str(tmp_path / "two")]) == 0
+    assert flow_cli.sweep_main([*common, "--seed", "2", "--out", str(tmp_path / "one")]) == 0
+    run = ("dry", "angle_22.00")
+    two, one = final_state(tmp_path / "two" / "seed_2" / "dry" / run[1]), \
+        final_state(tmp_path / "one" / "dry" / run[1])
+    assert two.keys() == one.keys()
+    for key in one:
+        np.testing.assert_array_equal(two[key], one[key], err_msg=key)
+    assert (tmp_path / "two" / "seed_0" / "bed.npz").exists()
+    rows = read_csv(tmp_path / "two" / "sweep.csv")
+    assert [row["seed"] for row in rows] == ["0", "2"]
+    means = read_csv(tmp_path / "two" / "sweep_means.csv")
+    rates = [float(row["flow_rate [d sqrt(g' d)]"]) for row in rows]
+    assert len(means) == 1 and means[0]["seeds"] == "2"
+    assert float(means[0]["flow_rate [d sqrt(g' d)]"]) == pytest.approx(np.mean(rates))
+    assert float(means[0]["flow_rate_sd"]) == pytest.approx(np.std(rates, ddof=1))
+    assert not (tmp_path / "one" / "sweep_means.csv").exists()
+    for figure in ("flow_rate.png", "contact_states.png", "coordination.png"):
+        assert (tmp_path / "two" / figure).exists()
+
+
+def test_a_viscosity_sweep_runs_each_viscosity_in_its_folder_with_its_glue(tmp_path, capsys):
+    argv = [*TINY, "--preset", "poster", "--models", "gluey", "--angles", "20", "--steps", "2",
+            "--viscosities", "1e-3,10", "--out", str(tmp_path)]
+    assert flow_cli.sweep_main(argv) == 0
+    rows = read_csv(tmp_path / "sweep.csv")
+    assert [float(row["viscosity [Pa s]"]) for row in rows] == [1e-3, 10.0]
+    for eta in ("eta_0.001", "eta_10"):
+        stored = RunConfig.from_json(str(np.load(tmp_path / eta / "gluey" / "angle_20.00" /
+                                                 "checkpoint.npz")["config"]))
+        assert stored.viscosity == float(eta[4:])
+    assert (tmp_path / "regime_map.png").exists()
+
+
+# -- coordination ------------------------------------------------------------------------------------
+def test_coordination_counts_both_ends_of_a_grain_grain_contact_and_one_of_a_bed_contact():
+    """Three free grains (0, 1, 2), fixed bodies from 3 on: contacts (0,1) glued, (3,1) frictional,
+    (1,2) frictional, (4,2) inactive."""
+    gamma = np.array([-0.5, -1.0, -1.0, -2.0])
+    floor = np.full(4, -1.0)
+    active = np.array([True, True, True, False])
+    masks = measure.state_masks(gamma, floor, active)
+    np.testing.assert_array_equal(masks.sum(axis=1), [0, 1, 2])
+    body_a = np.array([0, 3, 1, 4])
+    np.testing.assert_allclose(measure.coordination(masks, body_a, 3), [0.0, 2 / 3, 3 / 3])
+
+
+# -- ramps -----------------------------------------------------------------------------------------
+def test_a_ramp_goes_up_by_its_step_every_hold_then_back_down():
+    config = hysteresis.ramp_config(RunConfig(), 14.0, 17.5, 1.5, 10)
+    assert (config.ramp_stages, config.ramp_step, config.steps) == (2, 1.5, 50)
+    angles = [config.ramp_stage(step) for step in (0, 9, 10, 19, 20, 29, 30, 39, 40, 49, 60)]
+    assert angles == [(0, 14.0), (0, 14.0), (1, 15.5), (1, 15.5), (2, 17.0), (2, 17.0),
+                      (3, 15.5), (3, 15.5), (4, 14.0), (4, 14.0), (4, 14.0)]
+    down = hysteresis.ramp_config(RunConfig(), 20.0, 18.0, 1.0, 5)
+    assert down.ramp_step == -1.0 and down.ramp_stage(5)[1] == 19.0
+    with pytest.raises(ValueError, match="steps: a ramp of 2 stages"):
+        RunConfig(angle=14.0, ramp_step=1.0, ramp_stages=2, hold_steps=10, steps=40)
+    with pytest.raises(ValueError, match="far end"):
+        RunConfig(angle=80.0, ramp_step=5.0, ramp_stages=2, hold_steps=1, steps=5)
+    with pytest.raises(ValueError, match="stop"):
+        hysteresis.ramp_config(RunConfig(), 14.0, 14.5, 1.0, 10)
+
+
+def test_a_ramp_run_tilts_gravity_by_stage_and_resumes_to_the_same_state(tmp_path):
+    """Gravity follows the schedule (also after a resume); a ramp interrupted mid-way and resumed
+    reaches the state of the uninterrupted ramp bit for bit; the sampled angles are the stages'."""
+    config = hysteresis.ramp_config(RunConfig(n_grains=16, width=10.0, model="gluey",
+                                              dt_fraction=0.05, settle_steps=10,
+                                              solver="clarabel", checkpoint_every=3,
+                                              sample_every=1), 20.0, 24.0, 2.0, 3)
+    scene = initial_scene(config, tmp_path)
+    whole = FlowRun(config, scene, tmp_path / "whole")
+    whole.advance(4)
+    g = np.linalg.norm(whole.sim.scene.gravity)
+    np.testing.assert_allclose(whole.sim.scene.gravity, inclined.tilted_gravity(g, 22.0))
+    whole.finish()
+    assert whole.series["angle"] == [20.0] * 3 + [22.0] * 3 + [24.0] * 3 + [22.0] * 3 + [20.0] * 3
+    parted = FlowRun(config, scene, tmp_path / "parted")
+    parted.advance(7)                  # checkpoint at step 6, in the top stage's hold
+    resumed = FlowRun.resume(tmp_path / "parted" / "checkpoint.npz")
+    resumed.finish()
+    for key, value in final_state(tmp_path / "whole").items():
+        np.testing.assert_array_equal(final_state(tmp_path / "parted")[key], value, err_msg=key)
+
+
+def test_onset_angles_read_the_first_flowing_hold_up_and_the_first_still_hold_down():
+    config = hysteresis.ramp_config(RunConfig(), 10.0, 14.0, 1.0, 4)
+    velocity = {0: 1e-6, 1: 2e-3, 2: 0.05, 3: 0.2, 4: 0.5, 5: 0.3, 6: 0.02, 7: 0.004, 8: 1e-5}
+    steps = np.arange(1, config.steps + 1)
+    series = {"step": steps, "mean_velocity": np.array([velocity[(k - 1) // 4] for k in steps])}
+    holds = hysteresis.stages(series, config)
+    assert [(h.leg, h.angle) for h in holds][:6] == [("up", 10.0), ("up", 11.0), ("up", 12.0),
+                                                     ("up", 13.0), ("up", 14.0), ("down", 13.0)]
+    assert hysteresis.onset_angles(holds, 0.01) == (12.0, 11.0)
+    assert hysteresis.onset_angles(holds, 0.001) == (11.0, 10.0)
+    start, stop = hysteresis.onset_angles(holds, 1.0)         # never flows
+    assert np.isnan(start) and np.isnan(stop)
+    still = {**velocity, 6: 0.2, 7: 0.1, 8: 0.05}              # never stops on the way down
+    series["mean_velocity"] = np.array([still[(k - 1) // 4] for k in steps])
+    start, stop = hysteresis.onset_angles(hysteresis.stages(series, config), 0.01)
+    assert start == 12.0 and np.isnan(stop)
+
+
+def test_the_hysteresis_command_writes_one_row_per_model_and_seed(tmp_path, capsys):
+    argv = [*TINY, "--models", "dry", "--seeds", "0,1", "--from", "18", "--to", "20", "--step",
+            "2", "--hold", "2", "--out", str(tmp_path)]
+    assert flow_cli.hysteresis_main(argv) == 0
+    rows = read_csv(tmp_path / "hysteresis.csv")
+    assert [(row["model"], row["seed"]) for row in rows] == [("dry", "0"), ("dry", "1")]
+    stages = read_csv(tmp_path / "stages.csv")
+    assert [row["leg"] for row in stages] == ["up", "up", "down"] * 2
+    assert [float(row["angle [deg]"]) for row in stages] == [18.0, 20.0, 18.0] * 2
+    assert (tmp_path / "ramp.png").exists() and (tmp_path / "seed_1" / "bed.npz").exists()
+    out = capsys.readouterr().out
+    assert "theta_start" in out and "hysteresis.csv" in out
+    assert flow_cli.hysteresis_main(argv) == 0          # read back, not run again
