@@ -344,8 +344,9 @@ def sweep_figures(rows: list[dict], out_dir: pathlib.Path, preset: str = "dimens
 
     Writes ``flow_rate.png``, ``contact_states.png`` and ``coordination.png``
     (seed means) and, with several viscosities, ``regime_map.png`` in
-    ``out_dir``; ``profiles_<model>.png`` (from the runs' ``measurements.npz``)
-    in each group's folder.
+    ``out_dir``; ``profiles_<model>.png`` and, for the gluey model,
+    ``gamma_gluey.png`` (from the runs' ``measurements.npz``) in each group's
+    folder.
 
     Parameters
     ----------
@@ -380,6 +381,42 @@ def sweep_figures(rows: list[dict], out_dir: pathlib.Path, preset: str = "dimens
                             data["profile.velocity"])))
             if curves:
                 profiles(curves, folder / f"profiles_{model}.png", params)
+        histograms = [(f"{float(row['angle']):g} deg", run_folder(folder, row["model"], row["angle"])
+                       / "measurements.npz") for row in mine if row["model"] == "gluey"]
+        histograms = [(label, path) for label, path in histograms if path.exists()]
+        if histograms:
+            gamma_histograms(histograms, folder / "gamma_gluey.png")
+
+
+def gamma_histograms(runs: list[tuple[str, pathlib.Path]], path: pathlib.Path) -> None:
+    """Distribution of ``gamma / gamma_min`` over the glued contacts of each run.
+
+    Parameters
+    ----------
+    runs : list of (str, pathlib.Path)
+        A label and the ``measurements.npz`` of each run (its ``gamma_histogram``,
+        counted over the averaging window).
+    path : pathlib.Path
+        The image file (not written when no run has a glued contact).
+    """
+    histograms = []
+    for label, file in runs:
+        with np.load(file) as data:
+            counts = data["gamma_histogram"].astype(float)
+        if counts.sum() > 0:
+            histograms.append((label, counts))
+    if not histograms:
+        return
+    fig, ax = plt.subplots(figsize=(6, 4.5))
+    for label, counts in histograms:
+        edges = np.linspace(0.0, 1.0, counts.size + 1)
+        ax.stairs(counts / counts.sum(), edges, label=label)
+    ax.set_xlabel("gamma / gamma_min (0: just glued, lubricated ... 1: frictional)")
+    ax.set_ylabel("fraction of glued contact samples (-)")
+    ax.set_yscale("log")
+    ax.legend(fontsize=8)
+    ax.grid(alpha=0.3)
+    _save(fig, path)
 
 
 def ramp_curves(stage_rows: list[dict], path: pathlib.Path, flow_speed: float) -> None:

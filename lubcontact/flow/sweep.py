@@ -299,7 +299,9 @@ def run_sweep_point(config: RunConfig, run_dir: pathlib.Path,
                     progress: bool = False) -> tuple[dict[str, Any], bool]:
     """One run of a sweep: read back when finished, continued from its checkpoint, or started.
 
-    A new run starts from the bed at ``config.bed`` (settled there when absent).
+    A new run starts from the bed at ``config.bed`` (settled there when absent). A run
+    computed here also draws its last state, contacts coloured by gamma, in
+    ``run_dir/snapshot.png``.
 
     Returns
     -------
@@ -315,7 +317,11 @@ def run_sweep_point(config: RunConfig, run_dir: pathlib.Path,
         run = FlowRun.resume(checkpoint, run_dir, **changes)
     else:
         run = FlowRun(config, initial_scene(config, None, progress), run_dir)
-    return run.finish(progress), True
+    summary = run.finish(progress)
+    from . import plots
+
+    plots.snapshot(run.sim, run.last_report, run_dir / "snapshot.png")
+    return summary, True
 
 
 def _worker_point(config: RunConfig, run_dir: pathlib.Path) -> tuple[dict[str, Any], bool]:
