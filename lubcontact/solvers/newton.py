@@ -69,6 +69,7 @@ import scipy.sparse.linalg as spla
 from ..problem.conic import ConicProblem
 from ..problem.metrics import coulomb_error
 from .coulomb import solve_coulomb
+from .dual_data import DENSE_LIMIT
 from .registry import ALL_CONES, NEWTON, register
 from .result import CONVERGED, FAILED, INACCURATE, MAX_ITER, MethodOutput
 
@@ -118,10 +119,6 @@ local solves (:mod:`.gauss_seidel`): on gluey flow steps where Newton stalled at
 2e-5 to 1e-4 it reached 1e-6 in 0.3 s, or 5e-6 at its cap, where apgd-jacobi's fixed point ran
 out at 1e-4; then apgd-jacobi's fixed point on ``s``, which solves Siconos' 2020-contact file
 to 1e-8 where Gauss-Seidel stops at 2.8e-7 (docs/records/benchmarks.md)."""
-
-DENSE_LIMIT = 300
-"""Active rows up to which a Newton system is factorised dense: a dense LU of 100-250 rows
-costs a fraction of SuperLU's set-up (measured: 0.6 ms per sparse factorisation of 122 rows)."""
 
 STALLED = "stalled"
 """Status of a Newton phase that stalled (reported in ``info``, never as a result's status)."""
