@@ -294,6 +294,10 @@ def hysteresis_parser() -> argparse.ArgumentParser:
     return parser
 
 
+RAMP_FLAGS = {**FLAGS, "angle": "--from", "stop": "--to", "step": "--step", "ramp_step": "--step",
+              "ramp_stages": "--to", "hold_steps": "--hold", "steps": "--hold", "seed": "--seeds"}
+"""The option of each field in ``lubcontact hysteresis`` (its ramp is given by --from, --to,
+--step and --hold)."""
 AXIS_FLAGS = {"seed": "--seeds", "viscosity": "--viscosities", "roughness": "--roughnesses"}
 """The list option of each axis a sweep can vary (:data:`lubcontact.flow.sweep.AXES`)."""
 
@@ -305,11 +309,12 @@ def _add_axes(parser: argparse.ArgumentParser) -> None:
         help="comma list of seeds: each gets its own bed and runs in OUT/seed_<k>/, and "
              "sweep_means.csv gives the means over seeds with their spread (default: --seed's)")
     add("--viscosities", default=None, metavar="LIST",
-        help="comma list of fluid viscosities eta (Pa s, poster preset), runs in OUT/eta_<eta>/ "
+        help="comma list of fluid viscosities eta (Pa s, poster preset), runs in OUT/eta_<eta>/; "
+             "only the gluey model depends on it: sweep it with --models gluey "
              "(default: --viscosity's)")
     add("--roughnesses", default=None, metavar="LIST",
-        help="comma list of asperity heights eps (m, poster preset), runs in OUT/eps_<eps>/ "
-             "(default: --roughness's)")
+        help="comma list of asperity heights eps (m, poster preset), runs in OUT/eps_<eps>/; "
+             "only the gluey model depends on it (default: --roughness's)")
 
 
 def _axis_values(args: argparse.Namespace, parser: argparse.ArgumentParser
@@ -368,9 +373,9 @@ def _config(args: argparse.Namespace, parser: argparse.ArgumentParser,
         parser.error(f"argument {FLAGS.get(field, field)}: {message}")
 
 
-def _show(name: str, value: Any) -> str:
-    """``--flag value`` as a user would type it."""
-    flag = FLAGS[name]
+def _show(name: str, value: Any, flags: dict[str, str] = FLAGS) -> str:
+    """``--flag value`` as a user would type it (``flags``: the command's option of each field)."""
+    flag = flags[name]
     if isinstance(value, bool):
         return flag if value else f"--no-{flag[2:]}"
     if value is None:
@@ -492,22 +497,26 @@ def run_main(argv: list[str] | None = None) -> int:
     return 0
 
 
-def _check_runs(runs: list, parser: argparse.ArgumentParser) -> None:
-    """Refuse, before any work, run folders of other runs and unfinished runs past ``--steps``."""
+def _check_runs(runs: list, parser: argparse.ArgumentParser,
+                flags: dict[str, str] = FLAGS) -> None:
+    """Refuse, before any work, run folders of other runs and unfinished runs past ``--steps``.
+
+    ``flags``: the command's option of each config field (for its messages).
+    """
     from .sweep import folder_conflicts, stored_steps
 
     for config, run_dir in runs:
         changed = folder_conflicts(run_dir, config)
-        done = stored_steps(run_dir / "checkpoint.npz")
-        if done > config.steps and not (run_dir / "summary.json").exists():
-            parser.error(f"argument --steps: {config.steps} is below the step {done} that "
-                         f"the unfinished run in {run_dir} has reached")
         if changed:
             parser.error(f"argument --out: {run_dir} holds a run made with "
-                         + ", ".join(_show(name, old) for name, (old, _) in changed.items())
-                         + " (here: " + ", ".join(_show(name, new) for name, (_, new)
+                         + ", ".join(_show(name, old, flags) for name, (old, _) in changed.items())
+                         + " (here: " + ", ".join(_show(name, new, flags) for name, (_, new)
                                                   in changed.items())
                          + "): use another --out")
+        done = stored_steps(run_dir / "checkpoint.npz")
+        if done > config.steps and not (run_dir / "summary.json").exists():
+            parser.error(f"argument {flags['steps']}: {config.steps} is below the step {done} "
+                         f"that the unfinished run in {run_dir} has reached")
 
 
 def _models(text: str, parser: argparse.ArgumentParser) -> list[str]:
@@ -648,7 +657,6 @@ def hysteresis_main(argv: list[str] | None = None) -> int:
     _check_parallel(args, parser)
     if args.seed is not None:
         parser.error("argument --seed: use --seeds")
-    args.seed = None
     seeds = _axis_values(argparse.Namespace(seeds=args.seeds, viscosities=None,
                                             roughnesses=None), parser)["seed"]
     _fill_defaults(args, parser)
@@ -659,15 +667,10 @@ def hysteresis_main(argv: list[str] | None = None) -> int:
         config = ramp_config(base, args.start, args.stop, args.step, args.hold)
     except ValueError as exc:
         field, _, message = str(exc).partition(": ")
-        parser.error(f"argument {({'stop': '--to', 'step': '--step'}).get(field, field)}: "
-                     f"{message}")
-    from dataclasses import replace
+        parser.error(f"argument {RAMP_FLAGS.get(field, field)}: {message}")
+    from .hysteresis import ramp_runs
 
-    from .sweep import group_folder
-
-    _check_runs([(replace(config, model=model, seed=seed),
-                  group_folder(args.out, {"seed": seed}) / model / "ramp")
-                 for model in models for seed in seeds], parser)
+    _check_runs(ramp_runs(config, models, seeds, args.out), parser, RAMP_FLAGS)
     progress = args.progress and sys.stderr.isatty()
     outcome, status = _guarded(lambda: hysteresis(
         config, models, seeds, args.out, flow_speed=args.flow_speed,

@@ -125,7 +125,7 @@ class RunConfig:
         An angle ramp (``inclined_flow`` only; ``ramp_stages = 0``: a fixed
         angle): the incline starts at ``angle``, turns by ``ramp_step``
         degrees every ``hold_steps`` steps for ``ramp_stages`` stages, then
-        back down the same stages to ``angle`` (:meth:`angle_at`); the
+        back down the same stages to ``angle`` (:meth:`ramp_stage`); the
         grains keep their velocities and contacts their gluey state across
         a change. ``steps`` is then ``(2 ramp_stages + 1) hold_steps``.
     checkpoint_every, sample_every, frame_every : int
@@ -222,6 +222,12 @@ class RunConfig:
             if value is not None and self.preset != "poster":
                 raise ValueError(f"{name}: only the poster preset takes it (the {self.preset} "
                                  f"preset sets gamma_min directly), got {value}")
+        if self.roughness is not None:
+            params = self.params           # eps must stay below every contact's r_eff
+            smallest = 0.5 * params.radius * (1.0 - params.polydispersity)
+            if not self.roughness < smallest:
+                raise ValueError(f"roughness: must be below the smallest effective radius "
+                                 f"r (1 - polydispersity) / 2 = {smallest:g}, got {self.roughness}")
         self._check_ramp()
 
     def _check_ramp(self) -> None:
@@ -230,6 +236,9 @@ class RunConfig:
             raise ValueError(f"ramp_stages: must be >= 0 with hold_steps >= 0, got "
                              f"{self.ramp_stages} and {self.hold_steps}")
         if not self.ramp_stages:
+            if self.ramp_step or self.hold_steps:
+                raise ValueError(f"ramp_step: ramp_step and hold_steps need ramp_stages > 0, got "
+                                 f"{self.ramp_step} and {self.hold_steps}")
             return
         if self.scene != "inclined_flow":
             raise ValueError(f"ramp_stages: a ramp needs scene inclined_flow, got {self.scene!r}")

@@ -35,8 +35,11 @@ from .sweep import group_folder, run_all, write_csv
 END_FRACTION = 0.25
 """The part of a hold (its last quarter) whose samples give the hold's end velocity."""
 STAGE_COLUMNS = ("model", "seed", "stage", "leg", "angle", "mean_velocity", "flowing")
+"""Columns of ``stages.csv``: one row per hold of each run (``flowing``: 1 or 0)."""
 RESULT_COLUMNS = ("model", "seed", "theta_start", "theta_stop", "width", "ramp_step",
                   "hold_steps", "flow_speed")
+"""Columns of ``hysteresis.csv``: one row per model and seed (``width = theta_start -
+theta_stop``, degrees; empty where undefined)."""
 
 
 @dataclass
@@ -62,7 +65,7 @@ class Stage:
 
 
 def ramp_config(config: RunConfig, start: float, stop: float, step: float, hold: int) -> RunConfig:
-    """``config`` made a ramp from ``start`` to ``stop`` degrees and back, ``step`` per hold.
+    """``config`` made a ramp up from ``start`` to ``stop`` degrees and back, ``step`` per hold.
 
     Parameters
     ----------
@@ -70,26 +73,42 @@ def ramp_config(config: RunConfig, start: float, stop: float, step: float, hold:
         The other settings (model, seed, solver, ...).
     start, stop : float
         First and turning angle (degrees); ``stop`` is reached only if it is
-        a whole number of ``step`` from ``start``, else the ramp turns below it.
+        a whole number of ``step`` above ``start``, else the ramp turns below it.
     step : float
-        Degrees per stage (> 0; the sign follows ``stop - start``).
+        Degrees per stage (> 0).
     hold : int
-        Steps per angle.
+        Steps per angle; the run must sample at least twice in the last
+        :data:`END_FRACTION` of a hold (``sample_every``).
 
     Raises
     ------
     ValueError
-        Naming ``step`` or ``stop`` when the ramp has no stage, or a field
-        :class:`RunConfig` refuses.
+        Naming ``stop`` when it is not at least one ``step`` above ``start``,
+        ``sample_every`` when a hold's end would have fewer than 2 samples, or
+        a field :class:`RunConfig` refuses.
     """
     step = checks.positive_scalar("step", step)
-    stages = int(np.floor(abs(stop - start) / step + 1e-9))
-    checks.require(stages >= 1, "stop", f"must be at least one step ({step:g}) from start "
-                   f"({start:g})", stop)
-    signed = step if stop > start else -step
-    ramp = replace(config, scene="inclined_flow", angle=float(start), ramp_step=float(signed),
+    stages = int(np.floor((stop - start) / step + 1e-9))
+    checks.require(stages >= 1, "stop", f"must be at least one step ({step:g}) above the first "
+                   f"angle ({start:g})", stop)
+    checks.require(2 * config.sample_every <= END_FRACTION * hold, "sample_every",
+                   f"must be at most {END_FRACTION:g} x hold / 2 = {END_FRACTION * hold / 2:g} "
+                   "(2 samples at the end of each hold)", config.sample_every)
+    return replace(config, scene="inclined_flow", angle=float(start), ramp_step=float(step),
                    ramp_stages=stages, hold_steps=int(hold), steps=(2 * stages + 1) * int(hold))
-    return ramp
+
+
+def ramp_runs(config: RunConfig, models: list[str], seeds: list[int], out_dir: pathlib.Path
+              ) -> list[tuple[RunConfig, pathlib.Path]]:
+    """The runs of :func:`hysteresis`: ``config`` per model and seed, and each run's folder
+    ``out_dir/seed_<k>/<model>/ramp`` (its bed ``out_dir/seed_<k>/bed.npz``), models outer."""
+    runs = []
+    for model in models:
+        for seed in seeds:
+            folder = group_folder(out_dir, {"seed": seed})
+            runs.append((replace(config, model=model, seed=int(seed),
+                                 bed=str(folder / "bed.npz")), folder / model / "ramp"))
+    return runs
 
 
 def stages(series: dict[str, np.ndarray], config: RunConfig) -> list[Stage]:
@@ -105,7 +124,13 @@ def stages(series: dict[str, np.ndarray], config: RunConfig) -> list[Stage]:
     Returns
     -------
     list of Stage
-        The holds that have samples in their last :data:`END_FRACTION`, in order.
+        The holds the run has reached (every hold of a finished run), in order.
+
+    Raises
+    ------
+    ValueError
+        Naming ``series`` when a hold the run has passed has no sample in its
+        last :data:`END_FRACTION` (samples too sparse for the hold).
     """
     steps = np.asarray(series["step"], dtype=float)
     velocity = np.asarray(series["mean_velocity"], dtype=float)
@@ -113,9 +138,11 @@ def stages(series: dict[str, np.ndarray], config: RunConfig) -> list[Stage]:
     out = []
     for stage in range(2 * int(config.ramp_stages) + 1):
         first = stage * hold
+        if steps.size == 0 or steps.max() < first + hold:
+            break                                          # not reached (yet)
         end = (steps > first + (1.0 - END_FRACTION) * hold) & (steps <= first + hold)
-        if not end.any():
-            continue
+        checks.require(bool(end.any()), "series", f"no sample in the last {END_FRACTION:g} of "
+                       f"hold {stage} (steps {first + 1}-{first + hold})", steps.size)
         angle = config.ramp_stage(first)[1]
         out.append(Stage(stage=stage, leg="up" if stage <= config.ramp_stages else "down",
                          angle=angle, mean_velocity=float(np.mean(velocity[end]))))
@@ -182,12 +209,7 @@ def hysteresis(config: RunConfig, models: list[str], seeds: list[int], out_dir: 
                    config.ramp_stages)
     flow_speed = checks.positive_scalar("flow_speed", flow_speed)
     out_dir = pathlib.Path(out_dir)
-    runs = []
-    for model in models:
-        for seed in seeds:
-            folder = group_folder(out_dir, {"seed": seed})
-            runs.append((replace(config, model=model, seed=int(seed),
-                                 bed=str(folder / "bed.npz")), folder / model / "ramp"))
+    runs = ramp_runs(config, models, seeds, out_dir)
     run_all(runs, progress, workers, scheduler)
     stage_rows, results = [], []
     for run_config, run_dir in runs:

@@ -205,9 +205,9 @@ def flow_rate(scene: Scene) -> float:
 
 
 def mean_velocity(scene: Scene) -> float:
-    """Area-weighted (mass-weighted) mean downhill velocity of the free grains (length / time)."""
-    area = scene.grains.radii**2
-    return float(area @ scene.grains.velocities[:, 0] / np.sum(area))
+    """Mass-weighted mean downhill velocity of the free grains (length / time)."""
+    masses = scene.grains.masses
+    return float(masses @ scene.grains.velocities[:, 0] / np.sum(masses))
 
 
 def kinetic_energy(scene: Scene) -> float:
@@ -239,23 +239,22 @@ def state_masks(gamma: np.ndarray, gamma_min: np.ndarray, active: np.ndarray) ->
     return np.stack([unglued, glued, frictional])
 
 
-def coordination(masks: np.ndarray, body_a: np.ndarray, n_grains: int) -> np.ndarray:
+def coordination(masks: np.ndarray, a_is_free: np.ndarray, n_grains: int) -> np.ndarray:
     """Contacts per free grain in each state, shape (len(masks),).
 
-    A contact between two free grains counts for both, one with a fixed
-    grain for its free grain only (``body_b`` is always free; bodies from
-    ``n_grains`` on are fixed).
+    A contact between two free grains counts for both, one with a fixed body
+    (a bed grain, a plane) for its free grain only (``body_b`` is always free).
 
     Parameters
     ----------
     masks : ndarray of bool, shape (k, nc)
         Contacts in each state (:func:`state_masks`).
-    body_a : ndarray of int, shape (nc,)
-        First body of each contact (global numbering).
+    a_is_free : ndarray of bool, shape (nc,)
+        Whether each contact's first body is a free grain (``Contacts.a_is_free``).
     n_grains : int
         Number of free grains.
     """
-    ends = 1.0 + (np.asarray(body_a) < n_grains)
+    ends = 1.0 + np.asarray(a_is_free, dtype=float)
     return (masks @ ends) / max(int(n_grains), 1)
 
 

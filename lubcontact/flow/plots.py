@@ -190,13 +190,18 @@ def profiles(curves: list[tuple[str, measure.Profile]], path: pathlib.Path,
     _save(fig, path)
 
 
-def _curves(rows: list[dict]) -> dict[str, list[dict]]:
+def _curves(rows: list[dict]) -> dict[str, tuple[str, list[dict]]]:
     """Sweep rows averaged over seeds (:func:`~lubcontact.flow.sweep.seed_means`), grouped into
     curves by model and the varied viscosity / roughness, each curve sorted by angle.
 
     A curve's label is its model, with ``eta`` and ``eps`` when they vary
     among the rows. The means keep ``flow_rate_std`` (the time fluctuation
     over a run's window, averaged over seeds) beside the spread over seeds.
+
+    Returns
+    -------
+    dict of str to (str, list of dict)
+        Per label, the model and the curve's seed means.
     """
     means = seed_means(rows)
     for mean in means:
@@ -208,7 +213,8 @@ def _curves(rows: list[dict]) -> dict[str, list[dict]]:
     for mean in means:
         label = " ".join([mean["model"]] + [f"{AXES[key]} {mean[key]:g}" for key in varied])
         curves.setdefault(label, []).append(mean)
-    return {label: sorted(c, key=lambda row: float(row["angle"])) for label, c in curves.items()}
+    return {label: (c[0]["model"], sorted(c, key=lambda row: float(row["angle"])))
+            for label, c in curves.items()}
 
 
 def flow_rate_curve(rows: list[dict], path: pathlib.Path) -> None:
@@ -229,7 +235,7 @@ def flow_rate_curve(rows: list[dict], path: pathlib.Path) -> None:
     """
     fig, ax = plt.subplots(figsize=(6, 4.5))
     seeds = 1
-    for label, curve in _curves(rows).items():
+    for label, (_, curve) in _curves(rows).items():
         seeds = max(seeds, max(int(row["seeds"]) for row in curve))
         errors = [row["flow_rate_sd"] if row["seeds"] > 1 else row["flow_rate_std"]
                   for row in curve]
@@ -252,8 +258,8 @@ def _state_plot(rows: list[dict], quantity: str, ylabel: str) -> tuple[Figure, A
     :func:`_curves`, seed means with their standard deviation over seeds as error bars."""
     fig, ax = plt.subplots(figsize=(6.5, 4.5))
     styles = ["-", "--", ":", "-."]
-    for index, (label, curve) in enumerate(_curves(rows).items()):
-        states = ("frictional",) if label.split()[0] == "dry" else measure.STATES
+    for index, (label, (model, curve)) in enumerate(_curves(rows).items()):
+        states = ("frictional",) if model == "dry" else measure.STATES
         for state in states:                               # dry: every contact is Coulomb
             values = [r[f"{quantity}_{state}"] for r in curve]
             errors = [r[f"{quantity}_{state}_sd"] for r in curve]
@@ -308,7 +314,7 @@ def regime_map(rows: list[dict], path: pathlib.Path) -> None:
     Parameters
     ----------
     rows : list of dict
-        Sweep rows of the ``gluey`` model with several viscosities.
+        Sweep rows of the ``gluey`` model with several viscosities and one roughness.
     path : pathlib.Path
         The image file.
     """
@@ -343,7 +349,8 @@ def sweep_figures(rows: list[dict], out_dir: pathlib.Path, preset: str = "dimens
     """Q(theta), contact states, coordination, the regime map and the profiles of a sweep.
 
     Writes ``flow_rate.png``, ``contact_states.png`` and ``coordination.png``
-    (seed means) and, with several viscosities, ``regime_map.png`` in
+    (seed means) and, with several viscosities, ``regime_map.png`` (one
+    ``regime_map_eps_<eps>.png`` per roughness when that varies too) in
     ``out_dir``; ``profiles_<model>.png`` and, for the gluey model,
     ``gamma_gluey.png`` (from the runs' ``measurements.npz``) in each group's
     folder.
@@ -364,8 +371,14 @@ def sweep_figures(rows: list[dict], out_dir: pathlib.Path, preset: str = "dimens
     flow_rate_curve(rows, out_dir / "flow_rate.png")
     state_fractions(rows, out_dir / "contact_states.png")
     coordination_curve(rows, out_dir / "coordination.png")
-    if len({row.get("viscosity") for row in rows if row["model"] == "gluey"}) > 1:
-        regime_map([row for row in rows if row["model"] == "gluey"], out_dir / "regime_map.png")
+    gluey = [row for row in rows if row["model"] == "gluey"]
+    roughnesses = sorted({row.get("roughness") for row in gluey}, key=str)
+    for roughness in roughnesses:          # one map per roughness: its cells are (angle, eta)
+        mine = [row for row in gluey if row.get("roughness") == roughness]
+        if len({row.get("viscosity") for row in mine}) > 1:
+            name = "regime_map.png" if len(roughnesses) == 1 else \
+                f"regime_map_{group_folder('.', {'roughness': roughness}).name}.png"
+            regime_map(mine, out_dir / name)
     for group in groups or [{}]:
         folder = group_folder(out_dir, group)
         mine = [row for row in rows if all(row.get(k) == v for k, v in group.items())]

@@ -267,7 +267,7 @@ class FlowRun:
                   report.result.residual, report.result.iterations, report.result.success,
                   self.config.ramp_stage(self.steps_done - 1)[1],
                   measure.mean_velocity(scene) / self.params.velocity_scale,
-                  *measure.coordination(masks, contacts.body_a, scene.grains.count))
+                  *measure.coordination(masks, contacts.a_is_free, scene.grains.count))
         for name, value in zip(SERIES, values):
             self.series[name].append(value)
         if self.averaging:
@@ -426,7 +426,9 @@ class FlowRun:
             contact state; ``mean_velocity`` (downhill, in ``sqrt(g' d)``) and
             ``coordination_<state>`` (contacts per free grain per state),
             means over the window (NaN when the checkpoint predates them);
-            ``seed``, ``friction``, ``viscosity`` and ``roughness`` (the
+            for a ramp, ``ramp_step``, ``ramp_stages`` and ``hold_steps`` (its
+            ``angle`` is the first one; :mod:`~lubcontact.flow.hysteresis`
+            reads its stages); ``seed``, ``friction``, ``viscosity`` and ``roughness`` (the
             parameters in force; the last two None when the preset sets
             ``gamma_min`` directly); ``unconverged_steps`` (None if unknown),
             ``step_statuses``, ``unconverged_samples``; ``max_cross_check``
@@ -465,6 +467,8 @@ class FlowRun:
                 "mean_velocity": _window_mean(series["mean_velocity"], window),
                 **{f"coordination_{k}": _window_mean(series[f"coordination_{k}"], window)
                    for k in measure.STATES},
+                **({"ramp_step": self.config.ramp_step, "ramp_stages": self.config.ramp_stages,
+                    "hold_steps": self.config.hold_steps} if self.config.ramp_stages else {}),
                 "seed": self.config.seed, "friction": self.params.friction,
                 "viscosity": self.params.viscosity, "roughness": self.params.roughness,
                 "unconverged_steps": (None if self.statuses is None else
@@ -483,8 +487,10 @@ class FlowRun:
 
 
 def _window_mean(values: np.ndarray, window: np.ndarray) -> float:
-    """Mean of a series over the averaging window (NaN without samples there)."""
-    return float(np.mean(values[window])) if window.any() else float("nan")
+    """Mean of a series over the averaging window, leaving out NaN samples (those of a
+    checkpoint that predates the series); NaN when no sample is left."""
+    kept = values[window & np.isfinite(values)]
+    return float(np.mean(kept)) if kept.size else float("nan")
 
 
 def units(params: inclined.FlowParameters) -> dict[str, str]:

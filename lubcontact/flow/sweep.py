@@ -86,7 +86,9 @@ def group_folder(out_dir: pathlib.Path, group: dict[str, Any]) -> pathlib.Path:
     folder = pathlib.Path(out_dir)
     for name, prefix in AXES.items():
         if name in group:
-            folder = folder / f"{prefix}_{group[name]:g}"
+            value = group[name]
+            folder = folder / (f"{prefix}_{int(value)}" if name == "seed" else
+                               f"{prefix}_{float(value):.12g}")
     return folder
 
 
@@ -106,7 +108,8 @@ def axis_groups(**axes: list | None) -> list[dict[str, Any]]:
     Raises
     ------
     ValueError
-        Naming an axis that is not in :data:`AXES`, or an axis with no value or a repeated one.
+        Naming an axis that is not in :data:`AXES`, or an axis with no value or values
+        that share a folder name (:func:`group_folder`: 12 significant digits).
     """
     groups: list[dict[str, Any]] = [{}]
     for name in axes:
@@ -115,8 +118,9 @@ def axis_groups(**axes: list | None) -> list[dict[str, Any]]:
         values = axes.get(name)
         if values is None:
             continue
-        checks.require(len(values) > 0 and len(set(values)) == len(values), name,
-                       "needs distinct values", values)
+        names = {group_folder(".", {name: value}).name for value in values}
+        checks.require(len(values) > 0 and len(names) == len(values), name,
+                       "needs distinct values (to 12 significant digits)", values)
         groups = [{**group, name: value} for group in groups for value in values]
     return groups
 
@@ -367,9 +371,15 @@ def _report(outcome: tuple[dict[str, Any], bool]) -> dict[str, Any]:
     if computed:
         where = "".join(f"{prefix} {summary[name]:g}  " for name, prefix in AXES.items()
                         if summary.get(name) is not None)
-        print(f"{summary['model']:6s} {summary['angle']:5.1f} deg  {where}"
-              f"Q = {summary['flow_rate']:.4g} {Q_UNIT}  {summary['state']}  "
-              f"{summary['steps_per_second']:.1f} steps/s", flush=True)
+        if summary.get("ramp_stages"):
+            top = summary["angle"] + summary["ramp_stages"] * summary["ramp_step"]
+            print(f"{summary['model']:6s} ramp {summary['angle']:g} -> {top:g} -> "
+                  f"{summary['angle']:g} deg  {where}{summary['steps_per_second']:.1f} steps/s",
+                  flush=True)
+        else:
+            print(f"{summary['model']:6s} {summary['angle']:5.1f} deg  {where}"
+                  f"Q = {summary['flow_rate']:.4g} {Q_UNIT}  {summary['state']}  "
+                  f"{summary['steps_per_second']:.1f} steps/s", flush=True)
     return summary
 
 
@@ -428,7 +438,7 @@ def seed_means(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
         appearance: those keys, ``seeds`` (how many runs), and for each of
         :data:`MEAN_COLUMNS` its mean, ``_sd`` (sample standard deviation over
         the seeds, NaN for one seed) and ``_se`` (``sd / sqrt(seeds)``).
-        Missing values (None) are left out of a mean.
+        Missing values (None, NaN) are left out of a mean.
     """
     groups: dict[tuple, list[dict[str, Any]]] = {}
     for row in rows:
@@ -438,6 +448,7 @@ def seed_means(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
         mean = dict(zip(MEAN_KEYS, key), seeds=len(members))
         for name in MEAN_COLUMNS:
             values = np.array([m[name] for m in members if m.get(name) is not None], dtype=float)
+            values = values[np.isfinite(values)]
             sd = float(np.std(values, ddof=1)) if values.size > 1 else float("nan")
             mean.update({name: float(np.mean(values)) if values.size else float("nan"),
                          f"{name}_sd": sd, f"{name}_se": sd / np.sqrt(values.size)

@@ -50,8 +50,9 @@ from .result import CONVERGED, DIVERGED
 DIVERGENCE_FACTOR = 1e12
 """A residual above this factor times ``max(first residual, 1)`` stops a loop as ``diverged``."""
 DENSE_LIMIT = 300
-"""Rows up to which the direct solves of the fast methods (Newton systems, exact finishes) are
-factorised dense (LAPACK): a dense LU of 100-250 rows costs a fraction of a sparse
+"""Size up to which the direct solves of the fast methods are dense (LAPACK LU): the active
+block of a Newton system (its active rows), and the exact finish's ``W`` (all its rows, kept
+dense for the solve's attempts). A dense LU of 100-250 rows costs a fraction of a sparse
 factorisation's set-up (measured: 0.6 ms per SuperLU factorisation of 122 rows)."""
 
 

@@ -37,6 +37,14 @@ def test_axis_groups_are_the_product_of_the_given_axes_seed_outermost():
         sweep.axis_groups(friction=[0.3])
     with pytest.raises(ValueError, match="seed"):
         sweep.axis_groups(seed=[1, 1])
+    # folder names keep every digit of a seed and 12 of a parameter (they once kept 6 and two
+    # seeds shared one folder, the second reading back the first one's runs)
+    folders = {sweep.group_folder("out", g) for g in sweep.axis_groups(seed=[1000000, 1000001])}
+    assert len(folders) == 2
+    assert len({sweep.group_folder("out", g) for g in
+                sweep.axis_groups(viscosity=[1e-3, 1.0000001e-3])}) == 2
+    with pytest.raises(ValueError, match="viscosity: needs distinct values"):
+        sweep.axis_groups(viscosity=[1e-3, 1e-3 * (1 + 1e-14)])
 
 
 def test_viscosity_and_roughness_set_gamma_min_of_the_poster_preset():
@@ -55,6 +63,8 @@ def test_viscosity_and_roughness_set_gamma_min_of_the_poster_preset():
         RunConfig(viscosity=0.1)
     with pytest.raises(ValueError, match="roughness: must be > 0"):
         RunConfig(preset="poster", roughness=0.0)
+    with pytest.raises(ValueError, match="roughness: must be below the smallest effective radius"):
+        RunConfig(preset="poster", roughness=5e-4)             # r (1 - 0.2) / 2 = 4e-4
 
 
 def test_seed_means_give_the_mean_and_the_spread_over_seeds():
@@ -68,6 +78,8 @@ def test_seed_means_give_the_mean_and_the_spread_over_seeds():
     assert means[0]["flow_rate_sd"] == pytest.approx(np.sqrt(7.0))      # (4 + 1 + 9) / 2
     assert means[0]["flow_rate_se"] == pytest.approx(np.sqrt(7.0 / 3.0))
     assert np.isnan(means[0]["fraction_glued"]) and np.isnan(means[1]["flow_rate_sd"])
+    rows[1]["flow_rate"] = float("nan")          # NaN (a fresh summary) is left out like None
+    assert sweep.seed_means(rows)[0]["flow_rate"] == pytest.approx(3.5)
 
 
 def test_a_seed_of_a_seed_sweep_is_the_plain_sweep_of_that_seed(tmp_path, capsys):
@@ -117,34 +129,37 @@ def test_coordination_counts_both_ends_of_a_grain_grain_contact_and_one_of_a_bed
     active = np.array([True, True, True, False])
     masks = measure.state_masks(gamma, floor, active)
     np.testing.assert_array_equal(masks.sum(axis=1), [0, 1, 2])
-    body_a = np.array([0, 3, 1, 4])
-    np.testing.assert_allclose(measure.coordination(masks, body_a, 3), [0.0, 2 / 3, 3 / 3])
+    a_is_free = np.array([0, 3, 1, 4]) < 3
+    np.testing.assert_allclose(measure.coordination(masks, a_is_free, 3), [0.0, 2 / 3, 3 / 3])
 
 
 # -- ramps -----------------------------------------------------------------------------------------
 def test_a_ramp_goes_up_by_its_step_every_hold_then_back_down():
-    config = hysteresis.ramp_config(RunConfig(), 14.0, 17.5, 1.5, 10)
+    config = hysteresis.ramp_config(RunConfig(sample_every=1), 14.0, 17.5, 1.5, 10)
     assert (config.ramp_stages, config.ramp_step, config.steps) == (2, 1.5, 50)
     angles = [config.ramp_stage(step) for step in (0, 9, 10, 19, 20, 29, 30, 39, 40, 49, 60)]
     assert angles == [(0, 14.0), (0, 14.0), (1, 15.5), (1, 15.5), (2, 17.0), (2, 17.0),
                       (3, 15.5), (3, 15.5), (4, 14.0), (4, 14.0), (4, 14.0)]
-    down = hysteresis.ramp_config(RunConfig(), 20.0, 18.0, 1.0, 5)
-    assert down.ramp_step == -1.0 and down.ramp_stage(5)[1] == 19.0
+    with pytest.raises(ValueError, match="stop: must be at least one step"):
+        hysteresis.ramp_config(RunConfig(sample_every=1), 20.0, 18.0, 1.0, 10)
+    with pytest.raises(ValueError, match="sample_every: must be at most"):
+        hysteresis.ramp_config(RunConfig(sample_every=5), 14.0, 16.0, 1.0, 20)
+    with pytest.raises(ValueError, match="ramp_step: ramp_step and hold_steps need"):
+        RunConfig(hold_steps=5)
     with pytest.raises(ValueError, match="steps: a ramp of 2 stages"):
         RunConfig(angle=14.0, ramp_step=1.0, ramp_stages=2, hold_steps=10, steps=40)
     with pytest.raises(ValueError, match="far end"):
         RunConfig(angle=80.0, ramp_step=5.0, ramp_stages=2, hold_steps=1, steps=5)
     with pytest.raises(ValueError, match="stop"):
-        hysteresis.ramp_config(RunConfig(), 14.0, 14.5, 1.0, 10)
+        hysteresis.ramp_config(RunConfig(sample_every=1), 14.0, 14.5, 1.0, 10)
 
 
 def test_a_ramp_run_tilts_gravity_by_stage_and_resumes_to_the_same_state(tmp_path):
     """Gravity follows the schedule (also after a resume); a ramp interrupted mid-way and resumed
     reaches the state of the uninterrupted ramp bit for bit; the sampled angles are the stages'."""
-    config = hysteresis.ramp_config(RunConfig(n_grains=16, width=10.0, model="gluey",
-                                              dt_fraction=0.05, settle_steps=10,
-                                              solver="clarabel", checkpoint_every=3,
-                                              sample_every=1), 20.0, 24.0, 2.0, 3)
+    config = RunConfig(n_grains=16, width=10.0, model="gluey", dt_fraction=0.05, settle_steps=10,
+                       solver="clarabel", checkpoint_every=3, sample_every=1, angle=20.0,
+                       ramp_step=2.0, ramp_stages=2, hold_steps=3, steps=15)
     scene = initial_scene(config, tmp_path)
     whole = FlowRun(config, scene, tmp_path / "whole")
     whole.advance(4)
@@ -161,10 +176,10 @@ def test_a_ramp_run_tilts_gravity_by_stage_and_resumes_to_the_same_state(tmp_pat
 
 
 def test_onset_angles_read_the_first_flowing_hold_up_and_the_first_still_hold_down():
-    config = hysteresis.ramp_config(RunConfig(), 10.0, 14.0, 1.0, 4)
+    config = hysteresis.ramp_config(RunConfig(sample_every=1), 10.0, 14.0, 1.0, 8)
     velocity = {0: 1e-6, 1: 2e-3, 2: 0.05, 3: 0.2, 4: 0.5, 5: 0.3, 6: 0.02, 7: 0.004, 8: 1e-5}
     steps = np.arange(1, config.steps + 1)
-    series = {"step": steps, "mean_velocity": np.array([velocity[(k - 1) // 4] for k in steps])}
+    series = {"step": steps, "mean_velocity": np.array([velocity[(k - 1) // 8] for k in steps])}
     holds = hysteresis.stages(series, config)
     assert [(h.leg, h.angle) for h in holds][:6] == [("up", 10.0), ("up", 11.0), ("up", 12.0),
                                                      ("up", 13.0), ("up", 14.0), ("down", 13.0)]
@@ -173,14 +188,18 @@ def test_onset_angles_read_the_first_flowing_hold_up_and_the_first_still_hold_do
     start, stop = hysteresis.onset_angles(holds, 1.0)         # never flows
     assert np.isnan(start) and np.isnan(stop)
     still = {**velocity, 6: 0.2, 7: 0.1, 8: 0.05}              # never stops on the way down
-    series["mean_velocity"] = np.array([still[(k - 1) // 4] for k in steps])
+    series["mean_velocity"] = np.array([still[(k - 1) // 8] for k in steps])
     start, stop = hysteresis.onset_angles(hysteresis.stages(series, config), 0.01)
     assert start == 12.0 and np.isnan(stop)
+    assert len(hysteresis.stages({"step": steps[:20], "mean_velocity": steps[:20]}, config)) == 2
+    sparse = {"step": steps[::7], "mean_velocity": steps[::7]}           # a hold's end unsampled
+    with pytest.raises(ValueError, match="series: no sample in the last"):
+        hysteresis.stages(sparse, config)
 
 
 def test_the_hysteresis_command_writes_one_row_per_model_and_seed(tmp_path, capsys):
     argv = [*TINY, "--models", "dry", "--seeds", "0,1", "--from", "18", "--to", "20", "--step",
-            "2", "--hold", "2", "--out", str(tmp_path)]
+            "2", "--hold", "8", "--sample-every", "1", "--out", str(tmp_path)]
     assert flow_cli.hysteresis_main(argv) == 0
     rows = read_csv(tmp_path / "hysteresis.csv")
     assert [(row["model"], row["seed"]) for row in rows] == [("dry", "0"), ("dry", "1")]
@@ -191,3 +210,9 @@ def test_the_hysteresis_command_writes_one_row_per_model_and_seed(tmp_path, caps
     out = capsys.readouterr().out
     assert "theta_start" in out and "hysteresis.csv" in out
     assert flow_cli.hysteresis_main(argv) == 0          # read back, not run again
+    capsys.readouterr()
+    with pytest.raises(SystemExit) as exit_:             # another hold: refused, naming --hold
+        flow_cli.hysteresis_main([*argv[:-2], "--hold", "12", "--out", str(tmp_path)])
+    assert exit_.value.code == 2
+    lines = [line for line in capsys.readouterr().err.splitlines() if line.strip()]
+    assert len(lines) == 1 and "--hold 8" in lines[0] and "--hold 12" in lines[0], lines
