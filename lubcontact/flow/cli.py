@@ -494,6 +494,10 @@ def run_main(argv: list[str] | None = None) -> int:
     plots.profiles([(label, run.profiles.profile())], args.out / "profile.png", run.params,
                    incline=incline)
     print(summary_json(summary))
+    if run.failure is not None:
+        print(f"lubcontact run: stopped at {run.failure}; the state before that step is in "
+              f"{args.out / 'checkpoint.npz'}", file=sys.stderr)
+        return 1
     return 0
 
 

@@ -43,7 +43,7 @@ from ..model.scene import Scene
 from ..problem.step import StepProblem
 from ..scenes import inclined
 from ..sim import Simulation, SimulationState, StepReport
-from ..solvers import CONVERGED, solve
+from ..solvers import CONVERGED, SolverError, solve
 from . import interrupt, measure
 from .config import DEFINING_FIELDS, DT_UNIT, Q_UNIT, RunConfig, flow_rate_unit
 
@@ -60,6 +60,12 @@ grain per state (``coordination_<state>``). Checkpoints written before a series 
 it NaN samples."""
 GAMMA_BINS = 20
 """Bins of the gamma / gamma_min histogram over [0, 1]."""
+STEP_FAILURE_RESIDUAL = 1e-2
+"""A step whose solve did not converge and ends with a residual above this is not a solution:
+the run stops before applying it (:attr:`FlowRun.failure`, ``state = "failed"`` in its summary).
+Steps that end below it, though not converged, are applied and counted (``unconverged_steps``).
+Measured: applying steps at residual ~1 (no method solved them) drove a gluey run at 28 degrees
+from Q = 5 to 114 d sqrt(g' d) in 40 steps (docs/records/poster-experiment.md)."""
 WARM_UP_TOL = 1e-2
 WARM_UP_ITERATIONS = 20
 """Tolerance and iteration cap of the untimed warm-up solves (:meth:`FlowRun.warm_up`)."""
@@ -101,6 +107,10 @@ class FlowRun:
         one per process that stepped the run).
     last_report : StepReport or None
         What the last step computed.
+    failure : str or None
+        Why the run stopped early: a step whose solve failed beyond
+        :data:`STEP_FAILURE_RESIDUAL` (not applied; the scene holds the last
+        good state). None while the run is sound.
     """
 
     def __init__(self, config: RunConfig, scene: Scene, out_dir: pathlib.Path | None = None):
@@ -113,7 +123,7 @@ class FlowRun:
                               fixed_point=config.fixed_point, tol_fp=config.tol_fp,
                               max_outer=config.max_outer,
                               solver_options={"joint": config.joint} if config.joint else None,
-                              keep_trajectory=False)
+                              max_residual=STEP_FAILURE_RESIDUAL, keep_trajectory=False)
         r = self.params.radius
         top = float(scene.grains.positions[:, 1].max() + 2 * r)
         self.profiles = measure.ProfileAccumulator(
@@ -128,6 +138,7 @@ class FlowRun:
         self.warm_up_time = 0.0
         self._warmed = False
         self.last_report: StepReport | None = None
+        self.failure: str | None = None
 
     @property
     def steps_done(self) -> int:
@@ -150,6 +161,9 @@ class FlowRun:
         progress : bool
             Show a progress bar (tqdm).
 
+        A step whose solve fails beyond :data:`STEP_FAILURE_RESIDUAL` ends
+        the run there (:attr:`failure`); later calls step no more.
+
         Raises
         ------
         Interrupted
@@ -158,7 +172,7 @@ class FlowRun:
             folder), then this is raised.
         """
         end = min(self.config.steps, self.steps_done + n_steps)
-        if end <= self.steps_done:
+        if end <= self.steps_done or self.failure is not None:
             return
         if not self._warmed:
             self.warm_up()
@@ -170,7 +184,11 @@ class FlowRun:
                 if self.config.ramp_stages:
                     self._tilt()
                 start, start_cpu = time.perf_counter(), time.process_time()
-                report = self.sim.step()
+                try:
+                    report = self.sim.step()
+                except SolverError as exc:
+                    self.failure = f"step {self.steps_done + 1}: {exc}"
+                    break
                 self.wall_time += time.perf_counter() - start
                 self.cpu_time += time.process_time() - start_cpu
                 if self.statuses is not None:
@@ -422,8 +440,10 @@ class FlowRun:
             averaging window); the last ``kinetic_energy``; the verdict of
             :func:`~lubcontact.flow.measure.classify_flow` (``state``,
             ``energy_ratio``, ``relative_change``; NaN when there are fewer
-            than 4 samples); ``fraction_<state>`` of the active contacts per
-            contact state; ``mean_velocity`` (downhill, in ``sqrt(g' d)``) and
+            than 4 samples), ``state`` being ``"failed"`` and ``failure``
+            saying why when the run stopped early (:attr:`failure`; else None);
+            ``fraction_<state>`` of the active contacts per contact state;
+            ``mean_velocity`` (downhill, in ``sqrt(g' d)``) and
             ``coordination_<state>`` (contacts per free grain per state),
             means over the window (NaN when the checkpoint predates them);
             for a ramp, ``ramp_step``, ``ramp_stages`` and ``hold_steps`` (its
@@ -460,7 +480,8 @@ class FlowRun:
                 "flow_rate_std": float(np.std(rate)) if window.any() else 0.0,
                 "kinetic_energy": (float(series["kinetic_energy"][-1]) if series["time"].size
                                    else 0.0),
-                "state": verdict.label if verdict else "unknown",
+                "state": "failed" if self.failure else verdict.label if verdict else "unknown",
+                "failure": self.failure,
                 "energy_ratio": verdict.energy_ratio if verdict else float("nan"),
                 "relative_change": verdict.relative_change if verdict else float("nan"),
                 **{f"fraction_{k}": v for k, v in fractions.items()},

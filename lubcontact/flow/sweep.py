@@ -380,6 +380,8 @@ def _report(outcome: tuple[dict[str, Any], bool]) -> dict[str, Any]:
             print(f"{summary['model']:6s} {summary['angle']:5.1f} deg  {where}"
                   f"Q = {summary['flow_rate']:.4g} {Q_UNIT}  {summary['state']}  "
                   f"{summary['steps_per_second']:.1f} steps/s", flush=True)
+        if summary.get("failure"):
+            print(f"       stopped at {summary['failure']}", flush=True)
     return summary
 
 
@@ -419,7 +421,7 @@ def write_csv(path: pathlib.Path, rows: list[dict[str, Any]],
 
 def _mean_columns() -> tuple[str, ...]:
     """Columns of ``sweep_means.csv``."""
-    return (*MEAN_KEYS, "seeds", *(f"{name}{suffix}" for name in MEAN_COLUMNS
+    return (*MEAN_KEYS, "seeds", "failed", *(f"{name}{suffix}" for name in MEAN_COLUMNS
                                    for suffix in ("", "_sd", "_se")))
 
 
@@ -435,7 +437,9 @@ def seed_means(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
     -------
     list of dict
         One per (model, angle, viscosity, roughness), in order of first
-        appearance: those keys, ``seeds`` (how many runs), and for each of
+        appearance: those keys, ``seeds`` (how many runs enter the means),
+        ``failed`` (runs left out: they stopped on a failed step,
+        ``state == "failed"``), and for each of
         :data:`MEAN_COLUMNS` its mean, ``_sd`` (sample standard deviation over
         the seeds, NaN for one seed) and ``_se`` (``sd / sqrt(seeds)``).
         Missing values (None, NaN) are left out of a mean.
@@ -444,8 +448,9 @@ def seed_means(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
     for row in rows:
         groups.setdefault(tuple(row.get(key) for key in MEAN_KEYS), []).append(row)
     means = []
-    for key, members in groups.items():
-        mean = dict(zip(MEAN_KEYS, key), seeds=len(members))
+    for key, every in groups.items():
+        members = [row for row in every if row.get("state") != "failed"]
+        mean = dict(zip(MEAN_KEYS, key), seeds=len(members), failed=len(every) - len(members))
         for name in MEAN_COLUMNS:
             values = np.array([m[name] for m in members if m.get(name) is not None], dtype=float)
             values = values[np.isfinite(values)]

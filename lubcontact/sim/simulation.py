@@ -69,6 +69,11 @@ class Simulation:
         ``result.info["fallback_from"]``) and raises if that fails too.
     fallback_solver : str
         The solver used by ``on_failure="fallback"`` (default ``clarabel``).
+    max_residual : float, optional
+        Whatever ``on_failure`` says, a solve that did not converge and ends
+        with a residual above this (or NaN) is never applied: it raises
+        :class:`~lubcontact.solvers.SolverError` before the state is touched
+        (default: no bound).
     warm_start : bool
         Start each solve from the previous step's forces (normal and
         tangential) and shift, matched by pair.
@@ -118,7 +123,8 @@ class Simulation:
                  d_max: float | None = None, tol: float = 1e-9, solver_options: dict | None = None,
                  on_failure: str = "raise", warm_start: bool = True, fixed_point: bool = True,
                  tol_fp: float = 1e-8, max_outer: int = 50, fallback_solver: str = "clarabel",
-                 keep_trajectory: bool = True, verify_every: int = 0,
+                 max_residual: float | None = None, keep_trajectory: bool = True,
+                 verify_every: int = 0,
                  verify_with: str = "clarabel", verify_tol: float = 1e-6,
                  export_every: int = 0, export_dir: str | Path | None = None):
         checks.require(isinstance(law, Law), "law", "must be a Law (Inelastic(), "
@@ -137,6 +143,8 @@ class Simulation:
                        f"must be a registered method ({', '.join(methods())}), "
                        f"got {fallback_solver!r}")
         self.fallback_solver = fallback_solver
+        self.max_residual = None if max_residual is None else \
+            checks.positive_scalar("max_residual", max_residual)
         self.verify_every = checks.integer("verify_every", verify_every)
         checks.require(verify_with in methods(), "verify_with",
                        f"must be a registered method ({', '.join(methods())}), got {verify_with!r}")
@@ -236,7 +244,8 @@ class Simulation:
             result.info["fallback_from"] = (failed.method, failed.status, failed.residual)
         timings["solve"] = time.perf_counter() - start
         start = time.perf_counter()
-        check_status(result, "raise" if self.on_failure == "fallback" else self.on_failure)
+        check_status(result, "raise" if self.on_failure == "fallback" else self.on_failure,
+                     self.max_residual)
         if self.verify_every and (self.steps_done + 1) % self.verify_every == 0:
             self._verify(problem, result)
         if self.export_every and (self.steps_done + 1) % self.export_every == 0:

@@ -169,18 +169,32 @@ class CoulombResult(SolveResult):
         return cls(**vars(result), inner_status=result.status)
 
 
-def check_status(result: SolveResult, policy: str) -> None:
+def check_status(result: SolveResult, policy: str, max_residual: float | None = None) -> None:
     """Apply a non-convergence policy: ``"raise"``, ``"warn"`` or ``"ignore"``.
+
+    Parameters
+    ----------
+    result : SolveResult
+    policy : str
+        What a status other than ``converged`` does.
+    max_residual : float, optional
+        A result that did not converge with a residual above this (or NaN) is
+        not a solution whatever the policy: it raises.
 
     Raises
     ------
     SolverError
-        When the status is not ``converged`` and ``policy == "raise"``.
+        When the status is not ``converged`` and ``policy == "raise"``, or its
+        residual is above ``max_residual``.
     """
-    if result.success or policy == "ignore":
+    if result.success:
         return
     message = (f"{result.method}: status {result.status} after {result.iterations} iterations, "
                f"residual {result.residual:.3e}")
+    if max_residual is not None and not result.residual <= max_residual:
+        raise SolverError(f"{message}, above the largest accepted {max_residual:g}")
+    if policy == "ignore":
+        return
     if policy == "raise":
         raise SolverError(message)
     warnings.warn(message, SolverWarning, stacklevel=3)

@@ -216,3 +216,46 @@ def test_the_hysteresis_command_writes_one_row_per_model_and_seed(tmp_path, caps
     assert exit_.value.code == 2
     lines = [line for line in capsys.readouterr().err.splitlines() if line.strip()]
     assert len(lines) == 1 and "--hold 8" in lines[0] and "--hold 12" in lines[0], lines
+
+
+# -- a step no method solves stops the run instead of being applied ------------------------------------
+def test_a_step_that_fails_beyond_the_accepted_residual_stops_the_run_before_it_is_applied(tmp_path):
+    """A failed step (here a solve reported inaccurate at residual 0.5) used to be applied with
+    the run going on (a gluey run at 28 degrees went from Q = 5 to 114); now the run stops at
+    the last good state, says why, and its summary says ``failed``; a sweep's means leave it
+    out. A step below the accepted residual is applied and counted."""
+    from dataclasses import replace as replace_result
+
+    class Failing:
+        """The run's settings, whose solves report ``inaccurate`` at a given residual."""
+
+        def __init__(self, settings, residual):
+            self.settings, self.residual = settings, residual
+
+        def __getattr__(self, name):
+            return getattr(self.settings, name)
+
+        def solve(self, *args, **kwargs):
+            result = self.settings.solve(*args, **kwargs)
+            return replace_result(result, status="inaccurate", residual=self.residual)
+
+    config = RunConfig(n_grains=16, width=10.0, model="dry", dt_fraction=0.05, settle_steps=10,
+                       solver="clarabel", checkpoint_every=2, sample_every=1, steps=6)
+    run = FlowRun(config, initial_scene(config, tmp_path), tmp_path / "run")
+    run.advance(2)
+    settings = run.sim.settings
+    run.sim.settings = Failing(settings, 1e-3)
+    run.advance(1)                               # below 1e-2: applied, counted
+    assert run.steps_done == 3 and run.statuses["inaccurate"] == 1 and run.failure is None
+    before = run.sim.scene.grains.positions.copy()
+    run.sim.settings = Failing(settings, 0.5)
+    summary = run.finish()
+    assert run.steps_done == 3 and run.failure.startswith("step 4: clarabel: status inaccurate")
+    np.testing.assert_array_equal(run.sim.scene.grains.positions, before)
+    assert summary["state"] == "failed" and summary["failure"] == run.failure
+    with np.load(tmp_path / "run" / "checkpoint.npz") as data:
+        assert int(data["steps_done"]) == 3
+    rows = [{"model": "dry", "angle": 20.0, "flow_rate": 1.0, "state": "steady"},
+            {"model": "dry", "angle": 20.0, "flow_rate": 90.0, "state": "failed"}]
+    mean = sweep.seed_means(rows)[0]
+    assert (mean["flow_rate"], mean["seeds"], mean["failed"]) == (1.0, 1, 1)
