@@ -636,6 +636,9 @@ def sweep_main(argv: list[str] | None = None) -> int:
     from . import plots
 
     plots.sweep_figures(rows, args.out, config.preset, groups)
+    from .sweep import write_report
+
+    write_report(args.out, rows, resume)
     print(f"wrote {args.out / 'sweep.csv'}")
     return 0
 

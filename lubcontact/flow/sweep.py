@@ -30,7 +30,7 @@ from typing import Any
 import numpy as np
 
 from .. import checks
-from ..io.files import atomic_path
+from ..io.files import atomic_path, save_text
 from . import interrupt
 from .bed import initial_scene
 from .config import DEFINING_FIELDS, Q_UNIT, RunConfig, flow_rate_unit
@@ -460,6 +460,62 @@ def seed_means(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
                          if values.size > 1 else float("nan")})
         means.append(mean)
     return means
+
+
+def write_report(out_dir: pathlib.Path, rows: list[dict[str, Any]], command: str) -> None:
+    """Write ``out_dir/report.md``: the command, the seed means and the files of a sweep.
+
+    Parameters
+    ----------
+    out_dir : pathlib.Path
+        The sweep's folder (its figures already written).
+    rows : list of dict
+        The runs' summaries.
+    command : str
+        The command line that reproduces the sweep.
+    """
+    out_dir = pathlib.Path(out_dir)
+    lines = ["# Sweep report", "", "Reproduce (finished runs are read back):", "", "```",
+             command, "```", "",
+             f"Flow rate Q in units of {Q_UNIT}, mean downhill velocity in sqrt(g' d); means "
+             "over seeds +/- their standard deviation over seeds; fractions of the active "
+             "contacts; z: active contacts per grain. Runs that stopped on a failed step "
+             "(column 'failed') are left out of the means.", "",
+             "| model | theta (deg) | eta (Pa s) | eps (m) | seeds | failed | Q | mean velocity | "
+             "frictional | glued | unglued | z frictional | z glued | verdicts |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    for mean in seed_means(rows):
+        verdicts = [row["state"] for row in rows
+                    if all(row.get(key) == mean[key] for key in MEAN_KEYS)]
+        lines.append("| " + " | ".join([
+            mean["model"], f"{float(mean['angle']):g}", _shown(mean["viscosity"]),
+            _shown(mean["roughness"]), str(mean["seeds"]), str(mean["failed"]),
+            _plus_minus(mean, "flow_rate"), _plus_minus(mean, "mean_velocity"),
+            *(_shown(mean[f"fraction_{state}"], ".3f") for state in ("frictional", "glued",
+                                                                      "unglued")),
+            _shown(mean["coordination_frictional"], ".2f"),
+            _shown(mean["coordination_glued"], ".2f"), ", ".join(verdicts)]) + " |")
+    figures = sorted(path.relative_to(out_dir).as_posix() for path in out_dir.rglob("*.png")
+                     if path.name != "snapshot.png")
+    lines += ["", "Files: `sweep.csv` (one row per run), `sweep_means.csv` (the table above, "
+              "with standard errors), each run's folder (`summary.json`, `measurements.npz` with "
+              "the time series, profiles and gamma histogram, `checkpoint.npz`, "
+              "`snapshot.png`: the last state, contacts coloured by gamma).", "",
+              "Figures:", ""] + [f"- `{name}`" for name in figures]
+    save_text(out_dir / "report.md", "\n".join(lines) + "\n")
+
+
+def _shown(value: Any, fmt: str = ".4g") -> str:
+    """A table cell: the value formatted, ``-`` when it has none."""
+    if value is None or (isinstance(value, float) and not np.isfinite(value)):
+        return "-"
+    return format(value, fmt) if isinstance(value, (int, float)) else str(value)
+
+
+def _plus_minus(mean: dict[str, Any], name: str) -> str:
+    """``mean +/- sd`` of a seed mean (``mean`` alone with one seed)."""
+    sd = mean[f"{name}_sd"]
+    return _shown(mean[name]) + ("" if not np.isfinite(sd) else f" +/- {sd:.2g}")
 
 
 def _cell(value: Any) -> Any:

@@ -105,6 +105,10 @@ def test_a_seed_of_a_seed_sweep_is_the_plain_sweep_of_that_seed(tmp_path, capsys
     assert not (tmp_path / "one" / "sweep_means.csv").exists()
     for figure in ("flow_rate.png", "contact_states.png", "coordination.png"):
         assert (tmp_path / "two" / figure).exists()
+    report = (tmp_path / "two" / "report.md").read_text()
+    assert "lubcontact sweep" in report and "--seeds 0,2" in report
+    assert f"| dry | 22 | - | - | 2 | 0 | {np.mean(rates):.4g} +/- " in report
+    assert (tmp_path / "two" / "seed_2" / "dry" / "angle_22.00" / "snapshot.png").exists()
 
 
 def test_a_viscosity_sweep_runs_each_viscosity_in_its_folder_with_its_glue(tmp_path, capsys):
