@@ -234,17 +234,21 @@ def flow_rate_curve(rows: list[dict], path: pathlib.Path) -> None:
         The image file.
     """
     fig, ax = plt.subplots(figsize=(6, 4.5))
-    seeds = 1
+    counts = set()
     for label, (_, curve) in _curves(rows).items():
-        seeds = max(seeds, max(int(row["seeds"]) for row in curve))
+        counts |= {int(row["seeds"]) for row in curve}
         errors = [row["flow_rate_sd"] if row["seeds"] > 1 else row["flow_rate_std"]
                   for row in curve]
         ax.errorbar([float(r["angle"]) for r in curve], [r["flow_rate"] for r in curve],
                     yerr=errors, marker="o", capsize=3, label=label)
     ax.set_xlabel("incline angle theta (degrees)")
     ax.set_ylabel(f"flow rate Q / ({Q_UNIT})")
-    ax.set_title(f"mean over {seeds} seeds, bars: standard deviation over seeds" if seeds > 1
-                 else "bars: standard deviation of Q over the averaging window", fontsize=9)
+    seeds = f"{min(counts)}-{max(counts)}" if len(counts) > 1 else str(max(counts, default=1))
+    failed = sum(int(row.get("state") == "failed") for row in rows)
+    ax.set_title((f"mean over {seeds} seeds, bars: standard deviation over seeds" if
+                  max(counts, default=1) > 1 else
+                  "bars: standard deviation of Q over the averaging window")
+                 + (f"; {failed} failed run(s) left out" if failed else ""), fontsize=9)
     ax.legend(fontsize=8)
     ax.grid(alpha=0.3)
     _save(fig, path)
