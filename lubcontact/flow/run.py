@@ -189,8 +189,9 @@ class FlowRun:
                 except SolverError as exc:
                     self.failure = f"step {self.steps_done + 1}: {exc}"
                     break
-                self.wall_time += time.perf_counter() - start
-                self.cpu_time += time.process_time() - start_cpu
+                finally:                           # a failed step's time was spent too
+                    self.wall_time += time.perf_counter() - start
+                    self.cpu_time += time.process_time() - start_cpu
                 if self.statuses is not None:
                     status = report.result.status
                     self.statuses[status] = self.statuses.get(status, 0) + 1

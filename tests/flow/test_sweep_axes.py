@@ -253,10 +253,12 @@ def test_a_step_that_fails_beyond_the_accepted_residual_stops_the_run_before_it_
     assert run.steps_done == 3 and run.statuses["inaccurate"] == 1 and run.failure is None
     before = run.sim.scene.grains.positions.copy()
     run.sim.settings = Failing(settings, 0.5)
+    wall_before = run.wall_time
     summary = run.finish()
     assert run.steps_done == 3 and run.failure.startswith("step 4: clarabel: status inaccurate")
     np.testing.assert_array_equal(run.sim.scene.grains.positions, before)
     assert summary["state"] == "failed" and summary["failure"] == run.failure
+    assert summary["wall_time"] > wall_before                # the failed step counted
     with np.load(tmp_path / "run" / "checkpoint.npz") as data:
         assert int(data["steps_done"]) == 3
     rows = [{"model": "dry", "angle": 20.0, "flow_rate": 1.0, "state": "steady"},
