@@ -266,10 +266,10 @@ def hysteresis_parser() -> argparse.ArgumentParser:
         description="Hysteresis of the flow angle: for each model and seed, a settled bed tilted "
                     "to --from, held --hold steps at each angle and turned by --step degrees "
                     "up to --to, then back down. theta_start: the first angle of the way up "
-                    "where the layer flows (mean downhill velocity above --flow-speed at the end "
-                    "of the hold); theta_stop: the first angle of the way down where it no "
-                    "longer flows. Writes hysteresis.csv, stages.csv and ramp.png in OUT; the "
-                    "runs are resumable (run the same command again).")
+                    "from which the layer flows (mean downhill velocity above --flow-speed at "
+                    "the end of a hold) at every later hold; theta_stop: the first angle of the "
+                    "way down from which it stays still. Writes hysteresis.csv, stages.csv and "
+                    "ramp.png in OUT; the runs are resumable (run the same command again).")
     parser.add_argument("--models", default="dry,gluey",
                         help="comma list of contact models among dry, gluey, frictionless "
                              "(default: dry,gluey)")

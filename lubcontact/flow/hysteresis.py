@@ -9,9 +9,10 @@ layer is *flowing* when its mean downhill velocity (mass-weighted, averaged
 over the last :data:`END_FRACTION` of the hold) exceeds ``flow_speed``
 (:data:`FLOW_SPEED` ``sqrt(g' d)`` by default):
 
-- ``theta_start``: the first angle of the way up at which the layer flows;
-- ``theta_stop``: the first angle of the way down at which it no longer
-  flows (only when it flowed at the top);
+- ``theta_start``: the first angle of the way up from which the layer flows
+  at the end of every hold up to the top;
+- ``theta_stop``: the first angle of the way down from which it is still at
+  the end of every later hold (only when it flowed at the top);
 
 so a stage's angle is an upper bound of the transition it shows: the layer
 started (stopped) somewhere within one ``ramp_step`` below (above) it.
@@ -152,6 +153,12 @@ def stages(series: dict[str, np.ndarray], config: RunConfig) -> list[Stage]:
 def onset_angles(holds: list[Stage], flow_speed: float = FLOW_SPEED) -> tuple[float, float]:
     """``theta_start`` and ``theta_stop`` of a ramp (see the module).
 
+    ``theta_start`` is the first angle of the way up from which the layer
+    flows at the end of every hold up to the top (a transient that dies out,
+    such as the bed's rearrangement just after the tilt, does not count);
+    ``theta_stop`` the first angle of the way down from which it is still at
+    the end of every later hold.
+
     Parameters
     ----------
     holds : list of Stage
@@ -162,17 +169,26 @@ def onset_angles(holds: list[Stage], flow_speed: float = FLOW_SPEED) -> tuple[fl
     Returns
     -------
     (float, float)
-        The angles (degrees); NaN when the layer never flowed on the way up
-        (``theta_start``), or did not flow at the top or never stopped on the
-        way down (``theta_stop``).
+        The angles (degrees); NaN when the layer does not flow at the top
+        (both), or does not stop by the end of the way down (``theta_stop``).
     """
     up = [h for h in holds if h.leg == "up"]
     down = [h for h in holds if h.leg == "down"]
-    start = next((h.angle for h in up if abs(h.mean_velocity) > flow_speed), float("nan"))
-    stop = float("nan")
-    if up and abs(up[-1].mean_velocity) > flow_speed:
-        stop = next((h.angle for h in down if abs(h.mean_velocity) <= flow_speed), float("nan"))
-    return start, stop
+    start = _last_run([abs(h.mean_velocity) > flow_speed for h in up])
+    if start is None:
+        return float("nan"), float("nan")
+    stop = _last_run([abs(h.mean_velocity) <= flow_speed for h in down])
+    return up[start].angle, float("nan") if stop is None else down[stop].angle
+
+
+def _last_run(flags: list[bool]) -> int | None:
+    """Index where the final run of True values begins; None when the last flag is False."""
+    if not flags or not flags[-1]:
+        return None
+    index = len(flags) - 1
+    while index > 0 and flags[index - 1]:
+        index -= 1
+    return index
 
 
 def hysteresis(config: RunConfig, models: list[str], seeds: list[int], out_dir: pathlib.Path, *,

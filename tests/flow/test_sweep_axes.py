@@ -179,22 +179,28 @@ def test_a_ramp_run_tilts_gravity_by_stage_and_resumes_to_the_same_state(tmp_pat
         np.testing.assert_array_equal(final_state(tmp_path / "parted")[key], value, err_msg=key)
 
 
-def test_onset_angles_read_the_first_flowing_hold_up_and_the_first_still_hold_down():
+def test_onset_angles_read_the_last_start_up_and_the_last_stop_down():
+    """theta_start: the angle from which the layer flows at every later hold up (a transient
+    just after the tilt does not count); theta_stop: the angle from which it stays still."""
     config = hysteresis.ramp_config(RunConfig(sample_every=1), 10.0, 14.0, 1.0, 8)
-    velocity = {0: 1e-6, 1: 2e-3, 2: 0.05, 3: 0.2, 4: 0.5, 5: 0.3, 6: 0.02, 7: 0.004, 8: 1e-5}
+    velocity = {0: 0.02, 1: 2e-3, 2: 0.05, 3: 0.2, 4: 0.5, 5: 0.3, 6: 0.02, 7: 0.004, 8: 1e-5}
     steps = np.arange(1, config.steps + 1)
-    series = {"step": steps, "mean_velocity": np.array([velocity[(k - 1) // 8] for k in steps])}
-    holds = hysteresis.stages(series, config)
+
+    def series(speeds):
+        return {"step": steps, "mean_velocity": np.array([speeds[(k - 1) // 8] for k in steps])}
+
+    holds = hysteresis.stages(series(velocity), config)
     assert [(h.leg, h.angle) for h in holds][:6] == [("up", 10.0), ("up", 11.0), ("up", 12.0),
                                                      ("up", 13.0), ("up", 14.0), ("down", 13.0)]
     assert hysteresis.onset_angles(holds, 0.01) == (12.0, 11.0)
-    assert hysteresis.onset_angles(holds, 0.001) == (11.0, 10.0)
+    assert hysteresis.onset_angles(holds, 0.001) == (10.0, 10.0)
     start, stop = hysteresis.onset_angles(holds, 1.0)         # never flows
     assert np.isnan(start) and np.isnan(stop)
-    still = {**velocity, 6: 0.2, 7: 0.1, 8: 0.05}              # never stops on the way down
-    series["mean_velocity"] = np.array([still[(k - 1) // 8] for k in steps])
-    start, stop = hysteresis.onset_angles(hysteresis.stages(series, config), 0.01)
+    moving = {**velocity, 6: 0.2, 7: 0.1, 8: 0.05}            # never stops on the way down
+    start, stop = hysteresis.onset_angles(hysteresis.stages(series(moving), config), 0.01)
     assert start == 12.0 and np.isnan(stop)
+    restart = {**velocity, 7: 0.004, 8: 0.02}                 # stops, then creeps again
+    assert np.isnan(hysteresis.onset_angles(hysteresis.stages(series(restart), config), 0.01)[1])
     assert len(hysteresis.stages({"step": steps[:20], "mean_velocity": steps[:20]}, config)) == 2
     sparse = {"step": steps[::7], "mean_velocity": steps[::7]}           # a hold's end unsampled
     with pytest.raises(ValueError, match="series: no sample in the last"):
