@@ -35,8 +35,10 @@ from .sweep import group_folder, run_all, write_csv
 
 END_FRACTION = 0.25
 """The part of a hold (its last quarter) whose samples give the hold's end velocity."""
-STAGE_COLUMNS = ("model", "seed", "stage", "leg", "angle", "mean_velocity", "flowing")
-"""Columns of ``stages.csv``: one row per hold of each run (``flowing``: 1 or 0)."""
+STAGE_COLUMNS = ("model", "seed", "stage", "leg", "angle", "mean_velocity", "acceleration",
+                 "flowing")
+"""Columns of ``stages.csv``: one row per hold of each run (``flowing``: 1 or 0;
+``mean_velocity`` in ``sqrt(g' d)``, ``acceleration`` in ``g'``: :class:`Stage`)."""
 RESULT_COLUMNS = ("model", "seed", "theta_start", "theta_stop", "width", "ramp_step",
                   "hold_steps", "flow_speed")
 """Columns of ``hysteresis.csv``: one row per model and seed (``width = theta_start -
@@ -57,12 +59,18 @@ class Stage:
         Incline angle (degrees).
     mean_velocity : float
         Mean downhill velocity over the end of the hold (``sqrt(g' d)``).
+    acceleration : float
+        Change of the mean downhill velocity from the first to the last
+        :data:`END_FRACTION` of the hold over the time between their middles,
+        in units of ``g'``: about 0 where the layer, as it is, flows steadily
+        at that angle; > 0 accelerating, < 0 slowing down.
     """
 
     stage: int
     leg: str
     angle: float
     mean_velocity: float
+    acceleration: float
 
 
 def ramp_config(config: RunConfig, start: float, stop: float, step: float, hold: int) -> RunConfig:
@@ -142,11 +150,16 @@ def stages(series: dict[str, np.ndarray], config: RunConfig) -> list[Stage]:
         if steps.size == 0 or steps.max() < first + hold:
             break                                          # not reached (yet)
         end = (steps > first + (1.0 - END_FRACTION) * hold) & (steps <= first + hold)
-        checks.require(bool(end.any()), "series", f"no sample in the last {END_FRACTION:g} of "
-                       f"hold {stage} (steps {first + 1}-{first + hold})", steps.size)
+        start = (steps > first) & (steps <= first + END_FRACTION * hold)
+        checks.require(bool(end.any() and start.any()), "series",
+                       f"no sample in the first or the last {END_FRACTION:g} of hold {stage} "
+                       f"(steps {first + 1}-{first + hold})", steps.size)
         angle = config.ramp_stage(first)[1]
+        elapsed = (1.0 - END_FRACTION) * hold * config.dt_fraction     # in sqrt(d / g')
         out.append(Stage(stage=stage, leg="up" if stage <= config.ramp_stages else "down",
-                         angle=angle, mean_velocity=float(np.mean(velocity[end]))))
+                         angle=angle, mean_velocity=float(np.mean(velocity[end])),
+                         acceleration=float(np.mean(velocity[end]) - np.mean(velocity[start]))
+                         / elapsed))
     return out
 
 
@@ -236,7 +249,7 @@ def hysteresis(config: RunConfig, models: list[str], seeds: list[int], out_dir: 
         start, stop = onset_angles(holds, flow_speed)
         where = {"model": run_config.model, "seed": run_config.seed}
         stage_rows += [{**where, "stage": h.stage, "leg": h.leg, "angle": h.angle,
-                        "mean_velocity": h.mean_velocity,
+                        "mean_velocity": h.mean_velocity, "acceleration": h.acceleration,
                         "flowing": int(abs(h.mean_velocity) > flow_speed)} for h in holds]
         results.append({**where, "theta_start": start, "theta_stop": stop,
                         "width": start - stop, "ramp_step": abs(run_config.ramp_step),

@@ -202,8 +202,10 @@ def test_onset_angles_read_the_last_start_up_and_the_last_stop_down():
     restart = {**velocity, 7: 0.004, 8: 0.02}                 # stops, then creeps again
     assert np.isnan(hysteresis.onset_angles(hysteresis.stages(series(restart), config), 0.01)[1])
     assert len(hysteresis.stages({"step": steps[:20], "mean_velocity": steps[:20]}, config)) == 2
+    ramp = {"step": steps, "mean_velocity": 0.1 * config.dt_fraction * steps}    # v = 0.1 g' t
+    np.testing.assert_allclose([h.acceleration for h in hysteresis.stages(ramp, config)], 0.1)
     sparse = {"step": steps[::7], "mean_velocity": steps[::7]}           # a hold's end unsampled
-    with pytest.raises(ValueError, match="series: no sample in the last"):
+    with pytest.raises(ValueError, match="series: no sample in the first or the last"):
         hysteresis.stages(sparse, config)
 
 
