@@ -31,7 +31,7 @@ from matplotlib.patches import Circle
 
 from lubcontact import Simulation, StepReport
 from lubcontact.bench.tables import format_table
-from lubcontact.flow.measure import contact_states, flow_rate
+from lubcontact.flow.measure import flow_rate, state_masks
 from lubcontact.flow.plots import contact_segments
 from lubcontact.scenes import inclined
 
@@ -76,7 +76,7 @@ def main(quick: bool = False, out: Path = Path("out/gallery")) -> dict[str, floa
         writer.grab_frame()
         floors = s.law.gamma_min(report.contacts)
         active = (report.gamma < 0) | (report.result.forces[: report.contacts.count] > 0)
-        unglued, glued, frictional = contact_states(report.gamma, floors, active)
+        unglued, glued, frictional = state_masks(report.gamma, floors, active).sum(axis=1)
         rows.append(dict(t=s.scene.time, flow_rate=flow_rate(s.scene), contacts=int(active.sum()),
                          glued=glued, frictional=frictional, min_gap=min(s.trajectory.min_gap[-every:])))
 
