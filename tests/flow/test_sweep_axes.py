@@ -38,7 +38,7 @@ def test_axis_groups_are_the_product_of_the_given_axes_seed_outermost():
     with pytest.raises(ValueError, match="seed"):
         sweep.axis_groups(seed=[1, 1])
     # folder names keep every digit of a seed and 12 of a parameter (they once kept 6 and two
-    # seeds shared one folder, the second reading back the first one's runs)
+    # seeds got one folder, the second reading back the first one's runs)
     folders = {sweep.group_folder("out", g) for g in sweep.axis_groups(seed=[1000000, 1000001])}
     assert len(folders) == 2
     assert len({sweep.group_folder("out", g) for g in
