@@ -317,11 +317,13 @@ def _add_axes(parser: argparse.ArgumentParser) -> None:
              "only the gluey model depends on it (default: --roughness's)")
 
 
-def _axis_values(args: argparse.Namespace, parser: argparse.ArgumentParser
-                 ) -> dict[str, list | None]:
-    """The values of ``--seeds``, ``--viscosities`` and ``--roughnesses`` (None: not given)."""
+def _axis_values(args: argparse.Namespace, parser: argparse.ArgumentParser,
+                 names: tuple[str, ...] = tuple(AXIS_FLAGS)) -> dict[str, list | None]:
+    """The values of the list options of ``names`` (``--seeds``, ``--viscosities``,
+    ``--roughnesses``; None: not given)."""
     values: dict[str, list | None] = {}
-    for name, flag in AXIS_FLAGS.items():
+    for name in names:
+        flag = AXIS_FLAGS[name]
         text = getattr(args, flag[2:])
         if text is None:
             values[name] = None
@@ -614,7 +616,7 @@ def sweep_main(argv: list[str] | None = None) -> int:
     _fill_defaults(args, parser)
     config = _config(args, parser, scene="inclined_flow", model=models[0],
                      angle=float(angles[0]))
-    from .sweep import axis_groups, sweep_runs
+    from .sweep import axis_groups, sweep, sweep_runs, write_report
 
     groups = axis_groups(**axes)
     try:
@@ -625,8 +627,6 @@ def sweep_main(argv: list[str] | None = None) -> int:
     _check_runs(runs, parser)
     progress = args.progress and sys.stderr.isatty()
     resume = "lubcontact sweep " + shlex.join(argv)
-    from .sweep import sweep
-
     rows, status = _guarded(lambda: sweep(config, angles, models, args.out,
                                           progress and args.workers == 1, workers=args.workers,
                                           scheduler=args.scheduler, groups=groups),
@@ -636,8 +636,6 @@ def sweep_main(argv: list[str] | None = None) -> int:
     from . import plots
 
     plots.sweep_figures(rows, args.out, config.preset, groups)
-    from .sweep import write_report
-
     write_report(args.out, rows, resume)
     print(f"wrote {args.out / 'sweep.csv'}")
     return 0
@@ -664,10 +662,9 @@ def hysteresis_main(argv: list[str] | None = None) -> int:
     _check_parallel(args, parser)
     if args.seed is not None:
         parser.error("argument --seed: use --seeds")
-    seeds = _axis_values(argparse.Namespace(seeds=args.seeds, viscosities=None,
-                                            roughnesses=None), parser)["seed"]
+    seeds = _axis_values(args, parser, ("seed",))["seed"]
     _fill_defaults(args, parser)
-    from .hysteresis import hysteresis, model_means, ramp_config
+    from .hysteresis import hysteresis, model_means, ramp_config, ramp_runs
 
     base = _config(args, parser, scene="inclined_flow", model=models[0], angle=args.start)
     try:
@@ -675,8 +672,6 @@ def hysteresis_main(argv: list[str] | None = None) -> int:
     except ValueError as exc:
         field, _, message = str(exc).partition(": ")
         parser.error(f"argument {RAMP_FLAGS.get(field, field)}: {message}")
-    from .hysteresis import ramp_runs
-
     _check_runs(ramp_runs(config, models, seeds, args.out), parser, RAMP_FLAGS)
     progress = args.progress and sys.stderr.isatty()
     outcome, status = _guarded(lambda: hysteresis(

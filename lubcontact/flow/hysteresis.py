@@ -31,7 +31,7 @@ import numpy as np
 
 from .. import checks
 from .config import FLOW_SPEED, RunConfig
-from .sweep import group_folder, run_all, write_csv
+from .sweep import group_folder, mean_spread, run_all, write_csv
 
 END_FRACTION = 0.25
 """The part of a hold (its last quarter) whose samples give the hold's end velocity."""
@@ -279,11 +279,7 @@ def model_means(results: list[dict[str, Any]]) -> dict[str, dict[str, float]]:
         rows = [row for row in results if row["model"] == model]
         entry: dict[str, float] = {"seeds": len(rows)}
         for name in ("theta_start", "theta_stop", "width"):
-            values = np.array([row[name] for row in rows], dtype=float)
-            values = values[np.isfinite(values)]
-            entry[name] = float(np.mean(values)) if values.size else float("nan")
-            entry[f"{name}_sd"] = float(np.std(values, ddof=1)) if values.size > 1 \
-                else float("nan")
-            entry[f"{name}_n"] = int(values.size)
+            entry[name], entry[f"{name}_sd"], entry[f"{name}_n"] = \
+                mean_spread([row[name] for row in rows])
         out[model] = entry
     return out

@@ -26,7 +26,7 @@ from ..scenes import inclined  # noqa: E402
 from ..sim import Simulation, StepReport  # noqa: E402
 from . import measure  # noqa: E402
 from .config import Q_UNIT  # noqa: E402
-from .sweep import AXES, MEAN_KEYS, group_folder, run_folder, seed_means  # noqa: E402
+from .sweep import AXES, group_folder, run_folder, seed_means  # noqa: E402
 
 GAMMA_COLORMAP = "plasma"
 
@@ -195,8 +195,7 @@ def _curves(rows: list[dict]) -> dict[str, tuple[str, list[dict]]]:
     curves by model and the varied viscosity / roughness, each curve sorted by angle.
 
     A curve's label is its model, with ``eta`` and ``eps`` when they vary
-    among the rows. The means keep ``flow_rate_std`` (the time fluctuation
-    over a run's window, averaged over seeds) beside the spread over seeds.
+    among the rows.
 
     Returns
     -------
@@ -204,9 +203,6 @@ def _curves(rows: list[dict]) -> dict[str, tuple[str, list[dict]]]:
         Per label, the model and the curve's seed means.
     """
     means = seed_means(rows)
-    for mean in means:
-        members = [r for r in rows if all(r.get(k) == mean[k] for k in MEAN_KEYS)]
-        mean["flow_rate_std"] = float(np.mean([r.get("flow_rate_std", np.nan) for r in members]))
     varied = [key for key in ("viscosity", "roughness")
               if len({mean.get(key) for mean in means}) > 1]
     curves: dict[str, list[dict]] = {}

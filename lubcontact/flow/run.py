@@ -205,10 +205,7 @@ class FlowRun:
 
     def _tilt(self) -> None:
         """Set the incline of the coming step's ramp stage (:meth:`RunConfig.ramp_stage`)."""
-        scene = self.sim.scene
-        angle = self.config.ramp_stage(self.steps_done)[1]
-        scene.gravity = inclined.tilted_gravity(float(np.linalg.norm(scene.gravity)), angle)
-        scene.metadata["angle_deg"] = angle
+        inclined.tilt(self.sim.scene, self.config.ramp_stage(self.steps_done)[1])
 
     def warm_up(self) -> None:
         """Solve, untimed, a small problem of each cone family the run's law can produce.

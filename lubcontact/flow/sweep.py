@@ -425,6 +425,22 @@ def _mean_columns() -> tuple[str, ...]:
                                    for suffix in ("", "_sd", "_se")))
 
 
+def mean_spread(values: list) -> tuple[float, float, int]:
+    """Mean and sample standard deviation of the finite values among ``values``.
+
+    Returns
+    -------
+    (float, float, int)
+        The mean (NaN without a value), the standard deviation (``ddof = 1``;
+        NaN with fewer than two values) and how many values entered (None and
+        NaN are left out).
+    """
+    kept = np.array([v for v in values if v is not None], dtype=float)
+    kept = kept[np.isfinite(kept)]
+    return (float(np.mean(kept)) if kept.size else float("nan"),
+            float(np.std(kept, ddof=1)) if kept.size > 1 else float("nan"), int(kept.size))
+
+
 def seed_means(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
     """Means over seeds of the runs that differ only by their seed (:data:`MEAN_KEYS`).
 
@@ -439,10 +455,12 @@ def seed_means(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
         One per (model, angle, viscosity, roughness), in order of first
         appearance: those keys, ``seeds`` (how many runs enter the means),
         ``failed`` (runs left out: they stopped on a failed step,
-        ``state == "failed"``), and for each of
-        :data:`MEAN_COLUMNS` its mean, ``_sd`` (sample standard deviation over
-        the seeds, NaN for one seed) and ``_se`` (``sd / sqrt(seeds)``).
-        Missing values (None, NaN) are left out of a mean.
+        ``state == "failed"``), ``states`` (every run's state, failed ones
+        included), ``flow_rate_std`` (the runs' fluctuation of Q over their
+        averaging windows, averaged), and for each of :data:`MEAN_COLUMNS`
+        its mean, ``_sd`` (sample standard deviation over the seeds, NaN for
+        one seed) and ``_se`` (``sd / sqrt(seeds)``). Missing values (None,
+        NaN) are left out of a mean (:func:`mean_spread`).
     """
     groups: dict[tuple, list[dict[str, Any]]] = {}
     for row in rows:
@@ -450,14 +468,13 @@ def seed_means(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
     means = []
     for key, every in groups.items():
         members = [row for row in every if row.get("state") != "failed"]
-        mean = dict(zip(MEAN_KEYS, key), seeds=len(members), failed=len(every) - len(members))
+        mean = dict(zip(MEAN_KEYS, key), seeds=len(members), failed=len(every) - len(members),
+                    states=[row.get("state") for row in every],
+                    flow_rate_std=mean_spread([m.get("flow_rate_std") for m in members])[0])
         for name in MEAN_COLUMNS:
-            values = np.array([m[name] for m in members if m.get(name) is not None], dtype=float)
-            values = values[np.isfinite(values)]
-            sd = float(np.std(values, ddof=1)) if values.size > 1 else float("nan")
-            mean.update({name: float(np.mean(values)) if values.size else float("nan"),
-                         f"{name}_sd": sd, f"{name}_se": sd / np.sqrt(values.size)
-                         if values.size > 1 else float("nan")})
+            average, sd, count = mean_spread([m.get(name) for m in members])
+            mean.update({name: average, f"{name}_sd": sd,
+                         f"{name}_se": sd / np.sqrt(count) if count > 1 else float("nan")})
         means.append(mean)
     return means
 
@@ -485,8 +502,6 @@ def write_report(out_dir: pathlib.Path, rows: list[dict[str, Any]], command: str
              "frictional | glued | unglued | z frictional | z glued | verdicts |",
              "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for mean in seed_means(rows):
-        verdicts = [row["state"] for row in rows
-                    if all(row.get(key) == mean[key] for key in MEAN_KEYS)]
         lines.append("| " + " | ".join([
             mean["model"], f"{float(mean['angle']):g}", _shown(mean["viscosity"]),
             _shown(mean["roughness"]), str(mean["seeds"]), str(mean["failed"]),
@@ -494,7 +509,7 @@ def write_report(out_dir: pathlib.Path, rows: list[dict[str, Any]], command: str
             *(_shown(mean[f"fraction_{state}"], ".3f") for state in ("frictional", "glued",
                                                                       "unglued")),
             _shown(mean["coordination_frictional"], ".2f"),
-            _shown(mean["coordination_glued"], ".2f"), ", ".join(verdicts)]) + " |")
+            _shown(mean["coordination_glued"], ".2f"), ", ".join(mean["states"])]) + " |")
     figures = sorted(path.relative_to(out_dir).as_posix() for path in out_dir.rglob("*.png")
                      if path.name != "snapshot.png")
     lines += ["", "Files: `sweep.csv` (one row per run), `sweep_means.csv` (the table above, "

@@ -219,15 +219,22 @@ def inclined_flow(settled: Scene, angle_deg: float, *, keep_velocities: bool = F
     Velocities and spins are reset to zero unless ``keep_velocities``.
     """
     checks.require(settled.period is not None, "settled", "needs a periodic scene", None)
-    angle = float(checks.as_array("angle_deg", angle_deg, shape=()))
-    checks.require(-90 < angle < 90, "angle_deg", "must be in (-90, 90)", angle)
     scene = settled.copy()
-    scene.gravity = tilted_gravity(float(np.linalg.norm(settled.gravity)), angle)
+    tilt(scene, angle_deg)
     if not keep_velocities:
         scene.grains.velocities[:] = 0.0
         scene.grains.spins[:] = 0.0
-    scene.metadata.update(name="inclined_flow", angle_deg=angle)
+    scene.metadata["name"] = "inclined_flow"
     return scene
+
+
+def tilt(scene: Scene, angle_deg: float) -> None:
+    """Turn ``scene``'s gravity, in place, to the incline ``angle_deg`` (degrees, in (-90, 90)):
+    ``g (sin theta, -cos theta)`` with ``g`` its magnitude; the angle goes to its metadata."""
+    angle = float(checks.as_array("angle_deg", angle_deg, shape=()))
+    checks.require(-90 < angle < 90, "angle_deg", "must be in (-90, 90)", angle)
+    scene.gravity = tilted_gravity(float(np.linalg.norm(scene.gravity)), angle)
+    scene.metadata["angle_deg"] = angle
 
 
 def time_step(params: FlowParameters, fraction: float = 0.01) -> float:
