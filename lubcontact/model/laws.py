@@ -11,9 +11,10 @@ after a step (docs/guide/model.md sections 1 and 3):
 
     gamma^{k+1} = min(0, max(gamma_min, gamma^k - dt lambda_n))
 
-snapped to 0 or gamma_min within ``state_rtol * dt * force_scale`` where
-``force_scale`` is the larger of ``max |lambda|`` and the step problem's force
-unit (so solver noise on an open contact never glues it). Gamma has
+snapped to the nearer of 0 and gamma_min within ``state_rtol * dt * force_scale``
+where ``force_scale`` is the larger of ``max |lambda|`` and the step problem's force
+unit (so solver noise on an open contact never glues it, and a floor closer to 0
+than that tolerance never glues an unpushed contact). Gamma has
 units of impulse (force x time). Pairs are identified by their contact keys;
 a pair that leaves the candidate list forgets its gamma.
 """
@@ -202,9 +203,12 @@ class GlueyLubrication(Law):
         new = np.minimum(0.0, np.maximum(lower, gamma - dt * normal_forces))
         largest = np.max(np.abs(normal_forces)) if normal_forces.size else 0.0
         tol = self.state_rtol * dt * max(largest, force_scale)
-        new[np.abs(new) <= tol] = 0.0
-        at_floor = np.isfinite(lower) & (np.abs(new - lower) <= tol)
-        new[at_floor] = lower[at_floor]
+        # the nearer state wins where both are within tol (a floor |gamma_min| <= 2 tol):
+        # an unpushed contact stays unglued, a saturated one stays at the floor
+        from_zero, from_floor = np.abs(new), np.abs(new - lower)
+        to_floor = (from_floor <= tol) & (from_floor < from_zero)
+        new[(from_zero <= tol) & ~to_floor] = 0.0
+        new[to_floor] = lower[to_floor]
         return new
 
 
