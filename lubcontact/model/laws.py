@@ -76,13 +76,21 @@ class Law:
         return np.full(contacts.count, -np.inf)
 
     def update_gamma(self, contacts: Contacts, gamma: np.ndarray, normal_forces: np.ndarray,
-                     dt: float, force_scale: float) -> np.ndarray:
+                     dt: float, force_scale: float, *, gaps_after: np.ndarray | None = None,
+                     length_scale: float = 1.0) -> np.ndarray:
         """Gamma after the step (zeros for a law without glue).
 
         Parameters
         ----------
+        normal_forces : ndarray, shape (nc,)
+            The step's normal forces (force units).
         force_scale : float
             Typical force of the step (the solver's force unit), for snapping.
+        gaps_after : ndarray, shape (nc,), optional
+            Gaps at the end of the step, ``D + dt u_n`` (length). With them a
+            contact that ends the step open does not push (:func:`pushing`).
+        length_scale : float
+            The solver's length unit, to compare a gap with a force (:func:`pushing`).
         """
         return np.zeros(contacts.count)
 
@@ -150,6 +158,30 @@ class Coulomb(Law):
         return _friction_cones(kinds, mu, contacts.dim)
 
 
+def pushing(normal_forces: np.ndarray, gaps_after: np.ndarray, force_scale: float,
+            length_scale: float) -> np.ndarray:
+    """The normal forces with the pushes of contacts that end the step open set to 0.
+
+    Complementarity (a contact pushes only while closed) holds to the solver's
+    accuracy: an open contact may keep a small force, a pushed one a small gap.
+    The side that is noise is the smaller of the two in the solver's units: a
+    contact whose gap after the step (in ``length_scale``) exceeds its force (in
+    ``force_scale``) is open and its push is noise; it must not glue the
+    contact, which would then have to close that gap in one step. Pulls are
+    kept.
+
+    Parameters
+    ----------
+    normal_forces, gaps_after : ndarray, shape (nc,)
+        Normal forces (force) and gaps at the end of the step (length).
+    force_scale, length_scale : float
+        The solver's force and length units (``SolveResult.force_scale``,
+        ``SolveResult.length_scale``).
+    """
+    opening = gaps_after / length_scale > normal_forces / force_scale
+    return np.where(opening, np.minimum(normal_forces, 0.0), normal_forces)
+
+
 class GlueyLubrication(Law):
     """The gluey limit of lubrication (frictionless).
 
@@ -198,7 +230,10 @@ class GlueyLubrication(Law):
         return Cones.frictionless(kinds, contacts.dim - 1)
 
     def update_gamma(self, contacts: Contacts, gamma: np.ndarray, normal_forces: np.ndarray,
-                     dt: float, force_scale: float) -> np.ndarray:
+                     dt: float, force_scale: float, *, gaps_after: np.ndarray | None = None,
+                     length_scale: float = 1.0) -> np.ndarray:
+        if gaps_after is not None:
+            normal_forces = pushing(normal_forces, gaps_after, force_scale, length_scale)
         lower = self.gamma_min(contacts)
         new = np.minimum(0.0, np.maximum(lower, gamma - dt * normal_forces))
         largest = np.max(np.abs(normal_forces)) if normal_forces.size else 0.0

@@ -251,13 +251,15 @@ class Simulation:
         if self.export_every and (self.steps_done + 1) % self.export_every == 0:
             self.exporter.export(self.steps_done + 1, problem, result, self.scene)
         normal, _ = problem.cones.split(result.forces)
-        new_gamma = self.law.update_gamma(contacts, gamma, normal, self.dt, result.force_scale)
+        gaps_after = problem.gaps_after(result.velocities)
+        new_gamma = self.law.update_gamma(contacts, gamma, normal, self.dt, result.force_scale,
+                                          gaps_after=gaps_after, length_scale=result.length_scale)
         speed = float(np.max(np.linalg.norm(self.scene.grains.velocities, axis=1), initial=0.0))
         searched = self.search_distance()
         self._advance(problem, result, PairState.from_contacts(contacts.keys, new_gamma))
         self._check_missed_contacts(contacts, speed, searched)
         report = StepReport(contacts=contacts, problem=problem, result=result, gamma=new_gamma,
-                            gaps_after=problem.gaps_after(result.velocities), timings=timings)
+                            gaps_after=gaps_after, timings=timings)
         if self.keep_trajectory:
             self.trajectory.record_state(self.scene)
             self.trajectory.record_step(report)

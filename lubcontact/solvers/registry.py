@@ -253,7 +253,8 @@ def solve(problem: ConicProblem, method: str = "clarabel", *, tol: float = 1e-9,
     solve_time = (out.solve_time or 0.0) if timed else call_time
     return SolveResult(x=physical, velocities=velocities, status=status,
                        iterations=out.iterations, residual=residual, method=method,
-                       force_scale=scale.force, setup_time=setup_time + normalise_time,
+                       force_scale=scale.force, length_scale=scale.length,
+                       setup_time=setup_time + normalise_time,
                        solve_time=solve_time, residual_history=out.residual_history,
                        info=out.info, shift=np.array(problem.shift, dtype=float))
 

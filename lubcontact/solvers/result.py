@@ -89,6 +89,8 @@ class SolveResult:
     force_scale : float
         The force unit of the normalised problem (``m_ref V / dt``): forces
         below ``tol x force_scale`` are numerically zero.
+    length_scale : float
+        The length unit of the normalised problem (``dt V``), that of gaps.
     setup_time, solve_time : float
         Seconds spent normalising and building the method's data, and iterating.
     residual_history : ndarray
@@ -106,6 +108,7 @@ class SolveResult:
     residual: float
     method: str
     force_scale: float = 1.0
+    length_scale: float = 1.0
     setup_time: float = 0.0
     solve_time: float = 0.0
     residual_history: np.ndarray = field(default_factory=lambda: np.zeros(0))
