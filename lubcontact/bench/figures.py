@@ -13,7 +13,7 @@ import numpy as np
 
 from .problem_sets import COULOMB
 from .runs import WARM, Measurement
-from .statistics import penalised_times, performance_ratios, shifted_geometric_mean
+from .statistics import penalised_times, performance_ratios, scaling_exponents, shifted_geometric_mean
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -151,3 +151,29 @@ def _save(fig: Figure, path: Path) -> None:
     fig.tight_layout()
     fig.savefig(path, dpi=90)
     _pyplot().close(fig)
+
+
+def scaling_figure(rows: Sequence[dict], path: Path) -> None:
+    """Time per step against the number of grains on log-log axes, one curve per model,
+    friction and method (the rows of ``lubcontact bench flow``), each labelled with its fitted
+    exponent (:func:`~lubcontact.bench.statistics.scaling_exponents`)."""
+    plt = _pyplot()
+    exponents = scaling_exponents(rows)
+    labels = sorted({(row["model"], row["friction"], row["method"]) for row in rows})
+    styles = _styles([" ".join(label) for label in labels])
+    fig, ax = plt.subplots(figsize=(6.5, 4.5))
+    for label in labels:
+        points = sorted((row["n_grains"], row["s_per_step"]) for row in rows
+                        if (row["model"], row["friction"], row["method"]) == label)
+        name = " ".join(label)
+        if label in exponents:
+            name += f": N^{exponents[label]:.2f}"
+        ax.plot(*zip(*points), label=name, **styles[" ".join(label)])
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel("free grains N [-]")
+    ax.set_ylabel("time per step, median [s]")
+    ax.set_title("developed inclined flow: one step (contacts, assembly, solve, update)", fontsize=8)
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=7)
+    _save(fig, path)

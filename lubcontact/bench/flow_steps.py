@@ -6,17 +6,31 @@ benchmark settles a bed (frictionless, ``apgd-jacobi``), tilts it by the
 angle, lets the flow develop (:data:`DEVELOP_SOLVER`, exact Coulomb), and caches that state in
 ``CACHE/flow-<n>-<model>-<angle>-<settle>-<develop>-<solver>.npz`` (built once: a second call
 reads it).
-Then, for each method, it restores the state, solves one untimed step (numba
-compilation and imports are never timed) and times ``--steps`` steps with
-exact Coulomb friction (``SolveSettings(exact_coulomb=True)``), each warm-
-started from the previous one as in a simulation. Per method it prints the
-contacts, the median solve time per step, iterations per step, the largest
+With ``--layer`` (a checkpoint of ``lubcontact run``, e.g. a steady flow of
+the poster's preset) each size is that developed layer widened instead
+(:func:`~lubcontact.scenes.inclined.widen`: copies side by side, no onset to
+wait for), its velocities jittered by :data:`JITTER` of their rms (seed 0) so
+that the copies part, and run :data:`MIX_STEPS` steps with the layer run's
+solver; cached as ``CACHE/widened-<layer digest>-<copies>x.npz``. Every size
+must then be a multiple of the layer's grains.
+
+Then, for each method and friction (``--friction``: ``exact``, Coulomb's law
+with ``SolveSettings(exact_coulomb=True)``; ``relaxation``, the convex
+relaxation, one solve), it restores the state, solves one untimed step (numba
+compilation and imports are never timed) and times ``--steps`` steps, each
+warm-started from the previous one as in a simulation. Per method it prints
+the contacts, the median time per step, iterations per step, the largest
 FCLIB error over the steps (the accuracy measure of a frictional step, whose
-velocities are not unique) and the statuses.
+velocities are not unique; of the relaxation's steps too, which solve another
+law) and the statuses. ``--figure`` draws the time per step against the
+number of grains on log-log axes with the fitted exponents
+(:func:`~lubcontact.bench.figures.scaling_figure`); ``--json`` keeps the rows.
 """
 from __future__ import annotations
 
 import argparse
+import hashlib
+import json
 import pathlib
 import resource
 import time
@@ -24,7 +38,9 @@ from typing import Any
 
 import numpy as np
 
-from ..io.files import save_npz
+from ..flow.run import FlowRun
+from ..io.files import save_npz, save_text
+from ..model.scene import Scene
 from ..problem.metrics import scaled_coulomb_error
 from ..scenes import inclined
 from ..sim.simulation import Simulation
@@ -32,9 +48,10 @@ from ..sim.state import SimulationState
 from ..solvers import SolveSettings
 from .harness import warm_up
 from .options import check_methods, names
+from .statistics import scaling_exponents
 from .tables import format_table
 
-COLUMNS = ("n_grains", "model", "method", "contacts", "s_per_step", "iterations", "warm_cold",
+COLUMNS = ("n_grains", "model", "friction", "method", "contacts", "s_per_step", "iterations", "warm_cold",
            "max_fclib_error", "contacts_pc", "assembly_pc", "solve_pc", "update_pc", "peak_mb",
            "statuses")
 """``contacts``: mean per step; ``s_per_step``: median time of the whole step (contacts,
@@ -52,6 +69,14 @@ PHASES = ("contacts", "assembly", "solve", "update")
 DEVELOP_SOLVER = "newton-ac"
 """Solver of the flow steps before the timed ones (exact Coulomb): on a dense 1000-grain bed,
 apgd-jacobi's fixed point spent 20 000 to 370 000 iterations on each of them."""
+
+JITTER = 1e-3
+"""Relative velocity jitter (of the rms grain speed, seed 0) that parts a widened layer's copies."""
+MIX_STEPS = 50
+"""Steps run after widening a layer, before any timed step."""
+FRICTIONS = ("exact", "relaxation")
+"""``exact``: Coulomb's law (``SolveSettings(exact_coulomb=True)``); ``relaxation``: its convex
+relaxation, one solve."""
 
 
 def developed_flow(n_grains: int, model: str, angle: float, cache: pathlib.Path, *, seed: int = 1,
@@ -94,10 +119,57 @@ def developed_flow(n_grains: int, model: str, angle: float, cache: pathlib.Path,
     return sim
 
 
-def time_method(sim: Simulation, method: str, steps: int, tol: float) -> dict[str, Any]:
-    """Solve ``steps`` steps of ``sim`` from its current state with ``method``; the state is kept."""
+def widened_flow(layer: pathlib.Path, n_grains: int, cache: pathlib.Path) -> tuple[str, Simulation]:
+    """The developed layer of a ``lubcontact run`` checkpoint, widened to ``n_grains`` grains.
+
+    Returns
+    -------
+    (str, Simulation)
+        The layer run's model, and a simulation of the widened layer after
+        :data:`MIX_STEPS` steps (jitter :data:`JITTER`), with the layer run's
+        law, time step, search distance and solver settings; cached in ``cache``.
+
+    Raises
+    ------
+    ValueError
+        Naming ``--sizes`` when ``n_grains`` is not a multiple of the layer's grains.
+    """
+    base = FlowRun.resume(pathlib.Path(layer))
+    grains = base.sim.scene.grains.count
+    if n_grains % grains:
+        raise ValueError(f"--sizes: {n_grains} is not a multiple of the layer's {grains} grains")
+    copies = n_grains // grains
+    digest = hashlib.sha1(pathlib.Path(layer).read_bytes()).hexdigest()[:10]
+    path = pathlib.Path(cache) / f"widened-{digest}-{copies}x.npz"
+    model = base.config.model
+
+    def simulation(scene: Scene) -> Simulation:
+        return Simulation(scene, base.sim.law, base.sim.dt, solver=base.sim.settings.method,
+                          tol=base.sim.settings.tol, fixed_point=base.sim.settings.exact_coulomb,
+                          d_max=base.sim.d_max, on_failure="warn", keep_trajectory=False)
+
+    if path.exists():
+        with np.load(path) as data:
+            state = SimulationState.from_arrays(data)
+        sim = simulation(state.scene)
+        sim.restore(state)
+        return model, sim
+    scene = inclined.widen(base.sim.scene, copies)
+    velocities = scene.grains.velocities
+    rms = float(np.sqrt(np.mean(np.sum(velocities**2, axis=1))))
+    velocities += JITTER * rms * np.random.default_rng(0).standard_normal(velocities.shape)
+    sim = simulation(scene)
+    sim.run(MIX_STEPS)
+    save_npz(path, **sim.state.to_arrays())
+    return model, sim
+
+
+def time_method(sim: Simulation, method: str, steps: int, tol: float,
+                friction: str = "exact") -> dict[str, Any]:
+    """Solve ``steps`` steps of ``sim`` from its current state with ``method`` (``friction``:
+    one of :data:`FRICTIONS`); the state is kept."""
     start = sim.state
-    settings = SolveSettings(method=method, tol=tol, exact_coulomb=True)
+    settings = SolveSettings(method=method, tol=tol, exact_coulomb=friction == "exact")
     sim.step(settings)                       # untimed: compilation, caches
     _, _, problem, guess, shift = sim.next_problem()
     cold = settings.solve(problem).iterations
@@ -116,7 +188,8 @@ def time_method(sim: Simulation, method: str, steps: int, tol: float) -> dict[st
             phases[phase] += report.timings[phase]
     sim.restore(start)
     total = sum(times)
-    return {"method": method, "contacts": int(np.mean(contacts)), "s_per_step": float(np.median(times)),
+    return {"friction": friction, "method": method, "contacts": int(np.mean(contacts)),
+            "s_per_step": float(np.median(times)),
             "iterations": float(np.median(iterations)), "warm_cold": warm / max(cold, 1),
             "max_fclib_error": float(max(errors)),
             **{f"{phase}_pc": 100.0 * phases[phase] / total for phase in PHASES},
@@ -142,6 +215,16 @@ def main(argv: list[str] | None = None) -> int:
                         help="steps that settle the bed before it is tilted (default: 1500)")
     parser.add_argument("--cache", type=pathlib.Path, default=pathlib.Path("out/bench-flow"),
                         help="folder of the developed flows (default: out/bench-flow)")
+    parser.add_argument("--layer", type=pathlib.Path, action="append", default=[],
+                        help="checkpoint.npz of a developed flow (lubcontact run), widened to each "
+                             "size instead of settling and developing one; repeat for each model "
+                             "(--models, --angle and --settle-steps are then not used)")
+    parser.add_argument("--friction", type=names, default=["exact"],
+                        help="comma list of exact (Coulomb's law), relaxation (its convex "
+                             "relaxation) (default: exact)")
+    parser.add_argument("--json", type=pathlib.Path, help="write the rows to this JSON file")
+    parser.add_argument("--figure", type=pathlib.Path,
+                        help="draw s/step against grains (log-log, fitted exponents) to this PNG")
     args = parser.parse_args(argv)
     try:
         check_methods("--methods", args.methods)
@@ -156,16 +239,38 @@ def main(argv: list[str] | None = None) -> int:
     for model in args.models:
         if model not in ("dry", "gluey"):
             parser.error(f"argument --models: unknown model {model!r}; choose from dry, gluey")
+    for friction in args.friction:
+        if friction not in FRICTIONS:
+            parser.error(f"argument --friction: unknown {friction!r}; choose from {', '.join(FRICTIONS)}")
+    for layer in args.layer:
+        if not layer.is_file():
+            parser.error(f"argument --layer: no such file {str(layer)!r}")
     rows = []
     for n_grains in args.sizes:
-        for model in args.models:
-            sim = developed_flow(n_grains, model, args.angle, args.cache,
-                                 settle_steps=args.settle_steps)
+        for source in args.layer or args.models:
+            if args.layer:
+                try:
+                    model, sim = widened_flow(source, n_grains, args.cache)
+                except ValueError as exc:
+                    parser.error(f"argument {exc}")
+            else:
+                model, sim = source, developed_flow(n_grains, source, args.angle, args.cache,
+                                                    settle_steps=args.settle_steps)
             warm_up(sim.next_problem()[2], args.methods)
-            for method in args.methods:
-                row = {"n_grains": n_grains, "model": model, **time_method(sim, method, args.steps, args.tol)}
-                rows.append(row)
-                print(format_table([row], COLUMNS), flush=True)
+            for friction in args.friction:
+                for method in args.methods:
+                    row = {"n_grains": n_grains, "model": model,
+                           **time_method(sim, method, args.steps, args.tol, friction)}
+                    rows.append(row)
+                    print(format_table([row], COLUMNS), flush=True)
+                    if args.json:             # rewritten after each row: a stopped run keeps them
+                        save_text(args.json, json.dumps(rows, indent=1))
     print()
     print(format_table(rows, COLUMNS))
+    for (model, friction, method), exponent in scaling_exponents(rows).items():
+        print(f"# {model} {friction} {method}: s/step ~ N^{exponent:.2f}")
+    if args.figure:
+        from .figures import scaling_figure
+
+        scaling_figure(rows, args.figure)
     return 0

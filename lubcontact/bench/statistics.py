@@ -135,3 +135,40 @@ def performance_ratios(rows: Sequence[Measurement], labels: Sequence[str],
     with np.errstate(invalid="ignore", divide="ignore"):
         ratios = np.where(np.isfinite(best), times / best, np.inf)
     return {label: ratios[i] for i, label in enumerate(labels)}
+
+
+def power_law_exponent(sizes: Sequence[float], times: Sequence[float]) -> float:
+    """Exponent ``a`` of the least-squares fit ``time = c size^a`` on log-log axes.
+
+    Parameters
+    ----------
+    sizes, times : sequence of float, length k >= 2
+        Positive sizes (at least two distinct) and times.
+
+    Returns
+    -------
+    float
+        The slope of ``log time`` against ``log size``.
+
+    Raises
+    ------
+    ValueError
+        For fewer than two distinct sizes, or a size or time that is not positive.
+    """
+    sizes, times = np.asarray(sizes, dtype=float), np.asarray(times, dtype=float)
+    if sizes.shape != times.shape or np.unique(sizes).size < 2:
+        raise ValueError(f"sizes: need at least two distinct sizes with a time each, got {sizes}")
+    if not (np.all(sizes > 0) and np.all(times > 0)):
+        raise ValueError(f"times: sizes and times must be > 0, got {sizes}, {times}")
+    return float(np.polyfit(np.log(sizes), np.log(times), 1)[0])
+
+
+def scaling_exponents(rows: Sequence[dict], keys: Sequence[str] = ("model", "friction", "method"),
+                      size: str = "n_grains", time: str = "s_per_step") -> dict[tuple, float]:
+    """:func:`power_law_exponent` of each curve of ``rows`` (rows grouped by ``keys``) that has
+    two sizes or more."""
+    curves: dict[tuple, list[tuple[float, float]]] = {}
+    for row in rows:
+        curves.setdefault(tuple(row[key] for key in keys), []).append((row[size], row[time]))
+    return {label: power_law_exponent(*zip(*points)) for label, points in curves.items()
+            if len({n for n, _ in points}) >= 2}

@@ -228,6 +228,59 @@ def inclined_flow(settled: Scene, angle_deg: float, *, keep_velocities: bool = F
     return scene
 
 
+def widen(layer: Scene, copies: int) -> Scene:
+    """``copies`` copies of a periodic layer side by side: the same layer, ``copies`` times wider.
+
+    Each copy keeps the grains' state (positions shifted by a multiple of the
+    period, velocities, spins, angles) and its part of the rough bed, so a
+    developed flow stays a developed flow: the benchmarks build large flows
+    this way instead of waiting for each size's onset. The copies are
+    identical until the dynamics separate them.
+
+    Parameters
+    ----------
+    layer : Scene
+        A periodic scene (``period`` set), e.g. a flow of :func:`inclined_flow`.
+    copies : int
+        Number of copies, >= 1.
+
+    Returns
+    -------
+    Scene
+        Period ``copies x period``; ``metadata["width"]`` updated, ``metadata["copies"]`` set.
+    """
+    copies = int(checks.positive("copies", copies, shape=()))
+    checks.require(layer.period is not None, "layer", "needs a periodic scene", None)
+    period = float(layer.period)
+    grains = layer.grains
+
+    def tiled(points: np.ndarray) -> np.ndarray:
+        offsets = np.zeros((copies, 1, points.shape[1]))
+        offsets[:, 0, 0] = period * np.arange(copies)
+        return (points[None, :, :] + offsets).reshape(-1, points.shape[1])
+
+    def repeated(values: np.ndarray | None) -> np.ndarray | None:
+        return None if values is None else np.tile(values, (copies,) + (1,) * (values.ndim - 1))
+
+    wide = Grains.create(tiled(grains.positions), repeated(grains.radii),
+                         masses=repeated(grains.masses), densities=repeated(grains.densities),
+                         velocities=repeated(grains.velocities), spins=repeated(grains.spins),
+                         inertias=repeated(grains.inertias))
+    wide.angles[:] = repeated(grains.angles)
+    metadata = dict(layer.metadata, width=copies * period,
+                    copies=copies * int(layer.metadata.get("copies", 1)))
+    return Scene.create(wide, plane_points=layer.planes.points, plane_normals=layer.planes.normals,
+                        fixed_positions=tiled(layer.fixed_positions),
+                        fixed_radii=repeated(layer.fixed_radii), gravity=layer.gravity,
+                        fluid_density=layer.fluid_density,
+                        external_force=repeated(layer.external_force)
+                        if isinstance(layer.external_force, np.ndarray) else layer.external_force,
+                        time=layer.time, overlap_tolerance=layer.overlap_tolerance,
+                        check_overlaps=False,      # the layer's own pairs, repeated: nothing new
+                        metadata=metadata, period=copies * period,
+                        plane_velocity=layer.plane_velocity, fixed_velocity=layer.fixed_velocity)
+
+
 def tilt(scene: Scene, angle_deg: float) -> None:
     """Turn ``scene``'s gravity, in place, to the incline ``angle_deg`` (degrees, in (-90, 90)):
     ``g (sin theta, -cos theta)`` with ``g`` its magnitude; the angle goes to its metadata."""

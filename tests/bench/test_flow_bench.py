@@ -1,7 +1,13 @@
 """``lubcontact bench flow``: a developed flow built once and cached, a row per method."""
+import json
+
 import pytest
 
 from lubcontact.bench import flow_steps
+from lubcontact.bench.statistics import power_law_exponent
+from lubcontact.flow.bed import initial_scene
+from lubcontact.flow.config import RunConfig
+from lubcontact.flow.run import FlowRun
 
 
 def test_bench_flow_prints_a_row_per_method_and_reuses_its_cache(tmp_path, capsys):
@@ -32,3 +38,43 @@ def test_bad_flags_are_one_line_errors(bad, flag, capsys):
         flow_steps.main(bad)
     assert exit_.value.code == 2
     assert flag in capsys.readouterr().err.strip().splitlines()[-1]
+
+
+def test_a_layer_widened_to_each_size_gives_rows_an_exponent_and_a_figure(tmp_path, capsys):
+    """A 24-grain run's checkpoint widened to 24 and 48 grains: twice the contacts at twice the
+    grains, both frictions timed, the rows kept as JSON, the figure drawn."""
+    layer = tmp_path / "layer"
+    config = RunConfig(scene="inclined_flow", n_grains=24, width=12.0, model="dry", angle=24.0,
+                       steps=6, dt_fraction=0.05, settle_steps=0, checkpoint_every=6, sample_every=3)
+    FlowRun(config, initial_scene(config, layer), layer).advance(6)
+    argv = ["--sizes", "24", "48", "--layer", str(layer / "checkpoint.npz"), "--methods", "apgd",
+            "--friction", "exact,relaxation", "--steps", "2", "--cache", str(tmp_path / "cache"),
+            "--json", str(tmp_path / "rows.json"), "--figure", str(tmp_path / "scaling.png")]
+    assert flow_steps.main(argv) == 0
+    rows = json.loads((tmp_path / "rows.json").read_text())
+    assert [(row["n_grains"], row["friction"]) for row in rows] == [
+        (24, "exact"), (24, "relaxation"), (48, "exact"), (48, "relaxation")]
+    assert rows[2]["contacts"] == pytest.approx(2 * rows[0]["contacts"], rel=0.1)
+    assert all(row["model"] == "dry" and row["statuses"] == "converged" for row in rows)
+    out = capsys.readouterr().out
+    assert "# dry exact apgd: s/step ~ N^" in out
+    assert (tmp_path / "scaling.png").stat().st_size > 10_000
+    assert len(list((tmp_path / "cache").glob("widened-*-2x.npz"))) == 1
+
+
+def test_a_size_that_is_not_a_multiple_of_the_layer_is_a_one_line_error(tmp_path, capsys):
+    layer = tmp_path / "layer"
+    config = RunConfig(scene="inclined_flow", n_grains=24, width=12.0, model="dry", angle=24.0,
+                       steps=3, dt_fraction=0.05, settle_steps=0, checkpoint_every=3)
+    FlowRun(config, initial_scene(config, layer), layer).advance(3)
+    with pytest.raises(SystemExit):
+        flow_steps.main(["--sizes", "30", "--layer", str(layer / "checkpoint.npz"),
+                         "--cache", str(tmp_path)])
+    assert "--sizes: 30 is not a multiple" in capsys.readouterr().err.strip().splitlines()[-1]
+
+
+def test_power_law_exponent_recovers_the_exponent_and_rejects_one_size():
+    assert power_law_exponent([100, 1000, 10000], [2e-3, 2e-3 * 10**1.3, 2e-3 * 100**1.3]) == \
+        pytest.approx(1.3, abs=1e-12)
+    with pytest.raises(ValueError, match="sizes"):
+        power_law_exponent([100, 100], [1.0, 2.0])

@@ -77,3 +77,37 @@ def test_glued_pair_crossing_the_boundary_keeps_contact_and_gamma():
     # the impact costs nothing (equal velocities); then F dt per step
     np.testing.assert_allclose(gammas, -force * dt * np.arange(1, 51), rtol=1e-6)
     np.testing.assert_allclose(sim.scene.grains.velocities, [[1.0, 0.0], [1.0, 0.0]], atol=1e-7)
+
+
+def test_widened_layer_repeats_every_contact_and_its_step():
+    """Three copies of a periodic layer: three times the contacts with the same gaps, and one
+    step moves each copy as the layer alone moves (the copies stay identical)."""
+    from lubcontact import Coulomb
+    from lubcontact.scenes.inclined import widen
+
+    layer = random_layer()
+    layer.grains.velocities[:] = np.random.default_rng(1).normal(0.0, 0.1, layer.grains.velocities.shape)
+    wide = widen(layer, 3)
+    assert wide.period == 3 * layer.period and wide.grains.count == 3 * layer.grains.count
+    assert wide.fixed_radii.size == 3 * layer.fixed_radii.size and wide.metadata["copies"] == 3
+    alone, tiled = find_contacts(layer, d_max=0.1), find_contacts(wide, d_max=0.1)
+    assert tiled.count == 3 * alone.count
+    np.testing.assert_allclose(np.sort(tiled.gaps), np.sort(np.tile(alone.gaps, 3)), atol=1e-12)
+    runs = [Simulation(scene, Coulomb(0.3), 0.05, solver="clarabel", d_max=0.1)
+            for scene in (layer, wide)]
+    for sim in runs:
+        sim.step()
+    n = layer.grains.count
+    for copy in range(3):
+        np.testing.assert_allclose(runs[1].scene.grains.velocities[copy * n:(copy + 1) * n],
+                                   runs[0].scene.grains.velocities, atol=1e-7)
+
+
+def test_widen_rejects_a_scene_without_period():
+    from lubcontact.scenes.inclined import widen
+
+    box = Scene.create(Grains.create([[1.0, 1.0]], [0.5], masses=1.0))
+    with pytest.raises(ValueError, match="layer"):
+        widen(box, 2)
+    with pytest.raises(ValueError, match="copies"):
+        widen(random_layer(), 0)
