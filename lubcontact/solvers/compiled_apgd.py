@@ -50,12 +50,17 @@ def cone_kernel() -> Callable | None:
     return apgd_cone2d
 
 
+def positions(values: np.ndarray) -> np.ndarray:
+    """``values`` as unsigned indices (``np.uintp``), the index type the compiled loops are
+    compiled for: numba checks every signed index for a negative value (wrap-around), and on the
+    developed 3200-grain flow that made the product ``W x`` 2.5x slower (589 against 230 us;
+    docs/records/benchmarks.md)."""
+    return np.asarray(values).astype(np.uintp, copy=False)
+
+
 def csr_arrays(matrix: sp.csr_matrix) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``(indptr, indices, data)`` of a CSR matrix with int64 indices, the index type the loops
-    are compiled for: their products were 1.4x faster than with scipy's int32 indices on the
-    settled 1000-grain pile (docs/records/benchmarks.md)."""
-    return (matrix.indptr.astype(np.int64, copy=False), matrix.indices.astype(np.int64, copy=False),
-            matrix.data)
+    """``(indptr, indices, data)`` of a CSR matrix, the indices as :func:`positions`."""
+    return positions(matrix.indptr), positions(matrix.indices), matrix.data
 
 
 def is_box(cones: Cones) -> bool:
@@ -112,7 +117,8 @@ def run_apgd_cones(data: DualData, cones: Cones, z: np.ndarray, tol: float, max_
     best, best_residual, history, code, iterations, products, _, _, offset = kernel(
         *csr_arrays(matrix), data.offset,
         data.offset if base is None else base, data.project.lower, data.project.upper,
-        np.concatenate([cone_n, union_n]), np.concatenate([cone_t[:, 0], union_t[:, 0]]),
+        positions(np.concatenate([cone_n, union_n])),
+        positions(np.concatenate([cone_t[:, 0], union_t[:, 0]])),
         np.concatenate([cone_mu, union_mu]), union, data.ratio, z, tol, max_iter, lipschitz,
         DIVERGENCE_FACTOR, every)
     data.products += products

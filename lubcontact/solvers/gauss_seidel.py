@@ -9,7 +9,11 @@ contacts as in ``newton-ac`` (bilateral normal row, friction while pushed).
 It needs no factorisation and no regular Jacobian, so it goes on where
 Newton methods stall (degenerate contacts, rank-deficient ``W``), at the
 price of many sweeps on jammed piles: it is the robust, slow end of the
-family. Stopping test (:func:`_settled`), every :data:`CHECK_EVERY` sweeps: the FCLIB error
+family. On a step problem (``W = F^T F`` with ``F = dt M^-1/2 H^T``) a sweep reads each
+contact's velocity from the velocities ``F r``, updated after each change: a row of ``F^T``
+holds the degrees of freedom of the contact's two bodies (3 each with rotations), where a row
+of ``W`` holds every contact sharing a body with it (about 4x the entries on a developed flow).
+Stopping test (:func:`_settled`), every :data:`CHECK_EVERY` sweeps: the FCLIB error
 (:func:`~lubcontact.problem.metrics.coulomb_error`) and the estimated distance still to go of
 the velocities.
 """
@@ -21,6 +25,7 @@ import numpy as np
 
 from ..problem.conic import ConicProblem
 from ..problem.metrics import coulomb_error
+from .compiled_apgd import csr_arrays
 from .registry import ALL_CONES, FIRST_ORDER, register
 from .result import CONVERGED, DIVERGED, MAX_ITER, MethodOutput
 
@@ -88,16 +93,19 @@ def nonsmooth_gauss_seidel(problem: ConicProblem, *, tol: float, max_iter: int =
     forces = np.zeros(problem.n_rows) if warm_start is None else \
         np.array(warm_start, dtype=float)
     forces[box] = np.clip(forces[box], projector.lower[box], projector.upper[box])
-    arrays = (W.indptr.astype(np.int64), W.indices.astype(np.int64), W.data, q, projector.lower,
-              projector.upper, box_rows, diagonal[box_rows], cone_n, cone_t, mu, unilateral,
-              local)
+    factor = problem.delassus_factor
+    rows = W if factor is None else factor.T.tocsr()    # rows of W, or of F^T (W = F^T F)
+    arrays = (*csr_arrays(rows), q, projector.lower, projector.upper, box_rows, diagonal[box_rows],
+              cone_n, cone_t, mu, unilateral, local)
     setup_time = time.perf_counter() - start
     history = [coulomb_error(unshifted, forces)]
     velocity = W @ forces + q
     sweeps, status, changes = 0, MAX_ITER, [np.inf, np.inf]
     while not _settled(history[-1], changes, velocity, tol) and sweeps < max_iter:
         count = min(CHECK_EVERY, max_iter - sweeps)
-        gauss_seidel_2d(*arrays, forces, count)
+        # F r from the forces at each call: the updates inside carry no drift over the sweeps
+        state = forces if factor is None else factor @ forces
+        gauss_seidel_2d(*arrays, forces, state, factor is not None, count)
         sweeps += count
         previous, velocity = velocity, W @ forces + q
         changes = [changes[1], float(np.max(np.abs(velocity - previous), initial=0.0))]

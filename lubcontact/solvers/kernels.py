@@ -332,15 +332,31 @@ def local_coulomb_2d(a, c, c2, d, b_n, b_t, mu, unilateral, r_n, r_t):
     return n, t
 
 
+@numba.njit(cache=True, inline="always")
+def _moved(indptr, indices, values, state, row, change, tracked):
+    """After ``r_row`` changed by ``change``: with ``tracked``, ``state += change x (row of
+    F^T)``, keeping ``state = F r`` (nothing to do when ``state`` is ``r`` itself)."""
+    if tracked and change != 0.0:
+        for k in range(indptr[row], indptr[row + 1]):
+            state[indices[k]] += values[k] * change
+
+
 @numba.njit(cache=True)
 def gauss_seidel_2d(indptr, indices, values, q, lower, upper, box_rows, box_diagonal, cone_n,
-                    cone_t, cone_mu, unilateral, local, r, sweeps):
+                    cone_t, cone_mu, unilateral, local, r, state, tracked, sweeps):
     """``sweeps`` non-smooth Gauss-Seidel sweeps on ``W r + q`` in place of ``r`` (exact Coulomb).
 
     Each sweep visits the box rows (``r_i`` in ``[lower_i, upper_i]``: the
     clipped minimiser of row ``i`` with the others frozen) and then the 2D
     frictional contacts (rows ``cone_n[j]``, ``cone_t[j]``; ``local[j]`` the
     2x2 block ``W_nn, W_nt, W_tn, W_tt``; :func:`local_coulomb_2d`).
+
+    A row of ``W r`` is read from ``(indptr, indices, values)`` and ``state``:
+    the rows of ``W`` and ``r`` itself (``state`` is ``r``), or, with
+    ``tracked``, the rows of ``F^T`` (``W = F^T F``) and ``state = F r`` (the
+    velocities, updated after each change of ``r``): a row of ``F^T`` holds the
+    few degrees of freedom of one contact's two bodies where a row of ``W``
+    holds every contact sharing a body with it.
     """
     for _ in range(sweeps):
         for k in range(box_rows.size):
@@ -348,12 +364,19 @@ def gauss_seidel_2d(indptr, indices, values, q, lower, upper, box_rows, box_diag
             diagonal = box_diagonal[k]
             if diagonal <= 0.0:
                 continue
-            u = _row_product(indptr, indices, values, r, i) + q[i]
-            r[i] = min(max(r[i] - u / diagonal, lower[i]), upper[i])
+            u = _row_product(indptr, indices, values, state, i) + q[i]
+            new = min(max(r[i] - u / diagonal, lower[i]), upper[i])
+            change = new - r[i]
+            r[i] = new
+            _moved(indptr, indices, values, state, i, change, tracked)
         for j in range(cone_n.size):
             n, t = cone_n[j], cone_t[j]
             a, c, c2, d = local[j, 0], local[j, 1], local[j, 2], local[j, 3]
-            b_n = _row_product(indptr, indices, values, r, n) + q[n] - a * r[n] - c * r[t]
-            b_t = _row_product(indptr, indices, values, r, t) + q[t] - c2 * r[n] - d * r[t]
-            r[n], r[t] = local_coulomb_2d(a, c, c2, d, b_n, b_t, cone_mu[j], unilateral[j],
-                                          r[n], r[t])
+            b_n = _row_product(indptr, indices, values, state, n) + q[n] - a * r[n] - c * r[t]
+            b_t = _row_product(indptr, indices, values, state, t) + q[t] - c2 * r[n] - d * r[t]
+            new_n, new_t = local_coulomb_2d(a, c, c2, d, b_n, b_t, cone_mu[j], unilateral[j],
+                                            r[n], r[t])
+            change_n, change_t = new_n - r[n], new_t - r[t]
+            r[n], r[t] = new_n, new_t
+            _moved(indptr, indices, values, state, n, change_n, tracked)
+            _moved(indptr, indices, values, state, t, change_t, tracked)
