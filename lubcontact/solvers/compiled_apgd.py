@@ -86,7 +86,9 @@ def run_apgd_cones(data: DualData, cones: Cones, z: np.ndarray, tol: float, max_
     Parameters
     ----------
     data : DualData
-        The problem (``W_it`` is assembled here if it is not yet).
+        The problem: ``W_it z`` is applied as ``F^T (F z)`` where the data has the factor
+        ``F = L S_it`` and no assembled ``W_it`` (``operator="auto"`` or ``"factor"`` on a step
+        problem), from ``W_it`` otherwise (assembled here if it is not yet).
     cones : Cones
         Its cones (:func:`is_cone_2d`).
     z : ndarray, shape (n,)
@@ -110,12 +112,17 @@ def run_apgd_cones(data: DualData, cones: Cones, z: np.ndarray, tol: float, max_
         The offset ``b_it`` of the last shift.
     """
     kernel = cone_kernel()
-    matrix = data.assembled()
+    if data.matrix is None and data.factor is not None:
+        operator = (*csr_arrays(data.factor), *csr_arrays(data.factor.T.tocsr()),
+                    np.empty(data.factor.shape[0]))
+    else:
+        empty = np.zeros(0, dtype=np.uintp)
+        operator = (*csr_arrays(data.assembled()), empty, empty, np.zeros(0), np.zeros(0))
     (cone_n, cone_t, cone_mu), (union_n, union_t, union_mu) = cones.projector.pieces
     union = np.repeat([False, True], [cone_n.size, union_n.size])
     lipschitz = initial_lipschitz(data, z)
     best, best_residual, history, code, iterations, products, _, _, offset = kernel(
-        *csr_arrays(matrix), data.offset,
+        *operator, data.offset,
         data.offset if base is None else base, data.project.lower, data.project.upper,
         positions(np.concatenate([cone_n, union_n])),
         positions(np.concatenate([cone_t[:, 0], union_t[:, 0]])),
@@ -220,7 +227,7 @@ def joint_coulomb_apgd(convex: ConicProblem, shift: np.ndarray, warm_start: np.n
         The iterations done; the outer loop of the fixed point checks the result.
     """
     scaled = convex.with_shift(shift).normalized()
-    data = prepare(scaled, scaling=True, operator="matrix")
+    data = prepare(scaled, scaling=True)
     z = initial_point(data, None if warm_start is None else warm_start / scaled.scaling.force,
                       scaled.n_rows)
     base = scaled.offset.copy()

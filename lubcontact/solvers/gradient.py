@@ -39,10 +39,14 @@ residual of :mod:`.dual_data`), ``max_iter`` (iteration cap), ``warm_start``
 ``W x`` is applied, :func:`.dual_data.prepare`).
 
 With ``operator="auto"`` the ``apgd`` methods assemble ``S W S`` (11 ms at
-10^4 grains, from ``L S``) on frictionless problems and 2D friction cones
-(UNION contacts included), for the compiled loops of :mod:`.compiled_apgd`
-and the active-set finish; on 3D friction cones, and for ``pgd`` and ``bb``,
-the matrix-free product is used when the factor exists.
+10^4 grains, from ``L S``) on frictionless problems, for the compiled box loop
+of :mod:`.compiled_apgd` and the active-set finish; on 2D friction cones
+(UNION contacts included) the compiled cone loop applies the factor, ``(L
+S)^T ((L S) z)``, where it exists (a step problem): on a developed 3200-grain
+flow ``L`` has 102 000 entries where ``W`` has 468 000, and an APGD step took
+0.140 s instead of 0.259 s (docs/records/benchmarks.md); ``operator="matrix"``
+assembles ``S W S`` for it instead. On 3D friction cones, and for ``pgd`` and
+``bb``, the numpy loops use the matrix-free product when the factor exists.
 """
 from __future__ import annotations
 
@@ -137,12 +141,12 @@ def pgd(problem: ConicProblem, *, tol: float = 1e-8, max_iter: int = 20000,
 
 def _apgd(problem: ConicProblem, tol: float, max_iter: int, warm_start: np.ndarray | None,
           scaling: bool, operator: str, active_set: bool) -> MethodOutput:
-    box = is_box(problem.cones) and box_kernel() is not None
+    box = is_box(problem.cones) and box_kernel() is not None and operator != "factor"
     cones_2d = is_cone_2d(problem.cones) and cone_kernel() is not None
-    fused = (box or cones_2d) and operator != "factor"
+    fused = box or cones_2d
     finishing = active_set and not problem.cones.has_friction
     data, z, setup, start = _common(problem, warm_start, scaling,
-                                    "matrix" if fused or finishing else operator)
+                                    "matrix" if box or finishing else operator)
     if (out := _accept_warm_start(problem, data, z, tol, warm_start, setup, start)) is not None:
         return out
     finish = None
@@ -159,9 +163,9 @@ def _apgd(problem: ConicProblem, tol: float, max_iter: int, warm_start: np.ndarr
                 return _finalise(problem, data, tracker, CONVERGED, finish.solves, setup, start,
                                  info, finish)
             z = exact
-    if fused and cones_2d:
+    if cones_2d:
         tracker, status, iterations, _ = run_apgd_cones(data, problem.cones, z, tol, max_iter)
-    elif fused:
+    elif box:
         tracker, status, iterations = run_apgd_box(data, z, tol, max_iter, finish)
     else:
         tracker, status, iterations, _ = run_apgd(data, z, tol, max_iter, callback=finish)

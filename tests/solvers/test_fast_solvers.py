@@ -17,6 +17,8 @@ from lubcontact.scenes.packing import deposit_pile, settle_pile
 from lubcontact.solvers import methods, solve
 from lubcontact.solvers.active_set import MAX_FINISH_ATTEMPTS
 from lubcontact.solvers.direct import conic_form
+from lubcontact.solvers.dual_data import prepare
+from lubcontact.solvers.gradient_loops import run_apgd
 
 FAST = ["pgd", "apgd", "bb", "apgd-jacobi", "apgd-as"]
 DIRECT = ["clarabel-direct", "osqp", "scs"]
@@ -173,15 +175,20 @@ def test_frictional_pile_velocities_match_clarabel(frictional, method):
 
 @pytest.mark.parametrize("method", ["apgd", "apgd-jacobi"])
 def test_compiled_and_numpy_frictional_apgd_agree(frictional, method):
-    """2D friction cones run in the compiled kernel (``matrix``); ``factor`` keeps the numpy loop."""
+    """2D friction cones run in the compiled kernel, with ``W`` assembled (``matrix``) or as
+    ``F^T (F z)`` (``factor``, the default on step problems): both agree with the reference and
+    with the numpy loop on the same data."""
     problem, reference = frictional
-    compiled = solve(problem, method, tol=1e-10)
-    plain = solve(problem, method, tol=1e-10, operator="factor")
-    assert compiled.info["fused_kernel"] and not plain.info["fused_kernel"]
-    assert compiled.status == plain.status == "converged"
-    for result in (compiled, plain):
+    with_matrix = solve(problem, method, tol=1e-10, operator="matrix")
+    with_factor = solve(problem, method, tol=1e-10)
+    assert with_matrix.info["fused_kernel"] and with_factor.info["fused_kernel"]
+    scaled = problem.normalized()
+    data = prepare(scaled, method == "apgd-jacobi", "factor")
+    _, plain_status, plain_iterations, _ = run_apgd(data, np.zeros(scaled.n_rows), 1e-10, 20000)
+    assert with_matrix.status == with_factor.status == plain_status == "converged"
+    for result in (with_matrix, with_factor):
         assert velocity_error(problem, result.velocities, reference.velocities) <= ACCURACY
-    assert abs(compiled.iterations - plain.iterations) <= 0.05 * plain.iterations
+        assert abs(result.iterations - plain_iterations) <= 0.05 * plain_iterations
 
 
 def test_second_order_and_polyhedral_forms_agree(frictional):
@@ -401,15 +408,22 @@ def test_compiled_and_numpy_union_apgd_loops_agree(gluey_problems, scaling):
 
 @pytest.mark.parametrize("method", ["apgd", "apgd-jacobi"])
 def test_union_apgd_runs_compiled_and_matches_clarabel(gluey_problems, method):
-    """``solve`` takes the compiled loop on 2D UNION problems (``factor``: the numpy loop);
-    both reach Clarabel's branch-rule solution."""
+    """``solve`` takes the compiled loop on 2D UNION problems, with ``W`` assembled (``matrix``)
+    or factored (the default); both reach Clarabel's branch-rule solution, as the numpy loop
+    does on the same data."""
     for problem, reference in gluey_problems:
-        compiled = solve(problem, method, tol=1e-10)
-        plain = solve(problem, method, tol=1e-10, operator="factor")
-        assert compiled.info["fused_kernel"] and not plain.info["fused_kernel"]
-        assert compiled.status == plain.status == reference.status == "converged"
-        for result in (compiled, plain):
+        with_factor = solve(problem, method, tol=1e-10)
+        with_matrix = solve(problem, method, tol=1e-10, operator="matrix")
+        assert with_factor.info["fused_kernel"] and with_matrix.info["fused_kernel"]
+        assert with_factor.status == with_matrix.status == reference.status == "converged"
+        for result in (with_factor, with_matrix):
             assert velocity_error(problem, result.velocities, reference.velocities) <= ACCURACY
+        scaled = problem.normalized()
+        data = prepare(scaled, method == "apgd-jacobi", "factor")
+        tracker, status, _, _ = run_apgd(data, np.zeros(scaled.n_rows), 1e-10, 20000)
+        plain = problem.velocity(tracker.best * data.scale * scaled.scaling.force)
+        assert status == "converged"
+        assert velocity_error(problem, plain, reference.velocities) <= ACCURACY
 
 
 def test_bench_solvers_prints_the_condition_and_a_converged_row(capsys):
