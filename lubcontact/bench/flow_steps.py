@@ -42,6 +42,7 @@ from ..flow.run import FlowRun
 from ..io.files import save_npz, save_text
 from ..model.scene import Scene
 from ..problem.metrics import scaled_coulomb_error
+from ..problem.step import StepProblem
 from ..scenes import inclined
 from ..sim.simulation import Simulation
 from ..sim.state import SimulationState
@@ -51,12 +52,15 @@ from .options import check_methods, names
 from .statistics import scaling_exponents
 from .tables import format_table
 
-COLUMNS = ("n_grains", "model", "friction", "method", "contacts", "s_per_step", "iterations", "warm_cold",
+COLUMNS = ("n_grains", "model", "friction", "method", "contacts", "s_per_step", "iterations",
+           "per_product", "warm_cold",
            "max_fclib_error", "contacts_pc", "assembly_pc", "solve_pc", "update_pc", "peak_mb",
            "statuses")
 """``contacts``: mean per step; ``s_per_step``: median time of the whole step (contacts,
 assembly, the exact-Coulomb solve, update); ``iterations``: median per step (Newton iterations
 for ``newton-ac``, sweeps for ``nsgs``, inner first-order iterations for the others);
+``per_product``: the solve's time per iteration (set-up included; median over the steps) over
+one scipy product ``W x`` on the last step's normalised ``W``;
 ``warm_cold``: iterations of the first timed step warm-started from the previous step (pair
 keys) over those of the same step started cold; ``*_pc``: percentage of the steps' total time
 in each phase (:attr:`~lubcontact.sim.trajectory.StepReport.timings`); ``peak_mb``: the
@@ -164,6 +168,20 @@ def widened_flow(layer: pathlib.Path, n_grains: int, cache: pathlib.Path) -> tup
     return model, sim
 
 
+def product_time(problem: StepProblem, repeats: int = 20) -> float:
+    """Seconds of one scipy product ``W x`` with the problem's normalised ``W`` (the best of
+    ``repeats``, after one untimed)."""
+    matrix = problem.normalized().delassus
+    vector = np.ones(matrix.shape[0])
+    matrix @ vector
+    best = np.inf
+    for _ in range(repeats):
+        clock = time.perf_counter()
+        matrix @ vector
+        best = min(best, time.perf_counter() - clock)
+    return best
+
+
 def time_method(sim: Simulation, method: str, steps: int, tol: float,
                 friction: str = "exact") -> dict[str, Any]:
     """Solve ``steps`` steps of ``sim`` from its current state with ``method`` (``friction``:
@@ -175,12 +193,14 @@ def time_method(sim: Simulation, method: str, steps: int, tol: float,
     cold = settings.solve(problem).iterations
     warm = settings.solve(problem, guess, shift).iterations
     times, iterations, errors, contacts, statuses = [], [], [], [], set()
+    per_iteration = []
     phases = dict.fromkeys(PHASES, 0.0)
     for _ in range(steps):
         clock = time.perf_counter()
         report = sim.step(settings)
         times.append(time.perf_counter() - clock)
         iterations.append(report.result.iterations)
+        per_iteration.append(report.timings["solve"] / max(report.result.iterations, 1))
         contacts.append(report.problem.n_contacts)
         statuses.add(report.result.status)
         errors.append(scaled_coulomb_error(report.problem, report.result.forces))
@@ -191,6 +211,7 @@ def time_method(sim: Simulation, method: str, steps: int, tol: float,
     return {"friction": friction, "method": method, "contacts": int(np.mean(contacts)),
             "s_per_step": float(np.median(times)),
             "iterations": float(np.median(iterations)), "warm_cold": warm / max(cold, 1),
+            "per_product": float(np.median(per_iteration)) / product_time(report.problem),
             "max_fclib_error": float(max(errors)),
             **{f"{phase}_pc": 100.0 * phases[phase] / total for phase in PHASES},
             "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,

@@ -56,6 +56,7 @@ def test_a_layer_widened_to_each_size_gives_rows_an_exponent_and_a_figure(tmp_pa
         (24, "exact"), (24, "relaxation"), (48, "exact"), (48, "relaxation")]
     assert rows[2]["contacts"] == pytest.approx(2 * rows[0]["contacts"], rel=0.1)
     assert all(row["model"] == "dry" and row["statuses"] == "converged" for row in rows)
+    assert all(0 < row["per_product"] < 1e4 for row in rows)
     out = capsys.readouterr().out
     assert "# dry exact apgd: s/step ~ N^" in out
     assert (tmp_path / "scaling.png").stat().st_size > 10_000
