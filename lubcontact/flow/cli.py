@@ -144,7 +144,7 @@ def _add_common(parser: argparse.ArgumentParser, resume: bool, steps: bool = Tru
              f"gravity g (1 - rho_f/rho_p) {_default('dt_fraction')}")
     add("--solver", default=None,
         help="step solver, a registered method name (an unknown name lists them) "
-             "(default: newton-ac with --fixed-point, apgd without; clarabel when not "
+             "(default: newton-ac with --fixed-point, apgd-jacobi without; clarabel when not "
              "registered)")
     add("--tol", type=_number(float, 0, above=True), default=None,
         help=f"solver tolerance (normalised residual) {_default('tol')}")

@@ -326,3 +326,24 @@ def test_dry_thick_layer_flows_steadily_at_22_degrees_with_a_bagnold_profile():
     fit = measure.fit_bagnold(prof, bed_top, measure.layer_height(prof),
                               2.0 * float(run.sim.scene.grains.radii.mean()))
     assert fit.exponent == pytest.approx(1.5, abs=0.3)
+
+
+def test_the_default_relaxation_solver_converges_on_a_hard_gluey_flow_step():
+    """Step 657 of a 400-grain gluey flow at 22 degrees (poster preset; tests/flow/data/README.md):
+    ``apgd``, the default until 2026-11-27, stopped there at ``max_iter`` with residual 1.7e-2,
+    which failed the run; the default must converge on it from the run's warm start."""
+    from pathlib import Path
+
+    from lubcontact.flow.config import default_solver
+    from lubcontact.flow.run import STEP_FAILURE_RESIDUAL
+    from lubcontact.problem import StepProblem
+    from lubcontact.solvers import SolveSettings
+
+    with np.load(Path(__file__).parent / "data" / "gluey-flow-step.npz") as data:
+        problem = StepProblem.from_arrays(data)
+        guess, shift = data["warm_start"], data["warm_shift"]
+    assert problem.n_contacts == 1176
+    result = SolveSettings(method=default_solver(), tol=1e-6, exact_coulomb=False).solve(
+        problem, guess, shift)
+    assert result.status == "converged"          # the registry's own residual check included
+    assert result.residual <= 1e-2 * STEP_FAILURE_RESIDUAL

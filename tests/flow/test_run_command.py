@@ -273,9 +273,9 @@ def test_names_known_to_the_parser_match_the_scenes():
 
 
 def test_the_default_solver_follows_the_friction_model(tmp_path, capsys):
-    """The relaxation's fastest method by default (apgd), exact Coulomb's (newton-ac) with
+    """The relaxation's method by default (apgd-jacobi), exact Coulomb's (newton-ac) with
     --fixed-point; a solver given explicitly is kept; the checkpoint and summary record it."""
-    assert RunConfig().solver == "apgd" and RunConfig(fixed_point=True).solver == "newton-ac"
+    assert RunConfig().solver == "apgd-jacobi" and RunConfig(fixed_point=True).solver == "newton-ac"
     assert RunConfig(fixed_point=True, solver="apgd-jacobi").solver == "apgd-jacobi"
     out = tmp_path / "exact"
     assert flow_cli.run_main(["inclined_flow", "--n", "12", "--width", "8", "--steps", "2",
