@@ -323,7 +323,7 @@ def build_sequences() -> list[Instance]:
 
 def build_flows() -> list[Instance]:
     """Snapshots of inclined flows (dry Coulomb, gluey + Coulomb), 60 grains, 25 degrees."""
-    flow = _import("lubcontact.flow", "the flow scenes")
+    flow = _import("lubcontact.scenes.inclined", "the flow scenes")
     params = flow.dimensionless_parameters()
     dt = flow.time_step(params)
     bed = flow.sedimentation(60, params, width=20.0 * params.radius, seed=2)
@@ -394,7 +394,7 @@ SETS: dict[str, ProblemSet] = {s.name: s for s in [
     ProblemSet("sequences", "6 consecutive steps of 100-disk settling piles (dry, glued): "
                "cold against warm-started solves", build_sequences, seeds={"settling_pile": 3}),
     ProblemSet("flows", "inclined flows at 25 degrees, 60 disks: dry Coulomb and gluey + Coulomb, "
-               "3 consecutive steps", build_flows, seeds={"sedimentation": 2}),
+               "steps 21 and 22, warm-started from the step before", build_flows, seeds={"sedimentation": 2}),
     ProblemSet("hard", "the hard-case suite (lubcontact/bench/cases/hard.py, docs/records/hard_cases.md): "
                "one solve each, errors against the exact velocities where known", build_hard),
     ProblemSet("siconos-fc2d", "Siconos 2D granular flow on a wall (667, 2020, 7002 contacts)",

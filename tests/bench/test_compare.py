@@ -164,3 +164,14 @@ def test_hard_cases_use_exact_answers_and_flag_infeasible_problems():
     row = runs.measure(infeasible, variant, 1e-8, reference, 1, None, runs.SUCCESS_SLACK)
     assert row.status != "converged" and row.success
     assert np.isnan(row.velocity_error)
+
+
+def test_the_flows_set_builds_warm_started_steps_of_each_model():
+    """``--set flows`` builds its inclined-flow snapshots (it imported a module that no longer
+    held the flow scenes, and every call failed): of 3 consecutive steps, the last 2 with the
+    previous step's forces."""
+    instances = problem_sets.SETS["flows"].instances()
+    assert [i.name for i in instances] == [f"flow60-{model}-step{step}" for model in ("dry", "gluey")
+                                           for step in (21, 22)]
+    assert all(i.mode == problem_sets.COULOMB and i.problem.n_contacts > 20 for i in instances)
+    assert all(i.warm_start is not None for i in instances)
