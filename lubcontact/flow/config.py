@@ -21,8 +21,8 @@ DEFAULT_FAST_SOLVER = "apgd-jacobi"
 """The solver of runs with the convex relaxation of friction (the default), when registered.
 ``apgd`` was until 2026-11-27: on a 400-grain gluey flow at 22 degrees it stopped at
 ``max_iter`` (residual 1.7e-2) on step 657 and failed the run, where ``apgd-jacobi`` converged
-in 315 iterations and ran the 2000 steps; on developed dry flows of 400 to 3200 grains its
-steps cost 0.75x to 1.0x apgd's (docs/records/benchmarks.md)."""
+in 315 iterations and ran the 2000 steps; on developed dry flows of 400 to 12 800 grains its
+steps cost 0.84x to 1.08x apgd's (docs/records/benchmarks.md)."""
 DEFAULT_EXACT_SOLVER = "newton-ac"
 """The solver of runs with exact Coulomb friction (``fixed_point``), when registered: one native
 solve per step; on developed 300-grain flows 9.0x (dry) and 3.9x (gluey) faster than ``apgd``
