@@ -68,6 +68,7 @@ import scipy.sparse.linalg as spla
 
 from ..problem.conic import ConicProblem
 from ..problem.metrics import coulomb_error
+from ..problem.step import diagonal_scaled
 from .coulomb import solve_coulomb
 from .dual_data import DENSE_LIMIT
 from .registry import ALL_CONES, NEWTON, register
@@ -197,7 +198,15 @@ class AlartCurnier:
         return forces - projected, y
 
     def jacobian(self, y: np.ndarray) -> tuple[sp.csr_matrix, np.ndarray]:
-        """``J = I - G + G diag(rho) (W + sigma I)`` at ``y``, and the rows where ``G`` is not zero."""
+        """The rows of ``J = I - G + G diag(rho) (W + sigma I)`` at ``y`` where ``G`` is not zero.
+
+        Returns
+        -------
+        (scipy.sparse.csr_matrix, ndarray of bool)
+            Those rows, shape (m, n_rows), and the mask of the m rows (``active``); every other
+            row of ``J`` is the identity's. Only they are assembled: ``G``'s product with ``W``
+            for all rows cost 30 % of a Newton step on a developed 3200-grain flow.
+        """
         rows, cols, vals = [], [], []
         box = np.flatnonzero(self.box & (y > self.lower) & (y < self.upper))
         rows.append(box)
@@ -230,16 +239,22 @@ class AlartCurnier:
             cols.append(stick_rows)
             vals.append(np.ones(stick_rows.size))
         n = self.n_rows
-        G = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(n, n))
-        active = G.getnnz(axis=1) > 0
-        J = sp.identity(n, format="csr") - G + G @ self.scaled_W
+        rows = np.concatenate(rows)
+        active = np.zeros(n, dtype=bool)
+        active[rows] = True
+        position = np.cumsum(active) - 1               # row of J_A of each active row
+        m = int(active.sum())
+        G = sp.csr_matrix((np.concatenate(vals), (position[rows], np.concatenate(cols))), shape=(m, n))
+        identity = sp.csr_matrix((np.ones(m), (np.arange(m), np.flatnonzero(active))), shape=(m, n))
+        J = identity - G + G @ self.scaled_W
         if self.sigma:
-            J = J + G @ sp.diags(self.sigma * self.rho)
+            J = J + diagonal_scaled(G, columns=self.sigma * self.rho)
         return J.tocsr(), active
 
 
 def _newton_direction(J: sp.csr_matrix, active: np.ndarray, phi: np.ndarray) -> np.ndarray | None:
-    """Solve ``J d = -phi`` with the identity rows eliminated.
+    """Solve ``J d = -phi`` with the identity rows eliminated (``J``: the active rows, as
+    :meth:`AlartCurnier.jacobian` returns them).
 
     The active block is factorised by a dense LU (LAPACK) up to :data:`DENSE_LIMIT` rows,
     by SuperLU above.
@@ -253,11 +268,9 @@ def _newton_direction(J: sp.csr_matrix, active: np.ndarray, phi: np.ndarray) -> 
     rows = np.flatnonzero(active)
     if rows.size == 0:
         return direction
-    fixed = np.flatnonzero(~active)
-    J_rows = J[rows]
-    rhs = -phi[rows] - J_rows[:, fixed] @ direction[fixed]
+    rhs = -phi[rows] - J @ np.where(active, 0.0, direction)
     dense = rows.size <= DENSE_LIMIT
-    block = J_rows[:, rows].toarray() if dense else J_rows[:, rows].tocsc()
+    block = J[:, rows].toarray() if dense else J[:, rows].tocsc()
     for delta in REGULARISATIONS:
         try:
             with warnings.catch_warnings():
@@ -488,8 +501,8 @@ def _newton_phase(function: AlartCurnier, unshifted: ConicProblem, forces: np.nd
         step = None
         if newton is not None:
             step = _line_search(function, forces, newton, 2.0 * merit, max(recent))
-        if step is None:
-            gradient = J.T @ phi
+        if step is None:                   # J^T phi, J's inactive rows being the identity's
+            gradient = np.where(active, 0.0, phi) + J.T @ phi[active]
             step = _line_search(function, forces, -gradient, float(gradient @ gradient), max(recent))
             gradient_steps += 1
         if step is None:
