@@ -113,7 +113,7 @@ def run_apgd_cones(data: DualData, cones: Cones, z: np.ndarray, tol: float, max_
     """
     kernel = cone_kernel()
     if data.matrix is None and data.factor is not None:
-        operator = (*csr_arrays(data.factor), *csr_arrays(data.factor.T.tocsr()),
+        operator = (*csr_arrays(data.factor), *csr_arrays(data.factor_transpose),
                     np.empty(data.factor.shape[0]))
     else:
         empty = np.zeros(0, dtype=np.uintp)

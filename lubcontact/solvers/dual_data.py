@@ -80,6 +80,9 @@ class DualData:
         :meth:`assembled` is called).
     factor : scipy.sparse matrix or None
         ``L S_it`` (``W_it = (L S_it)^T (L S_it)``) for the matrix-free operator.
+    factor_transpose : scipy.sparse.csr_matrix or None
+        ``(L S_it)^T`` in CSR form, built once with ``factor`` (its rows are the second
+        product of the matrix-free operator, here and in the compiled loops).
     products : int
         Products ``W z`` done so far.
     ratio : ndarray, shape (n,)
@@ -93,6 +96,7 @@ class DualData:
     project: Callable
     matrix: sp.spmatrix | None = None
     factor: sp.spmatrix | None = None
+    factor_transpose: sp.csr_matrix | None = None
     products: int = 0
     ratio: np.ndarray = field(init=False, repr=False)
 
@@ -117,7 +121,7 @@ class DualData:
     def assembled(self) -> sp.csr_matrix:
         """``W_it`` as a sparse matrix, assembled from the factor on first use."""
         if self.matrix is None:
-            self.matrix = sp.csr_matrix(self.factor.T @ self.factor)
+            self.matrix = sp.csr_matrix(self.factor_transpose @ self.factor)
         return self.matrix
 
 
@@ -188,7 +192,8 @@ def prepare(problem: ConicProblem, scaling: bool, operator: str = "auto") -> Dua
         factor = diagonal_scaled(problem.delassus_factor, columns=scale)
         transposed = factor.T.tocsr()
         return DualData(apply=lambda z: transposed @ (factor @ z), offset=offset, scale=scale,
-                        jacobi=jacobi, project=problem.cones.projector, factor=factor)
+                        jacobi=jacobi, project=problem.cones.projector, factor=factor,
+                        factor_transpose=transposed)
     # S W S from the problem's W (assembled once per problem, kept by its copies with
     # another shift): no sparse product here
     matrix = diagonal_scaled(problem.delassus, scale, scale) if scaling else problem.delassus
