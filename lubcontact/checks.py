@@ -5,6 +5,8 @@ shows the offending value, so that a user can find the mistake in their input.
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numpy.typing import ArrayLike
 
@@ -78,6 +80,8 @@ def integer(field: str, value: float, minimum: int = 0) -> int:
 
 def positive_scalar(field: str, value: float) -> float:
     """A finite, strictly positive float."""
+    if type(value) is float and 0.0 < value < math.inf:     # the common case, without an array
+        return value
     return float(positive(field, value, shape=()))
 
 

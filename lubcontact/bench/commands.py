@@ -6,6 +6,7 @@ Benchmarks are listed in :data:`BENCHMARKS` and imported lazily:
 - ``friction``: exact Coulomb friction on external problems and a pile step
   (:mod:`lubcontact.bench.friction`);
 - ``flow``: exact-Coulomb steps of developed inclined flows (:mod:`lubcontact.bench.flow_steps`).
+- ``small``: the fixed cost of a solve on small systems (:mod:`lubcontact.bench.small_steps`).
 """
 from __future__ import annotations
 
@@ -15,6 +16,7 @@ BENCHMARKS = {
     "solvers": ("lubcontact.bench.piles", "solvers_main", "every solver on 2D piles at rest"),
     "friction": ("lubcontact.bench.friction", "main", "friction benchmarks"),
     "flow": ("lubcontact.bench.flow_steps", "main", "exact-Coulomb steps of developed inclined flows"),
+    "small": ("lubcontact.bench.small_steps", "main", "the fixed cost of a solve on small systems"),
 }
 """Name -> (module, function, one line of help); ``function(argv) -> int``."""
 

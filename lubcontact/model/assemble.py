@@ -9,11 +9,10 @@ centres cannot spin disks or spheres.
 from __future__ import annotations
 
 import numpy as np
-import scipy.sparse as sp
 
 from ..problem.cones import Cones
 from ..problem.step import StepProblem
-from .contacts import Contacts, normal_jacobian, obstacle_offset, tangential_jacobian
+from .contacts import Contacts, normal_jacobian, obstacle_offset, stacked_rows, tangential_jacobian
 from .scene import Scene
 
 
@@ -65,7 +64,7 @@ def assemble(scene: Scene, contacts: Contacts, cones: Cones, dt: float, *,
     free_velocity[: force.size] += dt * force / mass[: force.size]
     jacobian = normal_jacobian(contacts, rotations)
     if cones.has_friction:
-        jacobian = sp.vstack([jacobian, tangential_jacobian(contacts, cones.tangential)]).tocsr()
+        jacobian = stacked_rows(jacobian, tangential_jacobian(contacts, cones.tangential))
     obstacles = scene.obstacle_velocities()
     moving = obstacle_offset(contacts, obstacles, cones.tangential, dt) if np.any(obstacles) \
         else None

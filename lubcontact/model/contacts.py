@@ -109,13 +109,12 @@ def dof_count(n_grains: int, dim: int, rotations: bool) -> int:
 def normal_jacobian(contacts: Contacts, rotations: bool) -> sp.csr_matrix:
     """Rows ``B`` with ``(B v)_c = u_n,c``, shape (nc, n_dof)."""
     nc, dim, n = contacts.count, contacts.dim, contacts.n_grains
-    free_a = contacts.a_is_free
-    rows = np.concatenate([np.repeat(np.arange(nc), dim), np.repeat(np.flatnonzero(free_a), dim)])
-    cols = np.concatenate([(contacts.body_b[:, None] * dim + np.arange(dim)).ravel(),
-                           (contacts.body_a[free_a, None] * dim + np.arange(dim)).ravel()])
-    vals = np.concatenate([contacts.normals.ravel(), -contacts.normals[free_a].ravel()])
-    shape = (nc, dof_count(n, dim, rotations))
-    return sp.csr_matrix((vals, (rows, cols)), shape=shape)
+    columns = np.concatenate([contacts.body_b[:, None] * dim + np.arange(dim),
+                              contacts.body_a[:, None] * dim + np.arange(dim)], axis=1)
+    values = np.concatenate([contacts.normals, -contacts.normals], axis=1)
+    kept = np.ones(columns.shape, dtype=bool)
+    kept[:, dim:] = contacts.a_is_free[:, None]          # an obstacle has no column
+    return rows_to_csr(columns, values, kept, (nc, dof_count(n, dim, rotations)))
 
 
 def tangential_jacobian(contacts: Contacts, which: np.ndarray) -> sp.csr_matrix:
@@ -139,21 +138,53 @@ def tangential_jacobian(contacts: Contacts, which: np.ndarray) -> sp.csr_matrix:
     levers = lever_coefficients(normals, tangents)          # (m, nt, nrot)
     a, b = contacts.body_a[which], contacts.body_b[which]
     ra, rb = contacts.radius_a[which], contacts.radius_b[which]
-    free_a = a < n
-    row = np.arange(len(which) * nt).reshape(len(which), nt)
-    rot0 = n * dim
-    blocks = [
-        (row[:, :, None], b[:, None, None] * dim + np.arange(dim), tangents),
-        (row[:, :, None], rot0 + b[:, None, None] * nrot + np.arange(nrot), -rb[:, None, None] * levers),
-        (row[free_a, :, None], a[free_a, None, None] * dim + np.arange(dim), -tangents[free_a]),
-        (row[free_a, :, None], rot0 + a[free_a, None, None] * nrot + np.arange(nrot),
-         -ra[free_a, None, None] * levers[free_a]),
-    ]
-    rows = np.concatenate([np.broadcast_to(r, v.shape).ravel() for r, _, v in blocks])
-    cols = np.concatenate([np.broadcast_to(c, v.shape).ravel() for _, c, v in blocks])
-    vals = np.concatenate([v.ravel() for _, _, v in blocks])
-    shape = (len(which) * nt, dof_count(n, dim, True))
-    return sp.csr_matrix((vals, (rows, cols)), shape=shape)
+    m, rot0 = len(which), n * dim
+    # per row: body b's translations and rotations, then body a's (dropped for an obstacle)
+    blocks = [(b[:, None, None] * dim + np.arange(dim), tangents),
+              (rot0 + b[:, None, None] * nrot + np.arange(nrot), -rb[:, None, None] * levers),
+              (a[:, None, None] * dim + np.arange(dim), -tangents),
+              (rot0 + a[:, None, None] * nrot + np.arange(nrot), -ra[:, None, None] * levers)]
+    width = 2 * (dim + nrot)
+    columns = np.concatenate([np.broadcast_to(c, v.shape) for c, v in blocks], axis=2)
+    values = np.concatenate([v for _, v in blocks], axis=2)
+    kept = np.ones((m, nt, width), dtype=bool)
+    kept[:, :, dim + nrot:] = (a < n)[:, None, None]
+    return rows_to_csr(columns.reshape(m * nt, width), values.reshape(m * nt, width),
+                       kept.reshape(m * nt, width), (m * nt, dof_count(n, dim, True)))
+
+
+def rows_to_csr(columns: np.ndarray, values: np.ndarray, kept: np.ndarray,
+                shape: tuple[int, int]) -> sp.csr_matrix:
+    """A CSR matrix from a fixed number of candidate entries per row, built from its arrays.
+
+    Built directly (no COO matrix and its conversion, which cost more than a small step's
+    solve), in canonical form: each row's kept entries sorted by column; the columns of a row
+    must differ.
+
+    Parameters
+    ----------
+    columns : ndarray of int, shape (n_rows, k)
+        Column of each candidate entry.
+    values : ndarray, shape (n_rows, k)
+        Its value.
+    kept : ndarray of bool, shape (n_rows, k)
+        Whether the entry exists (a dropped entry's column may be anything).
+    shape : (int, int)
+        Shape of the matrix (``shape[0] == n_rows``).
+    """
+    order = np.argsort(np.where(kept, columns, np.iinfo(np.int64).max), axis=1, kind="stable")
+    kept = np.take_along_axis(kept, order, axis=1)
+    indptr = np.concatenate([[0], np.cumsum(kept.sum(axis=1))])
+    return sp.csr_matrix((np.take_along_axis(values, order, axis=1)[kept],
+                          np.take_along_axis(columns, order, axis=1)[kept], indptr), shape=shape)
+
+
+def stacked_rows(top: sp.csr_matrix, bottom: sp.csr_matrix) -> sp.csr_matrix:
+    """``[top; bottom]`` for two CSR matrices with the same columns, built from their arrays."""
+    return sp.csr_matrix((np.concatenate([top.data, bottom.data]),
+                          np.concatenate([top.indices, bottom.indices]),
+                          np.concatenate([top.indptr, top.indptr[-1] + bottom.indptr[1:]])),
+                         shape=(top.shape[0] + bottom.shape[0], top.shape[1]))
 
 
 def obstacle_offset(contacts: Contacts, obstacle_velocities: np.ndarray, tangential: np.ndarray,

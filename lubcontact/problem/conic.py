@@ -71,6 +71,10 @@ class ConicProblem(Protocol):
         """``L`` with ``W = L^T L`` when known (a step problem), else None."""
 
     @property
+    def dense_delassus(self) -> np.ndarray:
+        """``W`` as a dense array, shape (n_rows, n_rows) (built on demand: small problems)."""
+
+    @property
     def offset(self) -> np.ndarray:
         """``b``, shape (n_rows,), the shift included."""
 
@@ -79,6 +83,9 @@ class ConicProblem(Protocol):
 
     def velocity(self, forces: np.ndarray) -> np.ndarray:
         """The velocities the forces produce."""
+
+    def constraint_values(self, velocity: np.ndarray) -> np.ndarray:
+        """``W lam + b`` from ``velocity(lam)``, shape (n_rows,)."""
 
     def dual_objective(self, forces: np.ndarray) -> float: ...
 
@@ -129,5 +136,5 @@ class ConicProblemMixin:
         return other
 
 
-MATRICES = ("delassus", "delassus_factor", "jacobian_transpose")
+MATRICES = ("delassus", "delassus_factor", "jacobian_transpose", "dense_delassus")
 """Cached matrices of a problem, independent of its shift and cones."""

@@ -123,6 +123,11 @@ class LocalProblem(ConicProblemMixin):
         """No factor ``W = L^T L`` is known for a problem given by ``W``."""
         return None
 
+    @cached_property
+    def dense_delassus(self) -> np.ndarray:
+        """``W`` as a dense array, shape (n_rows, n_rows) (for small problems)."""
+        return self.delassus.toarray()
+
     @property
     def dim(self) -> int:
         return self.cones.tangent_dim + 1
@@ -137,6 +142,12 @@ class LocalProblem(ConicProblemMixin):
     def velocity(self, forces: np.ndarray) -> np.ndarray:
         """Local velocities ``u = W r + q`` (no shift), shape (n_rows,)."""
         return self.delassus @ forces + self.free_velocity
+
+    def constraint_values(self, velocity: np.ndarray) -> np.ndarray:
+        """``u + [s, 0]`` (the shifted local velocity) from a local velocity ``u``, shape (n_rows,)."""
+        out = velocity.copy()
+        out[: self.n_contacts] += self.shift
+        return out
 
     def gradient(self, forces: np.ndarray) -> np.ndarray:
         """``W r + b`` (the shifted local velocity)."""

@@ -17,6 +17,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from functools import cached_property
+from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
@@ -107,6 +108,17 @@ class StepProblem(ConicProblemMixin):
         left = self.jacobian if weight is None else diagonal_scaled(self.jacobian, columns=weight)
         return sp.csr_matrix(left @ self.delassus_factor)
 
+    @cached_property
+    def dense_delassus(self) -> np.ndarray:
+        """``W`` as a dense array, shape (n_rows, n_rows): one BLAS product of the dense,
+        weighted Jacobian, for small problems, where the sparse products' fixed cost is most of
+        a solve's set-up (``DENSE_OPERATOR_LIMIT`` in :mod:`lubcontact.solvers.dual_data`)."""
+        weighted = self.jacobian.toarray()
+        weight = self._factor_weight
+        if weight is not None:
+            weighted *= weight
+        return weighted @ weighted.T
+
     @property
     def _factor_weight(self) -> np.ndarray | None:
         """``dt M^-1/2`` per degree of freedom, None where it is 1 (a normalised problem)."""
@@ -166,11 +178,22 @@ class StepProblem(ConicProblemMixin):
         length = self.dt * speed
         scaling = Scaling(velocity=velocity_scale, force=m_ref * speed / self.dt, length=length)
         jacobian = diagonal_scaled(self.jacobian, columns=velocity_scale / speed)
-        return StepProblem(mass=np.ones(self.n_dof), free_velocity=self.free_velocity / velocity_scale,
-                           jacobian=jacobian, gaps=self.gaps / length, cones=self.cones, dt=1.0,
-                           shift=self.shift / length, keys=self.keys, scaling=scaling,
-                           obstacle_offset=None if self.obstacle_offset is None
-                           else self.obstacle_offset / length)
+        return StepProblem._derived(mass=np.ones(self.n_dof),
+                                    free_velocity=self.free_velocity / velocity_scale,
+                                    jacobian=jacobian, gaps=self.gaps / length, cones=self.cones,
+                                    dt=1.0, shift=self.shift / length, keys=self.keys,
+                                    scaling=scaling,
+                                    obstacle_offset=None if self.obstacle_offset is None
+                                    else self.obstacle_offset / length)
+
+    @classmethod
+    def _derived(cls, **fields: Any) -> StepProblem:
+        """A problem whose every field is derived from a checked problem (its scaled copy), built
+        without :meth:`__post_init__`'s checks: on small problems they cost as much as the
+        solve's products."""
+        problem = object.__new__(cls)
+        problem.__dict__.update(fields)
+        return problem
 
     def to_arrays(self) -> dict[str, np.ndarray]:
         """Plain arrays describing the problem (for ``np.savez``); see :meth:`from_arrays`."""

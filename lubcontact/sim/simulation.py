@@ -182,15 +182,16 @@ class Simulation:
             forces and shift matched by pair key (None without a previous step
             or with ``warm_start=False``).
         """
-        return self._build_problem({})
+        return self._build_problem({}, self.search_distance())
 
-    def _build_problem(self, timings: dict) -> tuple[Contacts, np.ndarray, StepProblem,
-                                                     np.ndarray | None, np.ndarray | None]:
-        """:meth:`next_problem`, with the seconds of its phases put in ``timings``
-        (``contacts``, ``assembly``)."""
+    def _build_problem(self, timings: dict, searched: float
+                       ) -> tuple[Contacts, np.ndarray, StepProblem, np.ndarray | None,
+                                  np.ndarray | None]:
+        """:meth:`next_problem` with the candidate distance ``searched`` (:meth:`search_distance`),
+        the seconds of its phases put in ``timings`` (``contacts``, ``assembly``)."""
         scene = self.scene
         start = time.perf_counter()
-        contacts = find_contacts(scene, self.search_distance())
+        contacts = find_contacts(scene, searched)
         timings["contacts"] = time.perf_counter() - start
         gamma = self.state.pairs.lookup(contacts.keys)
         problem = assemble(scene, contacts, self.law.cones(contacts, gamma), self.dt,
@@ -233,7 +234,8 @@ class Simulation:
         """
         settings = self.settings if settings is None else settings
         timings: dict[str, float] = {}
-        contacts, gamma, problem, guess, shift = self._build_problem(timings)
+        searched = self.search_distance()
+        contacts, gamma, problem, guess, shift = self._build_problem(timings, searched)
         start = time.perf_counter()
         result = settings.solve(problem, guess, shift)
         if not result.success and self.on_failure == "fallback" \
@@ -255,7 +257,6 @@ class Simulation:
         new_gamma = self.law.update_gamma(contacts, gamma, normal, self.dt, result.force_scale,
                                           gaps_after=gaps_after, length_scale=result.length_scale)
         speed = float(np.max(np.linalg.norm(self.scene.grains.velocities, axis=1), initial=0.0))
-        searched = self.search_distance()
         self._advance(problem, result, PairState.from_contacts(contacts.keys, new_gamma))
         self._check_missed_contacts(contacts, speed, searched)
         report = StepReport(contacts=contacts, problem=problem, result=result, gamma=new_gamma,

@@ -17,8 +17,6 @@ checked, and corrected by primal-dual active-set rounds.
 """
 from __future__ import annotations
 
-import warnings
-
 import numpy as np
 import scipy.linalg as sla
 import scipy.sparse as sp
@@ -26,6 +24,8 @@ import scipy.sparse as sp
 from ..problem.cones import ConeKind, Cones
 from .dual_data import DENSE_LIMIT, DualData, ResidualTracker
 from .result import CONVERGED
+
+_getrf, _getrs = sla.get_lapack_funcs(("getrf", "getrs"), dtype=np.float64)
 
 MAX_FINISH_ATTEMPTS = 4
 """Finish attempts of one ``apgd-as`` solve (the initial guess's included) before it goes on as
@@ -92,13 +92,16 @@ class ActiveSetFinish:
         self.tried: set[int] = set()
         self.exact: np.ndarray | None = None
         self._factor = None
+        self._dense = None
+        if data.offset.size <= DENSE_LIMIT:
+            dense = data.assembled().toarray() if data.dense is None else data.dense.copy()
+            diagonal = dense.ravel()[:: dense.shape[0] + 1]       # a view: the diagonal in place
+            diagonal += 1e-12 * max(float(diagonal.max(initial=0.0)), 1e-300)
+            self._dense = dense
+            return
         matrix = data.assembled()
         diagonal = matrix.diagonal()
         delta = 1e-12 * max(float(diagonal.max()), 1e-300) if diagonal.size else 1e-12
-        self._dense = None
-        if matrix.shape[0] <= DENSE_LIMIT:
-            self._dense = matrix.toarray() + delta * np.eye(matrix.shape[0])
-            return
         upper = sp.triu(matrix, format="csc")
         upper = sp.csc_matrix(upper + delta * sp.identity(upper.shape[0], format="csc"))
         self._upper = upper
@@ -191,15 +194,14 @@ class ActiveSetFinish:
             solution = np.zeros_like(rhs)
             if rows.size == 0:
                 return solution
-            try:
-                with warnings.catch_warnings():
-                    warnings.simplefilter("error", sla.LinAlgWarning)    # exactly singular
-                    factor = sla.lu_factor(self._dense[np.ix_(rows, rows)], check_finite=False)
-            except (ValueError, sla.LinAlgError, sla.LinAlgWarning):
+            # LAPACK's LU directly: scipy's lu_factor/lu_solve wrappers cost more than the
+            # factorisation of such a block; info > 0 is an exactly singular block
+            lu, pivots, info = _getrf(self._dense[np.ix_(rows, rows)], overwrite_a=True)
+            if info != 0:
                 return None
-            solution[rows] = sla.lu_solve(factor, rhs[rows], check_finite=False)
+            solution[rows] = _getrs(lu, pivots, rhs[rows])[0]
             product = self.data.product(solution)
-            solution[rows] += sla.lu_solve(factor, rhs[rows] - product[rows], check_finite=False)
+            solution[rows] += _getrs(lu, pivots, rhs[rows] - product[rows])[0]
             return solution if np.all(np.isfinite(solution)) else None
         import qdldl
 

@@ -58,9 +58,13 @@ def positions(values: np.ndarray) -> np.ndarray:
     return np.asarray(values).astype(np.uintp, copy=False)
 
 
-def csr_arrays(matrix: sp.csr_matrix) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``(indptr, indices, data)`` of a CSR matrix, the indices as :func:`positions`."""
-    return positions(matrix.indptr), positions(matrix.indices), matrix.data
+def csr_arrays(matrix: sp.csr_matrix | tuple[np.ndarray, np.ndarray, np.ndarray]
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(indptr, indices, data)`` of a CSR matrix (or of such a triple), the indices as
+    :func:`positions`."""
+    indptr, indices, values = (matrix.indptr, matrix.indices, matrix.data) \
+        if sp.issparse(matrix) else matrix
+    return positions(indptr), positions(indices), values
 
 
 def is_box(cones: Cones) -> bool:
@@ -117,7 +121,7 @@ def run_apgd_cones(data: DualData, cones: Cones, z: np.ndarray, tol: float, max_
                     np.empty(data.factor.shape[0]))
     else:
         empty = np.zeros(0, dtype=np.uintp)
-        operator = (*csr_arrays(data.assembled()), empty, empty, np.zeros(0), np.zeros(0))
+        operator = (*csr_arrays(data.sparse_arrays()), empty, empty, np.zeros(0), np.zeros(0))
     (cone_n, cone_t, cone_mu), (union_n, union_t, union_mu) = cones.projector.pieces
     union = np.repeat([False, True], [cone_n.size, union_n.size])
     lipschitz = initial_lipschitz(data, z)
@@ -149,7 +153,7 @@ def run_apgd_box(data: DualData, z: np.ndarray, tol: float, max_iter: int,
     Parameters
     ----------
     data : DualData
-        The problem, with ``W_it`` assembled (``data.matrix``).
+        The problem, with ``W_it`` assembled (``data.matrix``, or ``data.dense`` when small).
     z : ndarray, shape (n,)
         Starting iterate.
     tol : float
@@ -168,7 +172,7 @@ def run_apgd_box(data: DualData, z: np.ndarray, tol: float, max_iter: int,
     iterations : int
     """
     kernel = box_kernel()
-    arrays = csr_arrays(data.matrix)
+    arrays = csr_arrays(data.sparse_arrays())
     iterate, product = z.copy(), data.product(z)
     extrapolated, extrapolated_product = iterate.copy(), product.copy()
     active = np.zeros(z.size, dtype=bool)

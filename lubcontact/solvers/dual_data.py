@@ -35,7 +35,10 @@ frictional flow, where each contact shares a grain with many others, the
 matrix-free product costs half (3200 grains: 104 against 230 us in the
 compiled loops). With ``"auto"`` the matrix-free product is used whenever the
 factor exists; which methods assemble ``S W S`` instead is said in
-:mod:`.gradient`.
+:mod:`.gradient`. A small problem (at most :data:`DENSE_OPERATOR_LIMIT` rows)
+with ``"auto"`` gets ``S W S`` dense instead, from the problem's dense ``W``
+(one BLAS product): below ~100 contacts the sparse set-up, not the
+iterations, was most of a solve (``lubcontact bench small``).
 """
 from __future__ import annotations
 
@@ -57,6 +60,11 @@ DENSE_LIMIT = 300
 block of a Newton system (its active rows), and the exact finish's ``W`` (all its rows, kept
 dense for the solve's attempts). A dense LU of 100-250 rows costs a fraction of a sparse
 factorisation's set-up (measured: 0.6 ms per SuperLU factorisation of 122 rows)."""
+DENSE_OPERATOR_LIMIT = 128
+"""Rows up to which :func:`prepare` builds ``W_it`` from the problem's dense ``W``
+(``dense_delassus``, one BLAS product) and applies it as a dense product: on such sizes the
+sparse set-up (transposes, products, scaled copies; about 10 us of fixed cost each) was most of
+a warm-started solve (a 59-row step: 230 of 675 us)."""
 
 
 @dataclass
@@ -83,6 +91,9 @@ class DualData:
     factor_transpose : scipy.sparse.csr_matrix or None
         ``(L S_it)^T`` in CSR form, built once with ``factor`` (its rows are the second
         product of the matrix-free operator, here and in the compiled loops).
+    dense : ndarray, shape (n, n), or None
+        ``W_it`` as a dense array on small problems (:data:`DENSE_OPERATOR_LIMIT`), where
+        ``apply`` is its dense product; ``matrix`` then holds its sparse form.
     products : int
         Products ``W z`` done so far.
     ratio : ndarray, shape (n,)
@@ -97,10 +108,12 @@ class DualData:
     matrix: sp.spmatrix | None = None
     factor: sp.spmatrix | None = None
     factor_transpose: sp.csr_matrix | None = None
+    dense: np.ndarray | None = None
     products: int = 0
     ratio: np.ndarray = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
+        self._arrays = None
         self.ratio = self.scale / self.jacobi
         self._rms = 1.0 / np.sqrt(max(self.offset.size, 1))
 
@@ -119,19 +132,36 @@ class DualData:
         return float(0.5 * z @ product + self.offset @ z)
 
     def assembled(self) -> sp.csr_matrix:
-        """``W_it`` as a sparse matrix, assembled from the factor on first use."""
+        """``W_it`` as a sparse matrix, assembled from the factor (or the dense ``W_it``) on first
+        use."""
         if self.matrix is None:
-            self.matrix = sp.csr_matrix(self.factor_transpose @ self.factor)
+            self.matrix = sp.csr_matrix(self.factor_transpose @ self.factor) if self.dense is None \
+                else sp.csr_matrix(self.sparse_arrays()[::-1], shape=self.dense.shape)
         return self.matrix
 
+    def sparse_arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(indptr, indices, data)`` of ``W_it`` in CSR form (what the compiled loops read); on
+        a small problem from the dense ``W_it`` directly (its nonzeros: the sparse product's
+        pattern), without a sparse matrix object."""
+        if self.dense is None:
+            matrix = self.assembled()
+            return matrix.indptr, matrix.indices, matrix.data
+        if self._arrays is None:
+            rows, columns = np.nonzero(self.dense)
+            indptr = np.searchsorted(rows, np.arange(self.dense.shape[0] + 1))
+            self._arrays = (indptr, columns, self.dense[rows, columns])
+        return self._arrays
 
-def jacobi_scale(problem: ConicProblem) -> np.ndarray:
+
+def jacobi_scale(problem: ConicProblem, diagonal: np.ndarray | None = None) -> np.ndarray:
     """Per-row scale ``s``, constant over each contact's rows (see module docstring).
 
     Parameters
     ----------
     problem : ConicProblem
         A normalised problem (``delassus`` or ``delassus_factor``, ``cones``).
+    diagonal : ndarray, shape (n_rows,), optional
+        The diagonal of ``W`` when the caller has it (else read from the factor or ``W``).
 
     Returns
     -------
@@ -139,9 +169,10 @@ def jacobi_scale(problem: ConicProblem) -> np.ndarray:
         ``s = 1 / sqrt(mean diagonal of W over the contact's rows)`` (1 where that mean is 0).
     """
     cones = problem.cones
-    factor = problem.delassus_factor
-    diagonal = np.asarray(problem.delassus.diagonal()) if factor is None \
-        else np.bincount(factor.indices, weights=factor.data**2, minlength=problem.n_rows)
+    if diagonal is None:
+        factor = problem.delassus_factor
+        diagonal = np.asarray(problem.delassus.diagonal()) if factor is None \
+            else np.bincount(factor.indices, weights=factor.data**2, minlength=problem.n_rows)
     nc = cones.count
     total = diagonal[:nc].copy()
     count = np.ones(nc)
@@ -158,7 +189,8 @@ def jacobi_scale(problem: ConicProblem) -> np.ndarray:
     return scale
 
 
-def prepare(problem: ConicProblem, scaling: bool, operator: str = "auto") -> DualData:
+def prepare(problem: ConicProblem, scaling: bool, operator: str = "auto",
+            assembled: bool = False) -> DualData:
     """Build the iteration data of a (normalised) problem.
 
     Parameters
@@ -168,7 +200,12 @@ def prepare(problem: ConicProblem, scaling: bool, operator: str = "auto") -> Dua
     scaling : bool
         Iterate on the Jacobi-scaled problem.
     operator : {"auto", "matrix", "factor"}
-        How ``W z`` is applied (module docstring).
+        How ``W z`` is applied (module docstring). With ``"auto"``, a problem of at most
+        :data:`DENSE_OPERATOR_LIMIT` rows gets a dense ``W_it`` (``DualData.dense``);
+        ``"matrix"`` always assembles it sparse.
+    assembled : bool
+        The caller needs ``W_it`` assembled (a compiled box loop, an exact finish): a sparse
+        ``W_it`` unless the problem is small and ``operator`` is ``"auto"``.
 
     Returns
     -------
@@ -182,6 +219,10 @@ def prepare(problem: ConicProblem, scaling: bool, operator: str = "auto") -> Dua
     """
     if operator not in ("auto", "matrix", "factor"):
         raise ValueError(f"operator: must be 'auto', 'matrix' or 'factor', got {operator!r}")
+    if operator == "auto" and problem.n_rows <= DENSE_OPERATOR_LIMIT:
+        return _prepare_dense(problem, scaling)
+    if assembled:
+        operator = "matrix"
     has_factor = problem.delassus_factor is not None
     if operator == "factor" and not has_factor:
         raise ValueError("operator: 'factor' needs a problem with delassus_factor")
@@ -199,6 +240,17 @@ def prepare(problem: ConicProblem, scaling: bool, operator: str = "auto") -> Dua
     matrix = diagonal_scaled(problem.delassus, scale, scale) if scaling else problem.delassus
     return DualData(apply=matrix.dot, offset=offset, scale=scale, jacobi=jacobi,
                     project=problem.cones.projector, matrix=matrix)
+
+
+def _prepare_dense(problem: ConicProblem, scaling: bool) -> DualData:
+    """:func:`prepare` on a small problem: ``W_it = S W S`` from the dense ``W``, applied densely
+    (:meth:`DualData.sparse_arrays` gives the compiled loops its CSR arrays)."""
+    delassus = problem.dense_delassus
+    jacobi = jacobi_scale(problem, np.diag(delassus))
+    scale = jacobi if scaling else np.ones(problem.n_rows)
+    dense = delassus * np.outer(scale, scale) if scaling else delassus
+    return DualData(apply=dense.dot, offset=scale * problem.offset, scale=scale, jacobi=jacobi,
+                    project=problem.cones.projector, dense=dense)
 
 
 @dataclass

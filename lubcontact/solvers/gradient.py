@@ -47,6 +47,8 @@ flow ``L`` has 102 000 entries where ``W`` has 468 000, and an APGD step took
 0.140 s instead of 0.259 s (docs/records/benchmarks.md); ``operator="matrix"``
 assembles ``S W S`` for it instead. On 3D friction cones, and for ``pgd`` and
 ``bb``, the numpy loops use the matrix-free product when the factor exists.
+Problems of at most :data:`.dual_data.DENSE_OPERATOR_LIMIT` rows get a dense
+``S W S`` with ``operator="auto"`` (:func:`.dual_data.prepare`).
 """
 from __future__ import annotations
 
@@ -65,9 +67,9 @@ from .result import CONVERGED, DIVERGED, MAX_ITER, MethodOutput
 
 
 def _common(problem: ConicProblem, warm_start: np.ndarray | None, scaling: bool,
-            operator: str) -> tuple[DualData, np.ndarray, float, float]:
+            operator: str, assembled: bool = False) -> tuple[DualData, np.ndarray, float, float]:
     start = time.perf_counter()
-    data = prepare(problem, scaling, operator)
+    data = prepare(problem, scaling, operator, assembled)
     z = initial_point(data, warm_start, problem.n_rows)
     return data, z, time.perf_counter() - start, time.perf_counter()
 
@@ -145,8 +147,8 @@ def _apgd(problem: ConicProblem, tol: float, max_iter: int, warm_start: np.ndarr
     cones_2d = is_cone_2d(problem.cones) and cone_kernel() is not None
     fused = box or cones_2d
     finishing = active_set and not problem.cones.has_friction
-    data, z, setup, start = _common(problem, warm_start, scaling,
-                                    "matrix" if box or finishing else operator)
+    data, z, setup, start = _common(problem, warm_start, scaling, operator,
+                                    assembled=box or finishing)
     if (out := _accept_warm_start(problem, data, z, tol, warm_start, setup, start)) is not None:
         return out
     finish = None

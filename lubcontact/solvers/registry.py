@@ -100,8 +100,8 @@ class SolverInfo:
         if self.step_only and not isinstance(problem, StepProblem):
             return "it needs a step problem (velocities and masses), not a local problem"
         cones = problem.cones
-        unsupported = sorted({ConeKind(k).name for k in np.unique(cones.kinds)}
-                             - {k.name for k in self.cones})
+        unsupported = sorted(ConeKind(k).name for k in set(np.unique(cones.kinds).tolist())
+                             - self.cones)
         if unsupported:
             return f"{' and '.join(unsupported)} contacts are not supported"
         if cones.has_friction and cones.tangent_dim > 1 and not self.second_order:
@@ -239,15 +239,16 @@ def solve(problem: ConicProblem, method: str = "clarabel", *, tol: float = 1e-9,
     if not np.all(np.isfinite(forces)):
         status = FAILED if status == FAILED else DIVERGED
         forces = np.zeros_like(forces)
-    residual = scaled.natural_residual(forces) if forces.size else 0.0
+    scaled_velocities = scaled.velocity(forces)      # the residual's and the result's
+    residual = scaled.cones.natural_residual(forces, scaled.constraint_values(scaled_velocities)) \
+        if forces.size else 0.0
     if status == CONVERGED and residual > SUSPICIOUS_RESIDUAL * np.sqrt(max(forces.size, 1)):
         status = INACCURATE          # the method's claim does not survive an independent check
         out.info["claimed_status"] = CONVERGED
     physical = forces * scale.force
     if out.velocities is not None and status != DIVERGED and np.all(np.isfinite(out.velocities)):
-        velocities = out.velocities * scale.velocity
-    else:
-        velocities = problem.velocity(physical)
+        scaled_velocities = out.velocities
+    velocities = scaled_velocities * scale.velocity
     timed = out.setup_time is not None or out.solve_time is not None
     setup_time = (out.setup_time or 0.0) if timed else 0.0
     solve_time = (out.solve_time or 0.0) if timed else call_time

@@ -1,0 +1,126 @@
+"""``lubcontact bench small``: the fixed cost of a solve on small systems (a teaching run).
+
+A teaching run steps a few tens of grains 10^4 times; each step's problem has
+1-100 contacts, so what a solve costs is set-up (normalising, scaling, building
+``W``, checking, finishing), not iterations. For each size (grains of
+:func:`~lubcontact.scenes.small.settling_pile`, seed 1, ``dt`` = 0.02) and law
+this benchmark settles the pile with ``apgd-jacobi`` (``--settle`` steps, from
+the same start), then, for each method, steps it once untimed (compilation
+and imports are never timed) and times ``--steps`` steps as a simulation takes
+them (a new problem each step, warm-started from the previous step by pair).
+
+Laws (``--laws``): ``frictionless`` (gluey lubrication, gamma_min = -1: a QP),
+``relaxation`` (Coulomb mu = 0.3, the convex relaxation, one solve per step),
+``exact`` (Coulomb mu = 0.3, exact friction by the fixed point on s).
+
+Per row: contacts (mean per step), the median microseconds of the solve
+(``settings.solve``: normalising, set-up, iterations, finish, the result's
+checks) and of the whole step (contacts, assembly, solve, update), the
+steps per second of the run, the median iterations per solve and the statuses.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import pathlib
+import time
+from typing import Any
+
+import numpy as np
+
+from ..io.files import save_text
+from ..model.laws import Coulomb, GlueyLubrication, Law
+from ..scenes.small import settling_pile
+from ..sim.simulation import Simulation
+from ..solvers import SolveSettings
+from .options import check_methods, names
+from .tables import format_table
+
+LAWS = ("frictionless", "relaxation", "exact")
+"""Laws of ``--laws`` (module docstring)."""
+DT = 0.02
+"""Time step of the settling piles (radius 0.5, g = 1)."""
+FRICTION = 0.3
+"""Coulomb coefficient of the frictional laws."""
+COLUMNS = ("n_grains", "law", "method", "contacts", "solve_us", "step_us", "steps_per_s",
+           "iterations", "statuses")
+
+
+def _law(name: str) -> Law:
+    return GlueyLubrication(gamma_min=-1.0) if name == "frictionless" else Coulomb(FRICTION)
+
+
+def settled(n_grains: int, law: str, steps: int, tol: float) -> Simulation:
+    """A settling pile of ``n_grains`` after ``steps`` steps of ``apgd-jacobi`` under ``law``."""
+    sim = Simulation(settling_pile(n_grains, seed=1), _law(law), DT, solver="apgd-jacobi",
+                     tol=tol, fixed_point=law == "exact", tol_fp=1e-6, keep_trajectory=False,
+                     on_failure="ignore")
+    sim.run(steps)
+    return sim
+
+
+def time_steps(sim: Simulation, method: str, steps: int, tol: float, exact: bool) -> dict[str, Any]:
+    """Time ``steps`` steps of ``sim`` with ``method`` after one untimed step; the state is kept.
+
+    Returns
+    -------
+    dict
+        The row's measured columns (:data:`COLUMNS` but ``n_grains`` and ``law``).
+    """
+    start = sim.state
+    settings = SolveSettings(method=method, tol=tol, exact_coulomb=exact, tol_fp=1e-6)
+    sim.step(settings)                      # untimed: compilation, imports, caches
+    solves, totals, iterations, contacts, statuses = [], [], [], [], set()
+    for _ in range(steps):
+        clock = time.perf_counter()
+        report = sim.step(settings)
+        totals.append(time.perf_counter() - clock)
+        solves.append(report.timings["solve"])
+        iterations.append(report.result.iterations)
+        contacts.append(report.problem.n_contacts)
+        statuses.add(report.result.status)
+    sim.restore(start)
+    return {"method": method, "contacts": float(np.mean(contacts)),
+            "solve_us": 1e6 * float(np.median(solves)), "step_us": 1e6 * float(np.median(totals)),
+            "steps_per_s": steps / sum(totals), "iterations": float(np.median(iterations)),
+            "statuses": ",".join(sorted(statuses))}
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``lubcontact bench small [--sizes ...] [--laws ...] [--methods ...]``."""
+    parser = argparse.ArgumentParser(prog="lubcontact bench small", description=__doc__.split("\n")[0])
+    parser.add_argument("--sizes", type=int, nargs="+", default=[4, 10, 20, 40],
+                        help="grains per pile (default: 4 10 20 40)")
+    parser.add_argument("--laws", type=names, default=list(LAWS),
+                        help=f"comma-separated, of {', '.join(LAWS)} (default: all)")
+    parser.add_argument("--methods", type=names, default=["apgd-jacobi", "apgd-as", "nsgs"],
+                        help="comma-separated registered methods (default: apgd-jacobi,apgd-as,nsgs)")
+    parser.add_argument("--steps", type=int, default=300, help="timed steps per method (default: 300)")
+    parser.add_argument("--settle", type=int, default=100,
+                        help="steps before the timed ones (default: 100)")
+    parser.add_argument("--tol", type=float, default=1e-8, help="solver tolerance (default: 1e-8)")
+    parser.add_argument("--json", type=pathlib.Path, help="write the rows to this JSON file")
+    args = parser.parse_args(argv)
+    try:
+        check_methods("--methods", args.methods)
+    except ValueError as exc:
+        parser.error(f"argument {exc}")
+    if unknown := sorted(set(args.laws) - set(LAWS)):
+        parser.error(f"argument --laws: unknown {', '.join(map(repr, unknown))}; known: {', '.join(LAWS)}")
+    for option in ("sizes", "steps"):
+        if min(np.atleast_1d(getattr(args, option))) < 1:
+            parser.error(f"argument --{option}: must be >= 1")
+    rows = []
+    for n_grains in args.sizes:
+        for law in args.laws:
+            sim = settled(n_grains, law, args.settle, args.tol)
+            for method in args.methods:
+                row = {"n_grains": n_grains, "law": law,
+                       **time_steps(sim, method, args.steps, args.tol, law == "exact")}
+                rows.append(row)
+                print(format_table([row], COLUMNS, floats=".4g"), flush=True)
+                if args.json:              # rewritten after each row: a stopped run keeps them
+                    save_text(args.json, json.dumps(rows, indent=1))
+    print()
+    print(format_table(rows, COLUMNS, floats=".4g"))
+    return 0
