@@ -186,7 +186,7 @@ def time_method(sim: Simulation, method: str, steps: int, tol: float,
                 friction: str = "exact") -> dict[str, Any]:
     """Solve ``steps`` steps of ``sim`` from its current state with ``method`` (``friction``:
     one of :data:`FRICTIONS`); the state is kept."""
-    start = sim.state
+    start = sim.state.copy()              # the steps below move sim.state in place
     settings = SolveSettings(method=method, tol=tol, exact_coulomb=friction == "exact")
     sim.step(settings)                       # untimed: compilation, caches
     _, _, problem, guess, shift = sim.next_problem()

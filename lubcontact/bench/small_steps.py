@@ -67,7 +67,7 @@ def time_steps(sim: Simulation, method: str, steps: int, tol: float, exact: bool
     dict
         The row's measured columns (:data:`COLUMNS` but ``n_grains`` and ``law``).
     """
-    start = sim.state
+    start = sim.state.copy()              # the steps below move sim.state in place
     settings = SolveSettings(method=method, tol=tol, exact_coulomb=exact, tol_fp=1e-6)
     sim.step(settings)                      # untimed: compilation, imports, caches
     solves, totals, iterations, contacts, statuses = [], [], [], [], set()

@@ -326,7 +326,8 @@ class Simulation:
         state.scene.time = state.start_time + state.steps_done * self.dt   # no drift from summing dt
 
     def restore(self, state: SimulationState) -> None:
-        """Continue from ``state`` (e.g. a checkpoint's :meth:`SimulationState.from_arrays`)."""
+        """Continue from ``state`` (e.g. a checkpoint's :meth:`SimulationState.from_arrays`); the
+        steps then move it on in place (restore ``state.copy()`` to keep ``state``)."""
         self.state = state
 
     def run(self, n_steps: int, callback: Callable[[Simulation, StepReport], None] | None = None

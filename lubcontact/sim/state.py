@@ -10,7 +10,7 @@ count.
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -93,6 +93,11 @@ class SimulationState:
     previous: PreviousStep | None = None
     steps_done: int = 0
     start_time: float = 0.0
+
+    def copy(self) -> SimulationState:
+        """An independent copy: a step moves its scene in place, and replaces (never changes)
+        the pair states and the previous step, so the scene is copied and those are shared."""
+        return replace(self, scene=self.scene.copy())
 
     def to_arrays(self) -> dict[str, np.ndarray]:
         """Plain arrays (for ``np.savez``) that :meth:`from_arrays` restores bit for bit.
