@@ -147,10 +147,20 @@ class DualData:
             matrix = self.assembled()
             return matrix.indptr, matrix.indices, matrix.data
         if self._arrays is None:
-            rows, columns = np.nonzero(self.dense)
-            indptr = np.searchsorted(rows, np.arange(self.dense.shape[0] + 1))
-            self._arrays = (indptr, columns, self.dense[rows, columns])
+            self._arrays = dense_csr_arrays(self.dense)
         return self._arrays
+
+
+def dense_csr_arrays(dense: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(indptr, indices, data)`` of a dense matrix's nonzeros in CSR form (rows in order,
+    columns sorted), without a sparse matrix object.
+
+    Parameters
+    ----------
+    dense : ndarray, shape (m, n)
+    """
+    rows, columns = np.nonzero(dense)
+    return np.searchsorted(rows, np.arange(dense.shape[0] + 1)), columns, dense[rows, columns]
 
 
 def jacobi_scale(problem: ConicProblem, diagonal: np.ndarray | None = None) -> np.ndarray:

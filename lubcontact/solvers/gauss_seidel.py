@@ -26,6 +26,7 @@ import numpy as np
 from ..problem.conic import ConicProblem
 from ..problem.metrics import coulomb_error
 from .compiled_apgd import csr_arrays
+from .dual_data import DENSE_OPERATOR_LIMIT, dense_csr_arrays
 from .registry import ALL_CONES, FIRST_ORDER, register
 from .result import CONVERGED, DIVERGED, MAX_ITER, MethodOutput
 
@@ -71,7 +72,8 @@ def nonsmooth_gauss_seidel(problem: ConicProblem, *, tol: float, max_iter: int =
     start = time.perf_counter()
     cones = problem.cones
     nc = cones.count
-    W = problem.delassus.tocsr()
+    small = problem.n_rows <= DENSE_OPERATOR_LIMIT     # W dense: no sparse set-up (dual_data)
+    W = problem.dense_delassus if small else problem.delassus.tocsr()
     q = problem.offset.copy()
     q[:nc] -= problem.shift
     unshifted = problem.with_shift(np.zeros(nc))
@@ -93,8 +95,9 @@ def nonsmooth_gauss_seidel(problem: ConicProblem, *, tol: float, max_iter: int =
     forces = np.zeros(problem.n_rows) if warm_start is None else \
         np.array(warm_start, dtype=float)
     forces[box] = np.clip(forces[box], projector.lower[box], projector.upper[box])
-    factor = problem.delassus_factor
-    rows = W if factor is None else factor.T.tocsr()    # rows of W, or of F^T (W = F^T F)
+    factor = None if small else problem.delassus_factor
+    # the rows the sweeps read: of W, or of F^T (W = F^T F) on a large step problem
+    rows = dense_csr_arrays(W) if small else W if factor is None else factor.T.tocsr()
     arrays = (*csr_arrays(rows), q, projector.lower, projector.upper, box_rows, diagonal[box_rows],
               cone_n, cone_t, mu, unilateral, local)
     setup_time = time.perf_counter() - start
