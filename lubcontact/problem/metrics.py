@@ -31,7 +31,8 @@ PROPERTY_TOL = 1e-6
 """Scaled level below which a constraint violation counts as rounding (:func:`solution_properties`)."""
 
 
-def coulomb_shift(problem: ConicProblem, forces: np.ndarray) -> np.ndarray:
+def coulomb_shift(problem: ConicProblem, forces: np.ndarray,
+                  gradient: np.ndarray | None = None) -> np.ndarray:
     """``s_c = mu_c |g_T,c(forces)|`` on frictional contacts, 0 elsewhere.
 
     A UNION contact (gluey + friction at gamma_min) is frictional only on its
@@ -41,6 +42,9 @@ def coulomb_shift(problem: ConicProblem, forces: np.ndarray) -> np.ndarray:
     ----------
     problem : ConicProblem
     forces : ndarray, shape (n_rows,)
+    gradient : ndarray, shape (n_rows,), optional
+        ``problem.gradient(forces)`` when the caller has it (only its tangential rows are read,
+        which the shift does not enter).
 
     Returns
     -------
@@ -51,7 +55,7 @@ def coulomb_shift(problem: ConicProblem, forces: np.ndarray) -> np.ndarray:
     shift = np.zeros(cones.count)
     if not cones.has_friction:
         return shift
-    _, g_tangential = cones.split(problem.gradient(forces))
+    _, g_tangential = cones.split(problem.gradient(forces) if gradient is None else gradient)
     idx = cones.tangential
     slip = cones.mu[idx] * np.linalg.norm(g_tangential, axis=1)
     kinds = cones.kinds[idx]
@@ -74,10 +78,10 @@ def coulomb_error(problem: ConicProblem, forces: np.ndarray) -> float:
     forces : ndarray, shape (n_rows,)
     """
     nc = problem.cones.count
-    unshifted = problem.gradient(forces)
-    unshifted[:nc] -= problem.shift
-    corrected = unshifted.copy()
-    corrected[:nc] += coulomb_shift(problem, forces)
+    gradient = problem.gradient(forces)
+    corrected = gradient.copy()
+    corrected[:nc] -= problem.shift
+    corrected[:nc] += coulomb_shift(problem, forces, gradient)
     q = problem.offset.copy()
     q[:nc] -= problem.shift
     residual = problem.cones.natural_residual(forces, corrected)

@@ -18,14 +18,11 @@ checked, and corrected by primal-dual active-set rounds.
 from __future__ import annotations
 
 import numpy as np
-import scipy.linalg as sla
 import scipy.sparse as sp
 
 from ..problem.cones import ConeKind, Cones
-from .dual_data import DENSE_LIMIT, DualData, ResidualTracker
+from .dual_data import DENSE_LIMIT, DualData, ResidualTracker, dense_lu, dense_lu_solve
 from .result import CONVERGED
-
-_getrf, _getrs = sla.get_lapack_funcs(("getrf", "getrs"), dtype=np.float64)
 
 MAX_FINISH_ATTEMPTS = 4
 """Finish attempts of one ``apgd-as`` solve (the initial guess's included) before it goes on as
@@ -194,14 +191,12 @@ class ActiveSetFinish:
             solution = np.zeros_like(rhs)
             if rows.size == 0:
                 return solution
-            # LAPACK's LU directly: scipy's lu_factor/lu_solve wrappers cost more than the
-            # factorisation of such a block; info > 0 is an exactly singular block
-            lu, pivots, info = _getrf(self._dense[np.ix_(rows, rows)], overwrite_a=True)
-            if info != 0:
+            factors = dense_lu(self._dense[np.ix_(rows, rows)])
+            if factors is None:
                 return None
-            solution[rows] = _getrs(lu, pivots, rhs[rows])[0]
+            solution[rows] = dense_lu_solve(factors, rhs[rows])
             product = self.data.product(solution)
-            solution[rows] += _getrs(lu, pivots, rhs[rows] - product[rows])[0]
+            solution[rows] += dense_lu_solve(factors, rhs[rows] - product[rows])
             return solution if np.all(np.isfinite(solution)) else None
         import qdldl
 

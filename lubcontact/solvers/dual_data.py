@@ -47,6 +47,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
+import scipy.linalg as sla
 import scipy.sparse as sp
 
 from ..problem.conic import ConicProblem
@@ -149,6 +150,22 @@ class DualData:
         if self._arrays is None:
             self._arrays = dense_csr_arrays(self.dense)
         return self._arrays
+
+
+_GETRF, _GETRS = sla.get_lapack_funcs(("getrf", "getrs"), dtype=np.float64)
+
+
+def dense_lu(matrix: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """LU factors of a small square matrix by LAPACK's ``getrf`` (``matrix`` is overwritten),
+    or None when a pivot is exactly zero: scipy's ``lu_factor``/``lu_solve`` wrappers (and
+    their warning) cost more than factorising a block of a few tens of rows."""
+    lu, pivots, info = _GETRF(matrix, overwrite_a=True)
+    return None if info != 0 else (lu, pivots)
+
+
+def dense_lu_solve(factors: tuple[np.ndarray, np.ndarray], rhs: np.ndarray) -> np.ndarray:
+    """``A x = rhs`` with the factors of :func:`dense_lu`."""
+    return _GETRS(*factors, rhs)[0]
 
 
 def dense_csr_arrays(dense: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -62,7 +62,6 @@ import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
-import scipy.linalg as sla
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
@@ -70,7 +69,7 @@ from ..problem.conic import ConicProblem
 from ..problem.metrics import coulomb_error
 from ..problem.step import diagonal_scaled
 from .coulomb import solve_coulomb
-from .dual_data import DENSE_LIMIT
+from .dual_data import DENSE_LIMIT, DENSE_OPERATOR_LIMIT, dense_lu, dense_lu_solve
 from .registry import ALL_CONES, NEWTON, register
 from .result import CONVERGED, FAILED, INACCURATE, MAX_ITER, MethodOutput
 
@@ -151,7 +150,10 @@ class AlartCurnier:
     def __init__(self, problem: ConicProblem):
         cones = problem.cones
         nc, dim_t = cones.count, cones.tangent_dim
-        self.W = problem.delassus.tocsr()
+        # a small problem is dense throughout (W, the Jacobian's rows, the LU): at <= 128 rows
+        # the sparse products' fixed cost was most of a Newton iteration (dual_data)
+        self.dense = problem.n_rows <= DENSE_OPERATOR_LIMIT
+        self.W = problem.dense_delassus if self.dense else problem.delassus.tocsr()
         self.q = problem.offset.copy()
         self.q[:nc] -= problem.shift
         self.n_rows = problem.n_rows
@@ -174,7 +176,8 @@ class AlartCurnier:
         self.dim_t = dim_t
         self.typical = float(np.median(diagonal)) if nc else 1.0
         self.sigma, self.center = 0.0, np.zeros(self.n_rows)
-        self.scaled_W = sp.diags(self.rho) @ self.W          # built once; sigma enters as a diagonal
+        # diag(rho) W, built once; sigma enters as a diagonal
+        self.scaled_W = self.rho[:, None] * self.W if self.dense else sp.diags(self.rho) @ self.W
 
     def set_proximal(self, sigma: float, center: np.ndarray) -> None:
         """Solve the proximal problem ``W + sigma I``, ``q - sigma center`` from now on (0: the problem)."""
@@ -197,15 +200,16 @@ class AlartCurnier:
             projected[self.cone_t] = scale[:, None] * y_t
         return forces - projected, y
 
-    def jacobian(self, y: np.ndarray) -> tuple[sp.csr_matrix, np.ndarray]:
+    def jacobian(self, y: np.ndarray) -> tuple[sp.csr_matrix | np.ndarray, np.ndarray]:
         """The rows of ``J = I - G + G diag(rho) (W + sigma I)`` at ``y`` where ``G`` is not zero.
 
         Returns
         -------
-        (scipy.sparse.csr_matrix, ndarray of bool)
-            Those rows, shape (m, n_rows), and the mask of the m rows (``active``); every other
-            row of ``J`` is the identity's. Only they are assembled: ``G``'s product with ``W``
-            for all rows cost 30 % of a Newton step on a developed 3200-grain flow.
+        (scipy.sparse.csr_matrix or ndarray, ndarray of bool)
+            Those rows, shape (m, n_rows) (a dense array on a small problem), and the mask of
+            the m rows (``active``); every other row of ``J`` is the identity's. Only they are
+            assembled: ``G``'s product with ``W`` for all rows cost 30 % of a Newton step on a
+            developed 3200-grain flow.
         """
         rows, cols, vals = [], [], []
         box = np.flatnonzero(self.box & (y > self.lower) & (y < self.upper))
@@ -244,6 +248,14 @@ class AlartCurnier:
         active[rows] = True
         position = np.cumsum(active) - 1               # row of J_A of each active row
         m = int(active.sum())
+        if self.dense:                                  # each (row, column) appears once
+            G = np.zeros((m, n))
+            G[position[rows], np.concatenate(cols)] = np.concatenate(vals)
+            J = G @ self.scaled_W - G
+            if self.sigma:
+                J += G * (self.sigma * self.rho)
+            J[np.arange(m), np.flatnonzero(active)] += 1.0
+            return J, active
         G = sp.csr_matrix((np.concatenate(vals), (position[rows], np.concatenate(cols))), shape=(m, n))
         identity = sp.csr_matrix((np.ones(m), (np.arange(m), np.flatnonzero(active))), shape=(m, n))
         J = identity - G + G @ self.scaled_W
@@ -252,7 +264,8 @@ class AlartCurnier:
         return J.tocsr(), active
 
 
-def _newton_direction(J: sp.csr_matrix, active: np.ndarray, phi: np.ndarray) -> np.ndarray | None:
+def _newton_direction(J: sp.csr_matrix | np.ndarray, active: np.ndarray,
+                      phi: np.ndarray) -> np.ndarray | None:
     """Solve ``J d = -phi`` with the identity rows eliminated (``J``: the active rows, as
     :meth:`AlartCurnier.jacobian` returns them).
 
@@ -270,20 +283,22 @@ def _newton_direction(J: sp.csr_matrix, active: np.ndarray, phi: np.ndarray) -> 
         return direction
     rhs = -phi[rows] - J @ np.where(active, 0.0, direction)
     dense = rows.size <= DENSE_LIMIT
-    block = J[:, rows].toarray() if dense else J[:, rows].tocsc()
+    block = J[:, rows] if isinstance(J, np.ndarray) else \
+        J[:, rows].toarray() if dense else J[:, rows].tocsc()
     for delta in REGULARISATIONS:
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("error", spla.MatrixRankWarning)
-                warnings.simplefilter("error", sla.LinAlgWarning)
                 if dense:
-                    solved = sla.lu_solve(sla.lu_factor(block + delta * np.eye(rows.size),
-                                                        check_finite=False), rhs, check_finite=False)
+                    factors = dense_lu(block + delta * np.eye(rows.size))
+                    if factors is None:                 # exactly singular
+                        continue
+                    solved = dense_lu_solve(factors, rhs)
                 else:
                     matrix = block if delta == 0 else \
                         (block + delta * sp.identity(rows.size, format="csc")).tocsc()
                     solved = spla.splu(matrix, permc_spec="COLAMD").solve(rhs)
-        except (RuntimeError, spla.MatrixRankWarning, sla.LinAlgWarning):
+        except (RuntimeError, spla.MatrixRankWarning):
             continue
         if np.all(np.isfinite(solved)):
             direction[rows] = solved
