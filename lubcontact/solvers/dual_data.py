@@ -63,9 +63,13 @@ dense for the solve's attempts). A dense LU of 100-250 rows costs a fraction of 
 factorisation's set-up (measured: 0.6 ms per SuperLU factorisation of 122 rows)."""
 DENSE_OPERATOR_LIMIT = 128
 """Rows up to which :func:`prepare` builds ``W_it`` from the problem's dense ``W``
-(``dense_delassus``, one BLAS product) and applies it as a dense product: on such sizes the
-sparse set-up (transposes, products, scaled copies; about 10 us of fixed cost each) was most of
-a warm-started solve (a 59-row step: 230 of 675 us)."""
+(``dense_delassus``, one BLAS product) and applies it as a dense product, and ``nsgs`` and
+``newton-ac`` work on the dense ``W``: on such sizes the sparse set-up (transposes, products,
+scaled copies; about 10 us of fixed cost each) was most of a warm-started solve (a 59-row
+step: 230 of 675 us). The dense product costs ``n_rows^2 n_dof``: on settling piles (tol 1e-8,
+same problem, same process) ``apgd-jacobi`` gained 5-20 % up to 93 rows, was even at 128 and lost
+20-70 % from 136 rows on; ``newton-ac`` gained 1.5-1.7x up to 136 rows, 1.3x at 178 and lost
+at 238."""
 
 
 @dataclass
