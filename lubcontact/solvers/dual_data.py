@@ -98,7 +98,8 @@ class DualData:
         product of the matrix-free operator, here and in the compiled loops).
     dense : ndarray, shape (n, n), or None
         ``W_it`` as a dense array on small problems (:data:`DENSE_OPERATOR_LIMIT`), where
-        ``apply`` is its dense product; ``matrix`` then holds its sparse form.
+        ``apply`` is its dense product; its sparse form is then built on demand only
+        (:meth:`sparse_arrays`, :meth:`assembled`).
     products : int
         Products ``W z`` done so far.
     ratio : ndarray, shape (n,)

@@ -466,3 +466,53 @@ def test_bench_solvers_says_when_its_reference_is_not_trusted(capsys, monkeypatc
     assert piles.solvers_main(args) == 0
     lines = [line for line in capsys.readouterr().out.splitlines() if "NOT trusted" in line]
     assert len(lines) == 1 and "reference residual 8.2e-05 above 1e-08" in lines[0]
+
+
+# -- the dense lane of small problems (dual_data.DENSE_OPERATOR_LIMIT) ----------------------------
+@pytest.fixture(scope="module")
+def small_frictional():
+    """A step of a 10-grain frictional settling pile (mu = 0.3): about 40 rows, the dense lane."""
+    from lubcontact.model.laws import Coulomb
+
+    sim = Simulation(scenes.settling_pile(10, seed=1), Coulomb(0.3), 0.02, solver="apgd-jacobi",
+                     tol=1e-8, fixed_point=False, on_failure="ignore")
+    sim.run(60)
+    problem = sim.next_problem()[2]
+    assert problem.cones.has_friction and 20 <= problem.n_rows <= 128
+    return problem
+
+
+def test_the_dense_operator_of_a_small_problem_is_the_sparse_one(small_frictional):
+    """``prepare`` with ``"auto"`` builds ``S W S`` densely on a small problem: the same scale,
+    offset and matrix (to rounding) as the sparse ``"matrix"`` operator; its CSR arrays hold the
+    sparse pattern, plus the products that cancel exactly in the sparse product (a contact's
+    normal and tangential rows: ``n . t = 0``) and round to ~1e-18 in the BLAS one."""
+    scaled = small_frictional.normalized()
+    dense, sparse = prepare(scaled, True), prepare(scaled, True, "matrix")
+    assert dense.dense is not None and sparse.dense is None
+    assert np.allclose(dense.scale, sparse.scale, rtol=1e-15, atol=0)
+    assert np.allclose(dense.offset, sparse.offset, rtol=1e-15, atol=1e-15 * np.abs(sparse.offset).max())
+    reference = sparse.matrix.toarray()
+    assert np.abs(dense.dense - reference).max() <= 1e-14 * np.abs(reference).max()
+    indptr, indices, values = dense.sparse_arrays()
+    rows = np.repeat(np.arange(indptr.size - 1), np.diff(indptr))
+    assert np.array_equal(dense.dense[rows, indices], values)
+    extra = reference[rows, indices] == 0
+    assert np.count_nonzero(~extra) == sparse.matrix.nnz
+    assert np.abs(values[extra]).max(initial=0.0) <= 1e-15 * np.abs(reference).max()
+
+
+@pytest.mark.parametrize("method, exact", [("apgd-jacobi", False), ("nsgs", True)])
+def test_a_small_problem_solves_the_same_on_both_lanes(small_frictional, method, exact, monkeypatch):
+    """The dense lane and the sparse one (forced by a zero limit) reach the same forces: the
+    relaxation with ``apgd-jacobi``, exact Coulomb with ``nsgs``."""
+    from lubcontact.solvers import SolveSettings, dual_data, gauss_seidel
+
+    settings = SolveSettings(method=method, tol=1e-10, exact_coulomb=exact)
+    dense = settings.solve(small_frictional)
+    monkeypatch.setattr(dual_data, "DENSE_OPERATOR_LIMIT", 0)
+    monkeypatch.setattr(gauss_seidel, "DENSE_OPERATOR_LIMIT", 0)
+    sparse = settings.solve(small_frictional)
+    assert dense.status == sparse.status == "converged"
+    scale = np.abs(sparse.x).max()
+    assert np.abs(dense.x - sparse.x).max() <= 1e-8 * scale

@@ -206,3 +206,28 @@ def test_a_fallback_with_non_finite_forces_leaves_newtons_answer_and_status():
         unregister("nan-forces-test")
     assert result.info["newton_status"] == MAX_ITER and result.info["fallback_status"] == "diverged"
     assert result.status == MAX_ITER and np.all(np.isfinite(result.forces))
+
+
+@pytest.mark.parametrize("name", ["gamma_states_gluey_coulomb", "mu_ten", "dt_large_friction"])
+def test_small_problems_take_the_dense_lane_with_the_same_newton_steps(name, monkeypatch):
+    """At most DENSE_OPERATOR_LIMIT rows the Jacobian's rows are dense: the same values as the
+    sparse rows, and the same Newton iterations to the same forces (a zero limit forces the
+    sparse lane)."""
+    from lubcontact.solvers import newton
+
+    problem = load_cases()[name].problem.normalized()
+    assert problem.n_rows <= newton.DENSE_OPERATOR_LIMIT
+    function = AlartCurnier(problem)
+    y = function.residual(np.abs(np.random.default_rng(1).normal(size=problem.n_rows)))[1]
+    rows, active = function.jacobian(y)
+    dense = solve_coulomb(problem, "newton-ac", tol=1e-10)
+    monkeypatch.setattr(newton, "DENSE_OPERATOR_LIMIT", 0)
+    sparse_function = AlartCurnier(problem)
+    sparse_rows, sparse_active = sparse_function.jacobian(y)
+    assert isinstance(rows, np.ndarray) and not isinstance(sparse_rows, np.ndarray)
+    assert np.array_equal(active, sparse_active)
+    assert np.allclose(rows, sparse_rows.toarray(), rtol=0, atol=1e-13 * np.abs(rows).max())
+    sparse = solve_coulomb(problem, "newton-ac", tol=1e-10)
+    assert dense.status == sparse.status == CONVERGED
+    assert dense.info["newton_iterations"] == sparse.info["newton_iterations"]
+    assert np.abs(dense.forces - sparse.forces).max() <= 1e-9 * np.abs(sparse.forces).max()
