@@ -210,8 +210,8 @@ def jacobi_scale(problem: ConicProblem, diagonal: np.ndarray | None = None) -> n
     count = np.ones(nc)
     if cones.has_friction:
         tangent = diagonal[nc:].reshape(-1, cones.tangent_dim)
-        np.add.at(total, cones.tangential, tangent.sum(axis=1))
-        np.add.at(count, cones.tangential, cones.tangent_dim)
+        total[cones.tangential] += tangent.sum(axis=1)     # each contact listed once
+        count[cones.tangential] += cones.tangent_dim
     mean = total / count
     per_contact = np.where(mean > 0, 1.0 / np.sqrt(np.where(mean > 0, mean, 1.0)), 1.0)
     scale = np.empty(problem.n_rows)
