@@ -109,11 +109,13 @@ def dof_count(n_grains: int, dim: int, rotations: bool) -> int:
 def normal_jacobian(contacts: Contacts, rotations: bool) -> sp.csr_matrix:
     """Rows ``B`` with ``(B v)_c = u_n,c``, shape (nc, n_dof)."""
     nc, dim, n = contacts.count, contacts.dim, contacts.n_grains
-    columns = np.concatenate([contacts.body_b[:, None] * dim + np.arange(dim),
-                              contacts.body_a[:, None] * dim + np.arange(dim)], axis=1)
-    values = np.concatenate([contacts.normals, -contacts.normals], axis=1)
+    first, second, first_is_b = _bodies_in_order(contacts.body_a, contacts.body_b, n)
+    sign = np.where(first_is_b, 1.0, -1.0)[:, None]           # +n on b's columns, -n on a's
+    columns = np.concatenate([first[:, None] * dim + np.arange(dim),
+                              second[:, None] * dim + np.arange(dim)], axis=1)
+    values = np.concatenate([sign * contacts.normals, -sign * contacts.normals], axis=1)
     kept = np.ones(columns.shape, dtype=bool)
-    kept[:, dim:] = contacts.a_is_free[:, None]          # an obstacle has no column
+    kept[:, dim:] = (second < n)[:, None]                      # an obstacle has no column
     return rows_to_csr(columns, values, kept, (nc, dof_count(n, dim, rotations)))
 
 
@@ -139,18 +141,41 @@ def tangential_jacobian(contacts: Contacts, which: np.ndarray) -> sp.csr_matrix:
     a, b = contacts.body_a[which], contacts.body_b[which]
     ra, rb = contacts.radius_a[which], contacts.radius_b[which]
     m, rot0 = len(which), n * dim
-    # per row: body b's translations and rotations, then body a's (dropped for an obstacle)
-    blocks = [(b[:, None, None] * dim + np.arange(dim), tangents),
-              (rot0 + b[:, None, None] * nrot + np.arange(nrot), -rb[:, None, None] * levers),
-              (a[:, None, None] * dim + np.arange(dim), -tangents),
-              (rot0 + a[:, None, None] * nrot + np.arange(nrot), -ra[:, None, None] * levers)]
+    first, second, first_is_b = _bodies_in_order(a, b, n)
+    b_first = first_is_b[:, None, None]
+    # b's entries: t on its translations, -r_b lever on its rotations; a's: -t and -r_a lever
+    translation = (np.where(b_first, tangents, -tangents), np.where(b_first, -tangents, tangents))
+    lever_b, lever_a = -rb[:, None, None] * levers, -ra[:, None, None] * levers
+    rotation = (np.where(b_first, lever_b, lever_a), np.where(b_first, lever_a, lever_b))
+    # in column order: both bodies' translations, then both bodies' rotations
+    blocks = [(first[:, None, None] * dim + np.arange(dim), translation[0]),
+              (second[:, None, None] * dim + np.arange(dim), translation[1]),
+              (rot0 + first[:, None, None] * nrot + np.arange(nrot), rotation[0]),
+              (rot0 + second[:, None, None] * nrot + np.arange(nrot), rotation[1])]
     width = 2 * (dim + nrot)
     columns = np.concatenate([np.broadcast_to(c, v.shape) for c, v in blocks], axis=2)
     values = np.concatenate([v for _, v in blocks], axis=2)
     kept = np.ones((m, nt, width), dtype=bool)
-    kept[:, :, dim + nrot:] = (a < n)[:, None, None]
+    obstacle = (second >= n)[:, None]
+    kept[:, :, dim: 2 * dim] = ~obstacle[:, :, None]
+    kept[:, :, 2 * dim + nrot:] = ~obstacle[:, :, None]
     return rows_to_csr(columns.reshape(m * nt, width), values.reshape(m * nt, width),
                        kept.reshape(m * nt, width), (m * nt, dof_count(n, dim, True)))
+
+
+def _bodies_in_order(body_a: np.ndarray, body_b: np.ndarray,
+                     n_grains: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Each contact's two bodies in the order of their columns: the grain with the lower
+    number first, an obstacle ``a`` (no columns) second.
+
+    Returns
+    -------
+    (ndarray, ndarray, ndarray of bool)
+        ``first`` and ``second`` bodies, shape (nc,), and whether ``first`` is ``b``.
+    """
+    first_is_b = (body_a >= n_grains) | (body_b < body_a)
+    return (np.where(first_is_b, body_b, body_a), np.where(first_is_b, body_a, body_b),
+            first_is_b)
 
 
 def rows_to_csr(columns: np.ndarray, values: np.ndarray, kept: np.ndarray,
@@ -158,8 +183,7 @@ def rows_to_csr(columns: np.ndarray, values: np.ndarray, kept: np.ndarray,
     """A CSR matrix from a fixed number of candidate entries per row, built from its arrays.
 
     Built directly (no COO matrix and its conversion, which cost more than a small step's
-    solve), in canonical form: each row's kept entries sorted by column; the columns of a row
-    must differ.
+    solve), in canonical form: each row's kept columns must increase along the row.
 
     Parameters
     ----------
@@ -172,11 +196,8 @@ def rows_to_csr(columns: np.ndarray, values: np.ndarray, kept: np.ndarray,
     shape : (int, int)
         Shape of the matrix (``shape[0] == n_rows``).
     """
-    order = np.argsort(np.where(kept, columns, np.iinfo(np.int64).max), axis=1, kind="stable")
-    kept = np.take_along_axis(kept, order, axis=1)
     indptr = np.concatenate([[0], np.cumsum(kept.sum(axis=1))])
-    return sp.csr_matrix((np.take_along_axis(values, order, axis=1)[kept],
-                          np.take_along_axis(columns, order, axis=1)[kept], indptr), shape=shape)
+    return sp.csr_matrix((values[kept], columns[kept], indptr), shape=shape)
 
 
 def stacked_rows(top: sp.csr_matrix, bottom: sp.csr_matrix) -> sp.csr_matrix:
