@@ -141,8 +141,11 @@ class DualData:
         """``W_it`` as a sparse matrix, assembled from the factor (or the dense ``W_it``) on first
         use."""
         if self.matrix is None:
-            self.matrix = sp.csr_matrix(self.factor_transpose @ self.factor) if self.dense is None \
-                else sp.csr_matrix(self.sparse_arrays()[::-1], shape=self.dense.shape)
+            if self.dense is None:
+                self.matrix = sp.csr_matrix(self.factor_transpose @ self.factor)
+            else:
+                indptr, indices, values = self.sparse_arrays()
+                self.matrix = sp.csr_matrix((values, indices, indptr), shape=self.dense.shape)
         return self.matrix
 
     def sparse_arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -157,12 +160,18 @@ class DualData:
         return self._arrays
 
 
+def is_small(problem: ConicProblem) -> bool:
+    """Whether ``problem`` takes the dense lane (at most :data:`DENSE_OPERATOR_LIMIT` rows): the
+    one rule :func:`prepare`, ``nsgs`` and ``newton-ac`` follow."""
+    return problem.n_rows <= DENSE_OPERATOR_LIMIT
+
+
 _GETRF, _GETRS = sla.get_lapack_funcs(("getrf", "getrs"), dtype=np.float64)
 
 
 def dense_lu(matrix: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
-    """LU factors of a small square matrix by LAPACK's ``getrf`` (``matrix`` is overwritten),
-    or None when a pivot is exactly zero: scipy's ``lu_factor``/``lu_solve`` wrappers (and
+    """LU factors of a small square matrix by LAPACK's ``getrf`` (``matrix`` may be overwritten:
+    pass a copy), or None when a pivot is exactly zero: scipy's ``lu_factor``/``lu_solve`` wrappers (and
     their warning) cost more than factorising a block of a few tens of rows."""
     lu, pivots, info = _GETRF(matrix, overwrite_a=True)
     return None if info != 0 else (lu, pivots)
@@ -251,7 +260,7 @@ def prepare(problem: ConicProblem, scaling: bool, operator: str = "auto",
     """
     if operator not in ("auto", "matrix", "factor"):
         raise ValueError(f"operator: must be 'auto', 'matrix' or 'factor', got {operator!r}")
-    if operator == "auto" and problem.n_rows <= DENSE_OPERATOR_LIMIT:
+    if operator == "auto" and is_small(problem):
         return _prepare_dense(problem, scaling)
     if assembled:
         operator = "matrix"

@@ -26,7 +26,7 @@ import numpy as np
 from ..problem.conic import ConicProblem
 from ..problem.metrics import coulomb_error
 from .compiled_apgd import csr_arrays
-from .dual_data import DENSE_OPERATOR_LIMIT, dense_csr_arrays
+from .dual_data import dense_csr_arrays, is_small
 from .registry import ALL_CONES, FIRST_ORDER, register
 from .result import CONVERGED, DIVERGED, MAX_ITER, MethodOutput
 
@@ -72,7 +72,7 @@ def nonsmooth_gauss_seidel(problem: ConicProblem, *, tol: float, max_iter: int =
     start = time.perf_counter()
     cones = problem.cones
     nc = cones.count
-    small = problem.n_rows <= DENSE_OPERATOR_LIMIT     # W dense: no sparse set-up (dual_data)
+    small = is_small(problem)                 # W dense: no sparse set-up (dual_data)
     W = problem.dense_delassus if small else problem.delassus.tocsr()
     q = problem.offset.copy()
     q[:nc] -= problem.shift

@@ -69,7 +69,7 @@ from ..problem.conic import ConicProblem
 from ..problem.metrics import coulomb_error
 from ..problem.step import diagonal_scaled
 from .coulomb import solve_coulomb
-from .dual_data import DENSE_LIMIT, DENSE_OPERATOR_LIMIT, dense_lu, dense_lu_solve
+from .dual_data import DENSE_LIMIT, dense_lu, dense_lu_solve, is_small
 from .registry import ALL_CONES, NEWTON, register
 from .result import CONVERGED, FAILED, INACCURATE, MAX_ITER, MethodOutput
 
@@ -152,7 +152,7 @@ class AlartCurnier:
         nc, dim_t = cones.count, cones.tangent_dim
         # a small problem is dense throughout (W, the Jacobian's rows, the LU): at <= 128 rows
         # the sparse products' fixed cost was most of a Newton iteration (dual_data)
-        self.dense = problem.n_rows <= DENSE_OPERATOR_LIMIT
+        self.dense = is_small(problem)
         self.W = problem.dense_delassus if self.dense else problem.delassus.tocsr()
         self.q = problem.offset.copy()
         self.q[:nc] -= problem.shift

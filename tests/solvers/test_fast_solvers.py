@@ -506,12 +506,11 @@ def test_the_dense_operator_of_a_small_problem_is_the_sparse_one(small_frictiona
 def test_a_small_problem_solves_the_same_on_both_lanes(small_frictional, method, exact, monkeypatch):
     """The dense lane and the sparse one (forced by a zero limit) reach the same forces: the
     relaxation with ``apgd-jacobi``, exact Coulomb with ``nsgs``."""
-    from lubcontact.solvers import SolveSettings, dual_data, gauss_seidel
+    from lubcontact.solvers import SolveSettings, dual_data
 
     settings = SolveSettings(method=method, tol=1e-10, exact_coulomb=exact)
     dense = settings.solve(small_frictional)
     monkeypatch.setattr(dual_data, "DENSE_OPERATOR_LIMIT", 0)
-    monkeypatch.setattr(gauss_seidel, "DENSE_OPERATOR_LIMIT", 0)
     sparse = settings.solve(small_frictional)
     assert dense.status == sparse.status == "converged"
     scale = np.abs(sparse.x).max()

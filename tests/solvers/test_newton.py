@@ -213,15 +213,15 @@ def test_small_problems_take_the_dense_lane_with_the_same_newton_steps(name, mon
     """At most DENSE_OPERATOR_LIMIT rows the Jacobian's rows are dense: the same values as the
     sparse rows, and the same Newton iterations to the same forces (a zero limit forces the
     sparse lane)."""
-    from lubcontact.solvers import newton
+    from lubcontact.solvers import dual_data
 
     problem = load_cases()[name].problem.normalized()
-    assert problem.n_rows <= newton.DENSE_OPERATOR_LIMIT
+    assert dual_data.is_small(problem)
     function = AlartCurnier(problem)
     y = function.residual(np.abs(np.random.default_rng(1).normal(size=problem.n_rows)))[1]
     rows, active = function.jacobian(y)
     dense = solve_coulomb(problem, "newton-ac", tol=1e-10)
-    monkeypatch.setattr(newton, "DENSE_OPERATOR_LIMIT", 0)
+    monkeypatch.setattr(dual_data, "DENSE_OPERATOR_LIMIT", 0)
     sparse_function = AlartCurnier(problem)
     sparse_rows, sparse_active = sparse_function.jacobian(y)
     assert isinstance(rows, np.ndarray) and not isinstance(sparse_rows, np.ndarray)
