@@ -128,7 +128,7 @@ def solve_coulomb(problem: ConicProblem, method: str = "clarabel", *, tol: float
     normalized.delassus  # noqa: B018  (assembled here once, used by every inner solve)
     length, force_unit = normalized.scaling.length, normalized.scaling.force
     accelerator = _Anderson(anderson)
-    branches = UnionBranches(problem, warm_start, threshold=max(1e3 * tol, 1e-7))
+    branches = _Branches(problem, warm_start, threshold=max(1e3 * tol, 1e-7))
     forces, inner, history = warm_start, 0, []
     joint_iterations = 0
     convex = branches.problem()
@@ -200,7 +200,7 @@ def solve_native_coulomb(problem: ConicProblem, method: str, *, tol: float = 1e-
         contact was left to flip.
     """
     info = solver_info(method)
-    branches = UnionBranches(problem, warm_start, threshold=max(1e3 * tol, 1e-7))
+    branches = _Branches(problem, warm_start, threshold=max(1e3 * tol, 1e-7))
     native_union = ConeKind.UNION in info.cones
     if branches.union.any() and not native_union and not {ConeKind.COULOMB, ConeKind.NONPOS} <= info.cones:
         raise ValueError(f"method: {method!r} cannot solve this problem: UNION contacts need "
@@ -283,7 +283,7 @@ class _Anderson:
         return np.maximum(image - np.diff(images, axis=1) @ gamma, 0.0)
 
 
-class UnionBranches:
+class _Branches:
     """The piece (pushed or pulled) on which each UNION contact is fixed (module docstring).
 
     Parameters

@@ -30,10 +30,6 @@ the pulled piece), so its law is a bilateral normal row (``P_n(y) = y_n``, any
 normal force) with Coulomb's disk of radius ``mu max(y_n, 0)`` on its
 tangential rows: friction while pushed, none while pulled. One Newton solve
 replaces the branch rule's re-solves (``UNION`` is in the method's cones).
-Where the first strategy stalls on such a problem (a few contacts at the
-push/pull boundary, where the generalised Jacobian jumps), each UNION contact
-is fixed on the piece of its force's sign and the convex problem solved, the
-branch rule flipping the contacts on the wrong piece (:func:`_on_fixed_pieces`).
 
 Newton step. ``P`` is piecewise smooth; with ``G`` an element of its
 generalised Jacobian at ``y`` (block diagonal per contact: 0 or 1 on box rows,
@@ -69,11 +65,10 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from ..problem.cones import ConeKind
 from ..problem.conic import ConicProblem
 from ..problem.metrics import coulomb_error
 from ..problem.step import diagonal_scaled
-from .coulomb import UnionBranches, solve_coulomb
+from .coulomb import solve_coulomb
 from .dual_data import DENSE_LIMIT, dense_lu, dense_lu_solve, is_small
 from .registry import ALL_CONES, NEWTON, register
 from .result import CONVERGED, FAILED, INACCURATE, MAX_ITER, MethodOutput
@@ -119,10 +114,6 @@ INNER_REDUCTION = 0.3
 step than solving each subproblem to 1e-3 did, and no more on any of Siconos' and FCLIB's test
 problems (docs/records/benchmarks.md, "newton-ac on developed flows"); 0.1 gained less, 0.5
 took 4-8 times more iterations on some flow steps."""
-
-BRANCH_ROUNDS = 10
-"""Rounds of Newton on the union's fixed pieces (:func:`_on_fixed_pieces`) tried when the first
-strategy stalls on a problem with UNION contacts."""
 
 POLISH_ITERATIONS = 10
 """Proximal Newton iterations tried from the fallback's result (kept where they lower the error)."""
@@ -367,8 +358,7 @@ def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = 5
         (steepest-descent steps taken where the Newton direction failed),
         ``proximal_steps`` and ``strategies`` (the starting weights tried, each with
         its start, ``"warm"`` or ``"cold"``),
-        ``newton_status`` and ``error`` (the Newton phase's FCLIB error),
-        ``branch_rounds`` (solves on the union's fixed pieces, 0 where none ran), and
+        ``newton_status`` and ``error`` (the Newton phase's FCLIB error), and
         ``fallbacks`` (the methods run), ``fallback_iterations`` (summed) and
         ``fallback_status`` (the last one's) when a fallback ran.
     """
@@ -384,8 +374,7 @@ def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = 5
     status = INACCURATE if phase.status == STALLED else phase.status
     info = {"newton_iterations": phase.iterations, "gradient_steps": phase.gradient_steps,
             "proximal_steps": phase.proximal_steps, "strategies": phase.strategies,
-            "newton_status": phase.status, "error": phase.error,
-            "branch_rounds": phase.branch_rounds}
+            "newton_status": phase.status, "error": phase.error}
     if phase.status == CONVERGED or fallback is None:
         chain = ()
     elif fallback == "auto":
@@ -424,69 +413,26 @@ def _strategies(function: AlartCurnier, unshifted: ConicProblem, forces: np.ndar
     """:func:`_proximal_newton` with each ``sigma`` of :data:`STRATEGIES` in turn, each from
     ``forces`` (a strategy's stalled iterate is a worse start than the warm start, measured),
     the first also from zero forces when ``forces`` is not zero, until one converges or
-    ``max_iter`` Newton iterations are spent; the best phase is returned. On a problem with
-    UNION contacts, a stalled first strategy is followed by :func:`_on_fixed_pieces` from its
-    best iterate before the other strategies."""
+    ``max_iter`` Newton iterations are spent; the best phase is returned."""
     best, history, tried = None, [], []
     iterations = gradient_steps = proximal_steps = 0
     cold = np.zeros_like(forces)
     starts = [(STRATEGIES[0], forces)] + ([(STRATEGIES[0], cold)] if np.any(forces) else []) \
         + [(sigma, forces) for sigma in STRATEGIES[1:]]
-    union = bool(np.any(unshifted.cones.kinds == ConeKind.UNION))
-    branch_rounds = 0
-    for index, (sigma, start) in enumerate(starts):
-        phases = [_proximal_newton(function, unshifted, start, tol, max_iter - iterations, sigma)]
+    for sigma, start in starts:
+        phase = _proximal_newton(function, unshifted, start, tol, max_iter - iterations, sigma)
         tried.append((sigma, "warm" if start is forces and np.any(forces) else "cold"))
-        if index == 0 and union and phases[0].status != CONVERGED and iterations < max_iter:
-            phases.append(_on_fixed_pieces(unshifted, phases[0].forces, tol,
-                                           max_iter - iterations - phases[0].iterations))
-            branch_rounds = phases[1].branch_rounds
-        for phase in phases:
-            iterations += phase.iterations
-            gradient_steps += phase.gradient_steps
-            proximal_steps += phase.proximal_steps
-            history.extend(phase.history if not history else phase.history[1:])
-            if best is None or phase.error < best.error:
-                best = phase
-        if best.status == CONVERGED or iterations >= max_iter:
-            break
-    return _Phase(forces=best.forces, status=best.status, iterations=iterations, error=best.error,
-                  history=np.asarray(history), gradient_steps=gradient_steps,
-                  proximal_steps=proximal_steps, strategies=tried, branch_rounds=branch_rounds)
-
-
-def _on_fixed_pieces(unshifted: ConicProblem, forces: np.ndarray, tol: float, max_iter: int) -> _Phase:
-    """Newton with each UNION contact fixed on one piece of its law, flipped by the branch rule.
-
-    Where Newton stalls on the union law, the few contacts that hold the error sit at its
-    push/pull boundary (``lam_n`` near 0, the friction disk of radius ``mu max(y_n, 0)``
-    appearing and vanishing from one iterate to the next): the generalised Jacobian jumps
-    there. Fixed on a piece (pushed: Coulomb; pulled: frictionless, held closed; the signs of
-    ``forces``' normal rows), the problem is convex and Newton's strategies solve it; the
-    contacts the branch rule finds on the wrong piece (:class:`~.coulomb.UnionBranches`, as
-    the fixed point on ``s`` uses it) are flipped and the pieces solved again from the last
-    forces, at most :data:`BRANCH_ROUNDS` times. ``error`` is the union law's FCLIB error of
-    the last forces; ``converged`` when it is below ``tol``.
-    """
-    branches = UnionBranches(unshifted, forces, threshold=max(1e3 * tol, 1e-7))
-    history = [coulomb_error(unshifted, forces)]
-    iterations = gradient_steps = proximal_steps = rounds = 0
-    while rounds < BRANCH_ROUNDS and iterations < max_iter:
-        rounds += 1
-        pieces = branches.on(unshifted)
-        phase = _strategies(AlartCurnier(pieces), pieces, forces, tol, max_iter - iterations)
         iterations += phase.iterations
         gradient_steps += phase.gradient_steps
         proximal_steps += phase.proximal_steps
-        forces = phase.forces
-        history.append(coulomb_error(unshifted, forces))
-        if phase.status != CONVERGED or not branches.update(pieces, forces, 1.0, 1.0):
+        history.extend(phase.history if not history else phase.history[1:])
+        if best is None or phase.error < best.error:
+            best = phase
+        if phase.status == CONVERGED or iterations >= max_iter:
             break
-    error = history[-1]
-    status = CONVERGED if error <= tol else MAX_ITER if iterations >= max_iter else STALLED
-    return _Phase(forces=forces, status=status, iterations=iterations, error=error,
+    return _Phase(forces=best.forces, status=best.status, iterations=iterations, error=best.error,
                   history=np.asarray(history), gradient_steps=gradient_steps,
-                  proximal_steps=proximal_steps, branch_rounds=rounds)
+                  proximal_steps=proximal_steps, strategies=tried)
 
 
 def _proximal_newton(function: AlartCurnier, unshifted: ConicProblem, forces: np.ndarray,
@@ -560,7 +506,6 @@ class _Phase:
     proximal_steps: int = 0
     strategies: list = field(default_factory=list)
     solved: bool = False
-    branch_rounds: int = 0
 
 
 def _newton_phase(function: AlartCurnier, unshifted: ConicProblem, forces: np.ndarray,

@@ -1,7 +1,5 @@
 """newton-ac, the semismooth Newton method on the Alart-Curnier function, against exact answers,
 the Clarabel reference and Siconos' test problems."""
-from pathlib import Path
-
 import numpy as np
 import pytest
 
@@ -17,22 +15,15 @@ from lubcontact.problem.metrics import (
     scaled_velocity_error,
     velocity_error,
 )
-from lubcontact.problem.step import StepProblem
 from lubcontact.solvers import (
     CONVERGED,
     FIRST_ORDER,
     INACCURATE,
     MAX_ITER,
-    SolveSettings,
     solve_coulomb,
     solver_info,
 )
-from lubcontact.solvers.newton import (
-    AlartCurnier,
-    _on_fixed_pieces,
-    _proximal_newton,
-    newton_alart_curnier,
-)
+from lubcontact.solvers.newton import AlartCurnier, _proximal_newton, newton_alart_curnier
 from lubcontact.solvers.registry import ALL_CONES, register, unregister
 from lubcontact.solvers.result import MethodOutput
 
@@ -160,36 +151,6 @@ def test_union_contacts_are_solved_natively_in_one_solve():
     assert scaled_velocity_error(case.problem, result.velocities, expected.velocities) <= 1e-8
     pulled = case.problem.cones.pulled(result.forces)
     assert np.any(pulled) and np.any(~pulled[kinds == ConeKind.UNION])   # both pieces occur
-
-
-def test_fixed_pieces_flip_to_the_union_solution_from_every_contact_pushed():
-    """Newton on the union's pieces, each UNION contact started on the pushed piece (zero forces):
-    the branch rule flips the pulled ones and the last solve is the union law's solution
-    (Clarabel's fixed point on s with its branch rule)."""
-    case = load_cases()["gamma_states_gluey_coulomb"]
-    expected = expected_for(case, case.problem, fixed_point=True)
-    scaled = case.problem.normalized()
-    unshifted = scaled.with_shift(np.zeros(scaled.cones.count))
-    phase = _on_fixed_pieces(unshifted, np.zeros(scaled.n_rows), 1e-10, 500)
-    assert phase.status == CONVERGED and phase.error <= 1e-10
-    assert phase.branch_rounds >= 2                          # at least one contact flipped
-    assert np.any(scaled.cones.pulled(phase.forces))
-    velocities = case.problem.velocity(phase.forces * scaled.scaling.force)
-    assert scaled_velocity_error(case.problem, velocities, expected.velocities) <= 1e-8
-
-
-def test_a_gluey_flow_step_where_every_strategy_stalled_is_solved_on_fixed_pieces():
-    """A 2000-grain gluey flow step (tests/solvers/data/README.md) on which every Newton
-    strategy stalled and the nsgs fallback finished (2212 iterations): after the first stall
-    Newton on the union's fixed pieces solves it, no fallback, the union law's error below tol."""
-    with np.load(Path(__file__).parent / "data" / "gluey-stall-step.npz") as data:
-        problem = StepProblem.from_arrays(data)
-        warm_start, warm_shift = data["warm_start"], data["warm_shift"]
-    result = SolveSettings(method="newton-ac", tol=1e-6, exact_coulomb=True).solve(
-        problem, warm_start, warm_shift)
-    assert result.status == CONVERGED and "fallbacks" not in result.info
-    assert result.info["branch_rounds"] >= 2
-    assert scaled_coulomb_error(problem, result.forces) <= 1e-6
 
 
 @pytest.fixture(scope="module")
