@@ -113,7 +113,7 @@ INNER_REDUCTION = 0.3
 2000-grain flows (dry and gluey, exact Coulomb) 0.3 takes a third fewer Newton iterations per
 step than solving each subproblem to 1e-3 did, and no more on any of Siconos' and FCLIB's test
 problems (docs/records/benchmarks.md, "newton-ac on developed flows"); 0.1 gained less, 0.5
-took 4-8 times more iterations on some flow steps."""
+took up to 5 times more Newton iterations on some flow steps."""
 
 POLISH_ITERATIONS = 10
 """Proximal Newton iterations tried from the fallback's result (kept where they lower the error)."""
