@@ -47,8 +47,8 @@ direction gives no decrease, the steepest-descent direction of ``psi``,
 rows than degrees of freedom: a hyperstatic packing, most dense piles) the
 Newton system is singular at sticking contacts; a proximal-point outer loop
 (as in Siconos' PROX) makes each subproblem well posed: solve with ``W + sigma
-I`` and ``q - sigma r_k``, centre ``r_k`` at the result, shrink ``sigma`` while
-the error halves (:func:`_proximal_newton`). The starting ``sigma`` values of
+I`` and ``q - sigma r_k``, centre ``r_k`` at the result, shrink ``sigma`` after
+each subproblem solved (:func:`_proximal_newton`). The starting ``sigma`` values of
 :data:`STRATEGIES` are tried in turn while one stalls. Stopping: the FCLIB
 error (:func:`~lubcontact.problem.metrics.coulomb_error`, the measure every
 report uses) below ``tol``. When every strategy stalls, the best iterate goes
@@ -447,9 +447,17 @@ def _proximal_newton(function: AlartCurnier, unshifted: ConicProblem, forces: np
     system is not singular. ``sigma`` starts at ``sigma`` times the median
     diagonal of ``W`` (0: plain Newton throughout), is divided by 10 after an
     outer iteration whose subproblem was solved (towards plain Newton, down to
-    :data:`SIGMA_MIN`) and multiplied by 10 after one whose was not. The phase stalls when the best
-    error did not fall by :data:`STALL_FACTOR` over :data:`STALL_WINDOW`
-    Newton iterations.
+    :data:`SIGMA_MIN`, but not down to a weight whose subproblem was not solved
+    since the error last fell by :data:`STALL_FACTOR`) and multiplied by 10
+    after one whose was not. The next centre is a solved subproblem's solution
+    (Newton's last iterate) even where its FCLIB error is above the centre's:
+    re-centring at the best iterate posed the same subproblem again, and on
+    creeping beds the weight then alternated between a subproblem that moved
+    nothing and a smaller one not solved in :data:`INNER_CAP` iterations until
+    the phase stalled (docs/records/benchmarks.md, "creeping beds"). The best
+    iterate is what the phase returns. The phase stalls when the best error did
+    not fall by :data:`STALL_FACTOR` over :data:`STALL_WINDOW` Newton
+    iterations.
     """
     scale = sigma * function.typical
     q_norm = 1.0 + float(np.linalg.norm(function.q))
@@ -457,7 +465,8 @@ def _proximal_newton(function: AlartCurnier, unshifted: ConicProblem, forces: np
     history, best = [error], (error, forces)
     iterations = gradient_steps = proximal_steps = 0
     status = MAX_ITER
-    while error > tol and iterations < max_iter:
+    floor, floor_error = 0.0, np.inf                # the largest weight that failed lately
+    while best[0] > tol and iterations < max_iter:
         if len(history) > STALL_WINDOW and best[0] > STALL_FACTOR * min(history[:-STALL_WINDOW]):
             status = STALLED
             break
@@ -471,11 +480,18 @@ def _proximal_newton(function: AlartCurnier, unshifted: ConicProblem, forces: np
         iterations += inner.iterations
         gradient_steps += inner.gradient_steps
         history.extend(inner.history[1:])
-        forces, error = inner.forces, inner.error
-        best = min(best, (error, forces), key=lambda pair: pair[0])
-        if inner.solved and scale > 0:      # the proximal problem was solved: move towards Newton
-            scale = max(scale / 10.0, SIGMA_MIN * function.typical)
-        elif scale > 0:                     # it was not: a better-posed subproblem
+        best = min(best, (inner.error, inner.forces), key=lambda pair: pair[0])
+        if inner.solved:                    # centred at the subproblem's solution, even where its
+            forces, error = inner.last, inner.last_error    # error is above the centre's
+        else:
+            forces, error = inner.forces, inner.error
+        if floor and error < STALL_FACTOR * floor_error:    # progress since: try smaller weights
+            floor = 0.0
+        if scale > 0 and inner.solved:      # towards plain Newton, not to a weight that failed
+            if scale / 10.0 > floor:
+                scale = max(scale / 10.0, SIGMA_MIN * function.typical)
+        elif scale > 0:                     # a better-posed subproblem
+            floor, floor_error = max(floor, scale), error
             scale *= 10.0
         if inner.iterations == 0:
             status = FAILED
@@ -506,6 +522,8 @@ class _Phase:
     proximal_steps: int = 0
     strategies: list = field(default_factory=list)
     solved: bool = False
+    last: np.ndarray | None = None
+    last_error: float = np.inf
 
 
 def _newton_phase(function: AlartCurnier, unshifted: ConicProblem, forces: np.ndarray,
@@ -543,7 +561,7 @@ def _newton_phase(function: AlartCurnier, unshifted: ConicProblem, forces: np.nd
         status = CONVERGED
     return _Phase(forces=best[1], status=status, iterations=iterations, error=best[0],
                   history=np.asarray(history), gradient_steps=gradient_steps,
-                  solved=bool(np.sqrt(2.0 * merit) <= inner_tol))
+                  solved=bool(np.sqrt(2.0 * merit) <= inner_tol), last=forces, last_error=error)
 
 
 def _line_search(function: AlartCurnier, forces: np.ndarray, direction: np.ndarray,

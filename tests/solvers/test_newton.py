@@ -1,5 +1,7 @@
 """newton-ac, the semismooth Newton method on the Alart-Curnier function, against exact answers,
 the Clarabel reference and Siconos' test problems."""
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -15,11 +17,13 @@ from lubcontact.problem.metrics import (
     scaled_velocity_error,
     velocity_error,
 )
+from lubcontact.problem.step import StepProblem
 from lubcontact.solvers import (
     CONVERGED,
     FIRST_ORDER,
     INACCURATE,
     MAX_ITER,
+    SolveSettings,
     solve_coulomb,
     solver_info,
 )
@@ -102,6 +106,20 @@ def test_the_proximal_loop_solves_the_rank_deficient_problems_plain_newton_does_
     assert plain.status != CONVERGED and plain.error > 1e-3
     proximal = _proximal_newton(function, unshifted, start, 1e-8, 200, sigma=1e-3)
     assert proximal.status == CONVERGED and proximal.iterations <= 30 and proximal.proximal_steps >= 2
+
+
+def test_a_creeping_bed_converges_by_the_proximal_loop_without_fallback():
+    """A creeping 300-grain bed (tests/solvers/data/README.md): the proximal loop centres each
+    subproblem at the last one's solution; centred at the best iterate it posed the same
+    subproblem again and every strategy stalled at an FCLIB error of 2.3e-5."""
+    with np.load(Path(__file__).parent / "data" / "creeping-bed-step.npz") as data:
+        problem = StepProblem.from_arrays(data)
+        warm_start, warm_shift = data["warm_start"], data["warm_shift"]
+    settings = SolveSettings(method="newton-ac", tol=1e-6, exact_coulomb=True,
+                             options={"fallback": None})
+    result = settings.solve(problem, warm_start, warm_shift)
+    assert result.status == CONVERGED and result.info["strategies"] == [(1e-3, "warm")]
+    assert scaled_coulomb_error(problem, result.forces) <= 1e-6
 
 
 def test_max_iter_is_reported_with_the_best_iterate():
