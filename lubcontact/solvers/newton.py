@@ -485,14 +485,13 @@ def _proximal_newton(function: AlartCurnier, unshifted: ConicProblem, forces: np
             forces, error = inner.last, inner.last_error    # error is above the centre's
         else:
             forces, error = inner.forces, inner.error
-        if floor and error < STALL_FACTOR * floor_error:    # progress since: try smaller weights
-            floor = 0.0
-        if scale > 0 and inner.solved:      # towards plain Newton, not to a weight that failed
-            if scale / 10.0 > floor:
-                scale = max(scale / 10.0, SIGMA_MIN * function.typical)
-        elif scale > 0:                     # a better-posed subproblem
+        if error < STALL_FACTOR * floor_error:          # progress since: try smaller weights
+            floor, floor_error = 0.0, np.inf
+        if scale > 0 and not inner.solved:  # a better-posed subproblem
             floor, floor_error = max(floor, scale), error
             scale *= 10.0
+        elif scale / 10.0 > floor:          # towards plain Newton, not to a weight that failed
+            scale = max(scale / 10.0, SIGMA_MIN * function.typical)
         if inner.iterations == 0:
             status = FAILED
             break
