@@ -20,6 +20,11 @@ started (stopped) somewhere within one ``ramp_step`` below (above) it.
 In the output folder: the runs ``seed_<k>/<model>/ramp/`` (the files of
 :mod:`lubcontact.flow.run`), ``stages.csv`` (every hold of every run),
 ``hysteresis.csv`` (one row per model and seed) and ``ramp.png``.
+
+:func:`descent` measures ``theta_stop`` alone, from a flowing layer's checkpoint
+(a developed flow) turned down hold by hold: the way down without the way up,
+whose creeping bed is the costliest kind of step at a few thousand grains
+(docs/records/poster-experiment.md).
 """
 from __future__ import annotations
 
@@ -31,6 +36,7 @@ import numpy as np
 
 from .. import checks
 from .config import FLOW_SPEED, RunConfig
+from .run import FlowRun
 from .sweep import group_folder, mean_spread, run_all, write_csv
 
 END_FRACTION = 0.25
@@ -54,7 +60,8 @@ class Stage:
     stage : int
         Its index (0-based).
     leg : str
-        ``"up"`` (including the top) or ``"down"``.
+        ``"up"`` or ``"down"``: the way the ramp turns (the first hold and the
+        turning hold belong to the first leg, ``"up"`` unless ``ramp_step < 0``).
     angle : float
         Incline angle (degrees).
     mean_velocity : float
@@ -100,11 +107,16 @@ def ramp_config(config: RunConfig, start: float, stop: float, step: float, hold:
     stages = int(np.floor((stop - start) / step + 1e-9))
     checks.require(stages >= 1, "stop", f"must be at least one step ({step:g}) above the first "
                    f"angle ({start:g})", stop)
+    _check_sampling(config, hold)
+    return replace(config, scene="inclined_flow", angle=float(start), ramp_step=float(step),
+                   ramp_stages=stages, hold_steps=int(hold), steps=(2 * stages + 1) * int(hold))
+
+
+def _check_sampling(config: RunConfig, hold: int) -> None:
+    """``config`` samples at least twice in the last :data:`END_FRACTION` of a ``hold``."""
     checks.require(2 * config.sample_every <= END_FRACTION * hold, "sample_every",
                    f"must be at most {END_FRACTION:g} x hold / 2 = {END_FRACTION * hold / 2:g} "
                    "(2 samples at the end of each hold)", config.sample_every)
-    return replace(config, scene="inclined_flow", angle=float(start), ramp_step=float(step),
-                   ramp_stages=stages, hold_steps=int(hold), steps=(2 * stages + 1) * int(hold))
 
 
 def ramp_runs(config: RunConfig, models: list[str], seeds: list[int], out_dir: pathlib.Path
@@ -144,6 +156,7 @@ def stages(series: dict[str, np.ndarray], config: RunConfig) -> list[Stage]:
     steps = np.asarray(series["step"], dtype=float)
     velocity = np.asarray(series["mean_velocity"], dtype=float)
     hold = int(config.hold_steps)
+    legs = ("up", "down") if config.ramp_step > 0 else ("down", "up")
     out = []
     for stage in range(2 * int(config.ramp_stages) + 1):
         first = stage * hold
@@ -156,7 +169,7 @@ def stages(series: dict[str, np.ndarray], config: RunConfig) -> list[Stage]:
                        f"(steps {first + 1}-{first + hold})", steps.size)
         angle = config.ramp_stage(first)[1]
         elapsed = (1.0 - END_FRACTION) * hold * config.dt_fraction     # in sqrt(d / g')
-        out.append(Stage(stage=stage, leg="up" if stage <= config.ramp_stages else "down",
+        out.append(Stage(stage=stage, leg=legs[stage > config.ramp_stages],
                          angle=angle, mean_velocity=float(np.mean(velocity[end])),
                          acceleration=float(np.mean(velocity[end]) - np.mean(velocity[start]))
                          / elapsed))
@@ -190,8 +203,14 @@ def onset_angles(holds: list[Stage], flow_speed: float = FLOW_SPEED) -> tuple[fl
     start = _last_run([abs(h.mean_velocity) > flow_speed for h in up])
     if start is None:
         return float("nan"), float("nan")
+    return up[start].angle, _stop_angle(down, flow_speed)
+
+
+def _stop_angle(down: list[Stage], flow_speed: float) -> float:
+    """The first angle of the way down ``down`` from which the layer is still at the end of
+    every later hold; NaN when it flows at the end of the last one."""
     stop = _last_run([abs(h.mean_velocity) <= flow_speed for h in down])
-    return up[start].angle, float("nan") if stop is None else down[stop].angle
+    return float("nan") if stop is None else down[stop].angle
 
 
 def _last_run(flags: list[bool]) -> int | None:
@@ -243,20 +262,133 @@ def hysteresis(config: RunConfig, models: list[str], seeds: list[int], out_dir: 
     stage_rows, results = [], []
     for run_config, run_dir in runs:
         with np.load(run_dir / "measurements.npz") as data:
-            series = {name[len("series."):]: data[name] for name in data.files
-                      if name.startswith("series.")}
+            series = _series(dict(data))
         holds = stages(series, run_config)
         start, stop = onset_angles(holds, flow_speed)
         where = {"model": run_config.model, "seed": run_config.seed}
-        stage_rows += [{**where, "stage": h.stage, "leg": h.leg, "angle": h.angle,
-                        "mean_velocity": h.mean_velocity, "acceleration": h.acceleration,
-                        "flowing": int(abs(h.mean_velocity) > flow_speed)} for h in holds]
+        stage_rows += _stage_rows(holds, where, flow_speed)
         results.append({**where, "theta_start": start, "theta_stop": stop,
                         "width": start - stop, "ramp_step": abs(run_config.ramp_step),
                         "hold_steps": run_config.hold_steps, "flow_speed": flow_speed})
     write_csv(out_dir / "stages.csv", stage_rows, STAGE_COLUMNS)
     write_csv(out_dir / "hysteresis.csv", results, RESULT_COLUMNS)
     return results, stage_rows
+
+
+def _stage_rows(holds: list[Stage], where: dict[str, Any], flow_speed: float
+                ) -> list[dict[str, Any]]:
+    """Rows of ``stages.csv`` (:data:`STAGE_COLUMNS`) of one run's holds; ``where``: its model
+    and seed."""
+    return [{**where, "stage": h.stage, "leg": h.leg, "angle": h.angle,
+             "mean_velocity": h.mean_velocity, "acceleration": h.acceleration,
+             "flowing": int(abs(h.mean_velocity) > flow_speed)} for h in holds]
+
+
+@dataclass
+class Descent:
+    """What :func:`descent` measured.
+
+    Attributes
+    ----------
+    theta_stop : float
+        The angle (degrees) of the first hold that ended still: the layer
+        stopped within one step above it. NaN when it still flowed at the
+        last angle, was still at the first, or the run failed.
+    holds : list of Stage
+        The holds run, all on the way down.
+    failure : str or None
+        Why the run stopped early (:attr:`lubcontact.flow.run.FlowRun.failure`).
+    """
+
+    theta_stop: float
+    holds: list[Stage]
+    failure: str | None
+
+
+def descent(checkpoint: pathlib.Path, out_dir: pathlib.Path, start: float, stop: float,
+            step: float, hold: int, *, flow_speed: float = FLOW_SPEED,
+            progress: bool = False) -> Descent:
+    """``theta_stop`` of a flowing layer: its run turned down by ``step`` degrees every ``hold`` steps.
+
+    The state of ``checkpoint`` continues at ``start`` degrees: the grains keep
+    their velocities, the contacts their glue states and the solver its warm
+    start; only the incline turns, a ramp with ``ramp_step = -step`` (the
+    holds and the threshold as in the module's ramps). The descent ends after
+    the first hold that ends still (a lower angle does not set a layer at rest
+    moving, and a bed at rest is the costliest kind of step), or at ``stop``.
+    A checkpoint is written after each hold; called again with the same
+    arguments, it continues from ``out_dir``'s checkpoint or reads the
+    finished descent back. ``stages.csv`` lists the holds.
+
+    Parameters
+    ----------
+    checkpoint : pathlib.Path
+        A flowing layer's ``checkpoint.npz`` (an ``inclined_flow`` run).
+    out_dir : pathlib.Path
+        The descent's folder (its run's files and ``stages.csv``).
+    start, stop : float
+        First and lowest angle (degrees); ``stop`` is reached only if it is a
+        whole number of ``step`` below ``start``.
+    step : float
+        Degrees per hold (> 0).
+    hold : int
+        Steps per angle (the run must sample twice in the last
+        :data:`END_FRACTION` of a hold).
+    flow_speed : float
+        Threshold of a flowing layer (``sqrt(g' d)``).
+    progress : bool
+        Show a progress bar per hold.
+
+    Returns
+    -------
+    Descent
+
+    Raises
+    ------
+    ValueError
+        Naming ``stop`` when it is not at least one ``step`` below ``start``,
+        ``sample_every`` (the checkpoint's) when a hold is too short for it,
+        ``out_dir`` when it holds a run of another descent, or a field
+        :class:`RunConfig` refuses.
+    """
+    step = checks.positive_scalar("step", step)
+    flow_speed = checks.positive_scalar("flow_speed", flow_speed)
+    stages_down = int(np.floor((start - stop) / step + 1e-9))
+    checks.require(stages_down >= 1, "stop", f"must be at least one step ({step:g}) below the "
+                   f"first angle ({start:g})", stop)
+    out_dir = pathlib.Path(out_dir)
+    base = FlowRun.resume(pathlib.Path(checkpoint), out_dir=out_dir)
+    _check_sampling(base.config, hold)
+    config = replace(base.config, angle=float(start), ramp_step=-step, ramp_stages=stages_down,
+                     hold_steps=int(hold), steps=(2 * stages_down + 1) * int(hold))
+    if (out_dir / "checkpoint.npz").exists():
+        run = FlowRun.resume(out_dir / "checkpoint.npz")
+        changed = run.config.differences(config, ("angle", "ramp_step", "ramp_stages",
+                                                  "hold_steps"))
+        checks.require(not changed, "out_dir", f"{out_dir} holds a descent with other settings: "
+                       + ", ".join(f"{name} {old:g} (asked {new:g})"
+                                   for name, (old, new) in changed.items()))
+    else:
+        run = FlowRun(config, base.sim.scene, out_dir)
+        run.sim.restore(replace(base.sim.state, steps_done=0, start_time=base.sim.scene.time))
+    while True:
+        holds = stages(_series(run.measurements()), run.config)
+        if run.failure is not None or len(holds) == stages_down + 1 or \
+                (holds and abs(holds[-1].mean_velocity) <= flow_speed):
+            break
+        run.advance(int(hold) - run.steps_done % int(hold), progress)
+        run.save_checkpoint()
+    write_csv(out_dir / "stages.csv", _stage_rows(
+        holds, {"model": run.config.model, "seed": run.config.seed}, flow_speed), STAGE_COLUMNS)
+    flowed = bool(holds) and abs(holds[0].mean_velocity) > flow_speed
+    theta_stop = _stop_angle(holds, flow_speed) if flowed and run.failure is None else float("nan")
+    return Descent(theta_stop=theta_stop, holds=holds, failure=run.failure)
+
+
+def _series(measurements: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """The time series of a run's :meth:`~lubcontact.flow.run.FlowRun.measurements`."""
+    return {name[len("series."):]: value for name, value in measurements.items()
+            if name.startswith("series.")}
 
 
 def model_means(results: list[dict[str, Any]]) -> dict[str, dict[str, float]]:

@@ -209,6 +209,57 @@ def test_onset_angles_read_the_last_start_up_and_the_last_stop_down():
         hysteresis.stages(sparse, config)
 
 
+def test_a_ramp_with_a_negative_step_goes_down_first():
+    config = RunConfig(sample_every=1, angle=14.0, ramp_step=-1.0, ramp_stages=2, hold_steps=8,
+                       steps=40)
+    steps = np.arange(1, 41)
+    holds = hysteresis.stages({"step": steps, "mean_velocity": np.ones(40)}, config)
+    assert [(h.leg, h.angle) for h in holds] == [("down", 14.0), ("down", 13.0), ("down", 12.0),
+                                                 ("up", 13.0), ("up", 14.0)]
+
+
+def test_a_descent_continues_a_flowing_layer_hold_by_hold_and_ends_at_a_still_hold(tmp_path):
+    """The descent's first hold is the layer's own next steps (velocities, glue states and warm
+    start carried over), the incline turns by the step every hold, a layer still at the end of a hold ends the
+    descent there, and the same call again reads the descent back."""
+    config = RunConfig(n_grains=16, width=10.0, model="gluey", dt_fraction=0.05, settle_steps=40,
+                       solver="newton-ac", fixed_point=True, checkpoint_every=4, sample_every=1,
+                       angle=26.0, steps=8)
+    layer = FlowRun(config, initial_scene(config, tmp_path), tmp_path / "layer")
+    layer.advance(8)
+    layer.save_checkpoint()
+    assert np.count_nonzero(layer.sim.state.pairs.gamma) >= 4      # glued contacts to carry over
+    checkpoint = tmp_path / "layer" / "checkpoint.npz"
+    onward = FlowRun.resume(checkpoint, out_dir=tmp_path / "onward", steps=16)
+    onward.advance(8)
+
+    down = hysteresis.descent(checkpoint, tmp_path / "down", 26.0, 22.0, 2.0, 8, flow_speed=1e-9)
+    assert [(h.leg, h.angle) for h in down.holds] == [("down", 26.0), ("down", 24.0),
+                                                      ("down", 22.0)]
+    assert np.isnan(down.theta_stop) and down.failure is None       # still flowing at 22
+    series = FlowRun.resume(tmp_path / "down" / "checkpoint.npz").series
+    assert series["angle"] == [26.0] * 8 + [24.0] * 8 + [22.0] * 8
+    np.testing.assert_allclose(series["mean_velocity"][:8], onward.series["mean_velocity"][-8:],
+                               rtol=1e-9)
+    assert [row["leg"] for row in read_csv(tmp_path / "down" / "stages.csv")] == ["down"] * 3
+    again = hysteresis.descent(checkpoint, tmp_path / "down", 26.0, 22.0, 2.0, 8, flow_speed=1e-9)
+    assert [h.mean_velocity for h in again.holds] == [h.mean_velocity for h in down.holds]
+    assert FlowRun.resume(tmp_path / "down" / "checkpoint.npz").steps_done == 24
+
+    still = hysteresis.descent(checkpoint, tmp_path / "still", 26.0, 22.0, 2.0, 8, flow_speed=1e9)
+    assert len(still.holds) == 1 and np.isnan(still.theta_stop)     # never flowed: no theta_stop
+    held = FlowRun.resume(tmp_path / "still" / "checkpoint.npz")
+    assert held.steps_done == 8
+    np.testing.assert_allclose(held.sim.scene.grains.positions, onward.sim.scene.grains.positions,
+                               rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(held.sim.state.pairs.gamma, onward.sim.state.pairs.gamma)
+    with pytest.raises(ValueError, match="out_dir: .* holds a descent with other settings: "
+                                         "hold_steps 8 [(]asked 16[)]"):
+        hysteresis.descent(checkpoint, tmp_path / "down", 26.0, 22.0, 2.0, 16)
+    with pytest.raises(ValueError, match="stop: must be at least one step"):
+        hysteresis.descent(checkpoint, tmp_path / "up", 22.0, 26.0, 2.0, 8)
+
+
 def test_the_hysteresis_command_writes_one_row_per_model_and_seed(tmp_path, capsys):
     argv = [*TINY, "--models", "dry", "--seeds", "0,1", "--from", "18", "--to", "20", "--step",
             "2", "--hold", "8", "--sample-every", "1", "--out", str(tmp_path)]
