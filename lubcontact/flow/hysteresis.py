@@ -346,12 +346,13 @@ def descent(checkpoint: pathlib.Path, out_dir: pathlib.Path, start: float, stop:
     Raises
     ------
     ValueError
-        Naming ``stop`` when it is not at least one ``step`` below ``start``,
-        ``sample_every`` (the checkpoint's) when a hold is too short for it,
-        ``out_dir`` when it holds a run of another descent, or a field
-        :class:`RunConfig` refuses.
+        Naming ``stop`` when it is not at least one ``step`` below ``start``;
+        ``step``, ``hold`` or ``flow_speed`` out of range; ``sample_every``
+        (the checkpoint's) when a hold is too short for it; ``out_dir`` when
+        it holds a run of another descent; or a field :class:`RunConfig` refuses.
     """
     step = checks.positive_scalar("step", step)
+    hold = checks.integer("hold", hold, minimum=1)
     flow_speed = checks.positive_scalar("flow_speed", flow_speed)
     stages_down = int(np.floor((start - stop) / step + 1e-9))
     checks.require(stages_down >= 1, "stop", f"must be at least one step ({step:g}) below the "
@@ -360,7 +361,7 @@ def descent(checkpoint: pathlib.Path, out_dir: pathlib.Path, start: float, stop:
     base = FlowRun.resume(pathlib.Path(checkpoint), out_dir=out_dir)
     _check_sampling(base.config, hold)
     config = replace(base.config, angle=float(start), ramp_step=-step, ramp_stages=stages_down,
-                     hold_steps=int(hold), steps=(2 * stages_down + 1) * int(hold))
+                     hold_steps=hold, steps=(2 * stages_down + 1) * hold)
     if (out_dir / "checkpoint.npz").exists():
         run = FlowRun.resume(out_dir / "checkpoint.npz")
         changed = run.config.differences(config, ("angle", "ramp_step", "ramp_stages",
@@ -376,7 +377,7 @@ def descent(checkpoint: pathlib.Path, out_dir: pathlib.Path, start: float, stop:
         if run.failure is not None or len(holds) == stages_down + 1 or \
                 (holds and abs(holds[-1].mean_velocity) <= flow_speed):
             break
-        run.advance(int(hold) - run.steps_done % int(hold), progress)
+        run.advance(hold - run.steps_done % hold, progress)
         run.save_checkpoint()
     write_csv(out_dir / "stages.csv", _stage_rows(
         holds, {"model": run.config.model, "seed": run.config.seed}, flow_speed), STAGE_COLUMNS)

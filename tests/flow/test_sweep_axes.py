@@ -258,6 +258,8 @@ def test_a_descent_continues_a_flowing_layer_hold_by_hold_and_ends_at_a_still_ho
         hysteresis.descent(checkpoint, tmp_path / "down", 26.0, 22.0, 2.0, 16)
     with pytest.raises(ValueError, match="stop: must be at least one step"):
         hysteresis.descent(checkpoint, tmp_path / "up", 22.0, 26.0, 2.0, 8)
+    with pytest.raises(ValueError, match="hold: must be an integer >= 1"):
+        hysteresis.descent(checkpoint, tmp_path / "none", 26.0, 22.0, 2.0, 0)
 
 
 def test_the_hysteresis_command_writes_one_row_per_model_and_seed(tmp_path, capsys):
