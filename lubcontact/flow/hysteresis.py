@@ -29,6 +29,7 @@ whose creeping bed is the costliest kind of step at a few thousand grains
 from __future__ import annotations
 
 import pathlib
+from collections.abc import Mapping
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -104,12 +105,19 @@ def ramp_config(config: RunConfig, start: float, stop: float, step: float, hold:
         a field :class:`RunConfig` refuses.
     """
     step = checks.positive_scalar("step", step)
-    stages = int(np.floor((stop - start) / step + 1e-9))
-    checks.require(stages >= 1, "stop", f"must be at least one step ({step:g}) above the first "
-                   f"angle ({start:g})", stop)
+    stages = _stage_count(stop - start, step, start, stop, "above")
     _check_sampling(config, hold)
     return replace(config, scene="inclined_flow", angle=float(start), ramp_step=float(step),
                    ramp_stages=stages, hold_steps=int(hold), steps=(2 * stages + 1) * int(hold))
+
+
+def _stage_count(rise: float, step: float, start: float, stop: float, side: str) -> int:
+    """Whole ``step``s in ``rise`` (degrees from ``start`` to ``stop``, counted in the ramp's
+    direction), at least one; a ``ValueError`` naming ``stop`` (``side``: "above" or "below")."""
+    stages = int(np.floor(rise / step + 1e-9))
+    checks.require(stages >= 1, "stop", f"must be at least one step ({step:g}) {side} the first "
+                   f"angle ({start:g})", stop)
+    return stages
 
 
 def _check_sampling(config: RunConfig, hold: int) -> None:
@@ -262,7 +270,7 @@ def hysteresis(config: RunConfig, models: list[str], seeds: list[int], out_dir: 
     stage_rows, results = [], []
     for run_config, run_dir in runs:
         with np.load(run_dir / "measurements.npz") as data:
-            series = _series(dict(data))
+            series = _series(data)
         holds = stages(series, run_config)
         start, stop = onset_angles(holds, flow_speed)
         where = {"model": run_config.model, "seed": run_config.seed}
@@ -354,9 +362,7 @@ def descent(checkpoint: pathlib.Path, out_dir: pathlib.Path, start: float, stop:
     step = checks.positive_scalar("step", step)
     hold = checks.integer("hold", hold, minimum=1)
     flow_speed = checks.positive_scalar("flow_speed", flow_speed)
-    stages_down = int(np.floor((start - stop) / step + 1e-9))
-    checks.require(stages_down >= 1, "stop", f"must be at least one step ({step:g}) below the "
-                   f"first angle ({start:g})", stop)
+    stages_down = _stage_count(start - stop, step, start, stop, "below")
     out_dir = pathlib.Path(out_dir)
     base = FlowRun.resume(pathlib.Path(checkpoint), out_dir=out_dir)
     _check_sampling(base.config, hold)
@@ -386,8 +392,9 @@ def descent(checkpoint: pathlib.Path, out_dir: pathlib.Path, start: float, stop:
     return Descent(theta_stop=theta_stop, holds=holds, failure=run.failure)
 
 
-def _series(measurements: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
-    """The time series of a run's :meth:`~lubcontact.flow.run.FlowRun.measurements`."""
+def _series(measurements: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """The time series of a run's :meth:`~lubcontact.flow.run.FlowRun.measurements` (or of its
+    ``measurements.npz``, read series by series)."""
     return {name[len("series."):]: value for name, value in measurements.items()
             if name.startswith("series.")}
 

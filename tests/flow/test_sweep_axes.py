@@ -220,8 +220,8 @@ def test_a_ramp_with_a_negative_step_goes_down_first():
 
 def test_a_descent_continues_a_flowing_layer_hold_by_hold_and_ends_at_a_still_hold(tmp_path):
     """The descent's first hold is the layer's own next steps (velocities, glue states and warm
-    start carried over), the incline turns by the step every hold, a layer still at the end of a hold ends the
-    descent there, and the same call again reads the descent back."""
+    start carried over), the incline turns by the step every hold, a layer still at the end of
+    a hold ends the descent there, and the same call again reads the descent back."""
     config = RunConfig(n_grains=16, width=10.0, model="gluey", dt_fraction=0.05, settle_steps=40,
                        solver="newton-ac", fixed_point=True, checkpoint_every=4, sample_every=1,
                        angle=26.0, steps=8)
