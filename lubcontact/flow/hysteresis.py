@@ -21,21 +21,24 @@ In the output folder: the runs ``seed_<k>/<model>/ramp/`` (the files of
 :mod:`lubcontact.flow.run`), ``stages.csv`` (every hold of every run),
 ``hysteresis.csv`` (one row per model and seed) and ``ramp.png``.
 
-:func:`descent` measures ``theta_stop`` alone, from a flowing layer's checkpoint
-(a developed flow) turned down hold by hold: the way down without the way up,
-whose creeping bed is the costliest kind of step at a few thousand grains
+Each leg alone, for layers too large for a whole ramp: :func:`ascent` measures
+``theta_start``, the way up from the settled bed ended once the layer flows;
+:func:`descent` measures ``theta_stop`` from a flowing layer's checkpoint (a
+developed flow) turned down hold by hold, without the way up, whose creeping
+bed is the costliest kind of step at a few thousand grains
 (docs/records/poster-experiment.md).
 """
 from __future__ import annotations
 
 import pathlib
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
 
 from .. import checks
+from .bed import initial_scene
 from .config import FLOW_SPEED, RunConfig
 from .run import FlowRun
 from .sweep import group_folder, mean_spread, run_all, write_csv
@@ -368,28 +371,150 @@ def descent(checkpoint: pathlib.Path, out_dir: pathlib.Path, start: float, stop:
     _check_sampling(base.config, hold)
     config = replace(base.config, angle=float(start), ramp_step=-step, ramp_stages=stages_down,
                      hold_steps=hold, steps=(2 * stages_down + 1) * hold)
-    if (out_dir / "checkpoint.npz").exists():
-        run = FlowRun.resume(out_dir / "checkpoint.npz")
-        changed = run.config.differences(config, ("angle", "ramp_step", "ramp_stages",
-                                                  "hold_steps"))
-        checks.require(not changed, "out_dir", f"{out_dir} holds a descent with other settings: "
-                       + ", ".join(f"{name} {old:g} (asked {new:g})"
-                                   for name, (old, new) in changed.items()))
-    else:
-        run = FlowRun(config, base.sim.scene, out_dir)
-        run.sim.restore(replace(base.sim.state, steps_done=0, start_time=base.sim.scene.time))
-    while True:
-        holds = stages(_series(run.measurements()), run.config)
-        if run.failure is not None or len(holds) == stages_down + 1 or \
-                (holds and abs(holds[-1].mean_velocity) <= flow_speed):
-            break
-        run.advance(hold - run.steps_done % hold, progress)
-        run.save_checkpoint()
-    write_csv(out_dir / "stages.csv", _stage_rows(
-        holds, {"model": run.config.model, "seed": run.config.seed}, flow_speed), STAGE_COLUMNS)
+    run = _open_run(out_dir, config, "a descent", lambda: _continued(base, config, out_dir))
+    holds = _hold_by_hold(run, hold, stages_down + 1, lambda holds: bool(holds) and abs(
+        holds[-1].mean_velocity) <= flow_speed, progress)
+    _write_stages(out_dir, run, holds, flow_speed)
     flowed = bool(holds) and abs(holds[0].mean_velocity) > flow_speed
     theta_stop = _stop_angle(holds, flow_speed) if flowed and run.failure is None else float("nan")
     return Descent(theta_stop=theta_stop, holds=holds, failure=run.failure)
+
+
+def _continued(base: FlowRun, config: RunConfig, out_dir: pathlib.Path) -> FlowRun:
+    """A new run of ``config`` in ``out_dir`` that continues ``base``'s state: the grains'
+    velocities, the contacts' glue states, the solver's warm start."""
+    run = FlowRun(config, base.sim.scene, out_dir)
+    run.sim.restore(replace(base.sim.state, steps_done=0, start_time=base.sim.scene.time))
+    return run
+
+
+@dataclass
+class Ascent:
+    """What :func:`ascent` measured.
+
+    Attributes
+    ----------
+    theta_start : float
+        The angle (degrees) from which the layer flowed at the end of every
+        later hold: it started within one step below it. NaN when it flowed
+        from the first hold (the start was not below the transition), never
+        flowed up to the last angle, or the run failed.
+    holds : list of Stage
+        The holds run, all on the way up.
+    failure : str or None
+        Why the run stopped early (:attr:`lubcontact.flow.run.FlowRun.failure`).
+    """
+
+    theta_start: float
+    holds: list[Stage]
+    failure: str | None
+
+
+def ascent(config: RunConfig, out_dir: pathlib.Path, start: float, stop: float, step: float,
+           hold: int, *, confirm: int = 2, flow_speed: float = FLOW_SPEED,
+           progress: bool = False) -> Ascent:
+    """``theta_start`` of a settled bed: tilted to ``start`` degrees, turned up by ``step`` every
+    ``hold`` steps until it flows.
+
+    The way up of :func:`ramp_config`'s ramp (same holds, same threshold), ended
+    once the last ``confirm`` holds have ended flowing (a layer that has started
+    at a few thousand grains accelerates, and the way back down is
+    :func:`descent`'s), or at ``stop``. The bed is ``config.bed``, else
+    ``out_dir/bed.npz``, else one settled and saved there
+    (:func:`~lubcontact.flow.bed.initial_scene`). A checkpoint is written after
+    each hold; called again with the same arguments, it continues from
+    ``out_dir``'s checkpoint or reads the finished ascent back. ``stages.csv``
+    lists the holds.
+
+    Parameters
+    ----------
+    config : RunConfig
+        The other settings (model, seed, solver, size, ...).
+    out_dir : pathlib.Path
+        The ascent's folder (its run's files, ``stages.csv``, the bed if settled here).
+    start, stop : float
+        First and highest angle (degrees); ``stop`` is reached only if it is a
+        whole number of ``step`` above ``start``.
+    step : float
+        Degrees per hold (> 0).
+    hold : int
+        Steps per angle (``config`` must sample twice in the last
+        :data:`END_FRACTION` of a hold).
+    confirm : int
+        Consecutive flowing holds that end the ascent (>= 1).
+    flow_speed : float
+        Threshold of a flowing layer (``sqrt(g' d)``).
+    progress : bool
+        Show a progress bar per hold.
+
+    Returns
+    -------
+    Ascent
+
+    Raises
+    ------
+    ValueError
+        Naming ``stop`` when it is not at least one ``step`` above ``start``;
+        ``step``, ``hold``, ``confirm`` or ``flow_speed`` out of range;
+        ``sample_every`` when a hold is too short for it; ``out_dir`` when it
+        holds a run of another ascent; or a field :class:`RunConfig` refuses.
+    """
+    hold = checks.integer("hold", hold, minimum=1)
+    confirm = checks.integer("confirm", confirm, minimum=1)
+    flow_speed = checks.positive_scalar("flow_speed", flow_speed)
+    config = ramp_config(config, start, stop, step, hold)
+    out_dir = pathlib.Path(out_dir)
+    run = _open_run(out_dir, config, "an ascent",
+                    lambda: FlowRun(config, initial_scene(config, out_dir, progress), out_dir))
+
+    def started(holds: list[Stage]) -> bool:
+        return len(holds) >= confirm and all(abs(h.mean_velocity) > flow_speed
+                                             for h in holds[-confirm:])
+
+    holds = _hold_by_hold(run, hold, config.ramp_stages + 1, started, progress)
+    _write_stages(out_dir, run, holds, flow_speed)
+    first = _last_run([abs(h.mean_velocity) > flow_speed for h in holds])
+    bracketed = first is not None and first > 0 and run.failure is None
+    return Ascent(theta_start=holds[first].angle if bracketed else float("nan"), holds=holds,
+                  failure=run.failure)
+
+
+def _open_run(out_dir: pathlib.Path, config: RunConfig, what: str,
+              new_run: Callable[[], FlowRun]) -> FlowRun:
+    """``out_dir``'s run resumed from its checkpoint, else ``new_run()``; a ``ValueError``
+    naming ``out_dir`` when the checkpoint's run is not ``config``'s (``what``: "a descent")."""
+    if not (out_dir / "checkpoint.npz").exists():
+        return new_run()
+    run = FlowRun.resume(out_dir / "checkpoint.npz")
+    changed = run.config.differences(config)
+    checks.require(not changed, "out_dir", f"{out_dir} holds {what} with other settings: "
+                   + ", ".join(f"{name} {_shown(old)} (asked {_shown(new)})"
+                               for name, (old, new) in changed.items()))
+    return run
+
+
+def _shown(value: Any) -> str:
+    """A setting as an error message shows it (numbers in ``g`` format)."""
+    return f"{value:g}" if isinstance(value, (int, float, np.number)) else str(value)
+
+
+def _hold_by_hold(run: FlowRun, hold: int, last: int, ended: Callable[[list[Stage]], bool],
+                  progress: bool) -> list[Stage]:
+    """Advance a ramp ``run`` one ``hold`` at a time, a checkpoint after each, until it has run
+    ``last`` holds, failed or ``ended(holds)``; its holds (:func:`stages`)."""
+    while True:
+        holds = stages(_series(run.measurements()), run.config)
+        if run.failure is not None or len(holds) == last or ended(holds):
+            return holds
+        run.advance(hold - run.steps_done % hold, progress)
+        run.save_checkpoint()
+
+
+def _write_stages(out_dir: pathlib.Path, run: FlowRun, holds: list[Stage], flow_speed: float
+                  ) -> None:
+    """``out_dir/stages.csv``: the holds of ``run``."""
+    write_csv(out_dir / "stages.csv", _stage_rows(
+        holds, {"model": run.config.model, "seed": run.config.seed}, flow_speed), STAGE_COLUMNS)
 
 
 def _series(measurements: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:

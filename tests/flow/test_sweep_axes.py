@@ -1,5 +1,6 @@
 """Sweeps over seeds, viscosity and roughness; angle ramps and the hysteresis of the flow angle."""
 import csv
+from dataclasses import replace
 from types import SimpleNamespace
 
 import numpy as np
@@ -260,6 +261,48 @@ def test_a_descent_continues_a_flowing_layer_hold_by_hold_and_ends_at_a_still_ho
         hysteresis.descent(checkpoint, tmp_path / "up", 22.0, 26.0, 2.0, 8)
     with pytest.raises(ValueError, match="hold: must be an integer >= 1"):
         hysteresis.descent(checkpoint, tmp_path / "none", 26.0, 22.0, 2.0, 0)
+
+
+def test_an_ascent_is_the_way_up_of_the_ramp_ended_once_the_layer_flows(tmp_path):
+    """The ascent's holds are the ramp's way up (the same run step for step); it ends after
+    ``confirm`` holds that end flowing, theta_start the first of them; the same call again
+    reads it back."""
+    config = RunConfig(n_grains=16, width=10.0, model="dry", dt_fraction=0.05, settle_steps=40,
+                       solver="newton-ac", fixed_point=True, checkpoint_every=4, sample_every=1)
+    ramp = hysteresis.ramp_config(config, 10.0, 40.0, 10.0, 8)
+    whole = FlowRun(ramp, initial_scene(ramp, tmp_path), tmp_path / "ramp")
+    whole.advance(32)
+    way_up = hysteresis.stages(whole.series, ramp)
+    speeds = [h.mean_velocity for h in way_up]
+    assert max(speeds[:2]) < min(speeds[2:]) and speeds[2] < 0.8 * speeds[3]   # the bed starts
+    threshold = 0.5 * (max(speeds[:2]) + speeds[2])
+
+    up = hysteresis.ascent(config, tmp_path / "up", 10.0, 50.0, 10.0, 8, flow_speed=threshold)
+    assert [(h.leg, h.angle) for h in up.holds] == [("up", 10.0), ("up", 20.0), ("up", 30.0),
+                                                    ("up", 40.0)]         # not on to 50
+    assert up.theta_start == 30.0 and up.failure is None
+    np.testing.assert_allclose([h.mean_velocity for h in up.holds], speeds, rtol=1e-9)
+    assert [row["flowing"] for row in read_csv(tmp_path / "up" / "stages.csv")] == \
+        ["0", "0", "1", "1"]
+    again = hysteresis.ascent(config, tmp_path / "up", 10.0, 50.0, 10.0, 8, flow_speed=threshold)
+    assert again.theta_start == 30.0 and FlowRun.resume(
+        tmp_path / "up" / "checkpoint.npz").steps_done == 32
+
+    once = hysteresis.ascent(config, tmp_path / "up", 10.0, 50.0, 10.0, 8, confirm=1,
+                             flow_speed=threshold)            # already past: read back
+    assert once.theta_start == 30.0 and len(once.holds) == 4
+    never = hysteresis.ascent(config, tmp_path / "never", 10.0, 20.0, 10.0, 8, flow_speed=1e9)
+    assert len(never.holds) == 2 and np.isnan(never.theta_start)
+    at_once = hysteresis.ascent(config, tmp_path / "at_once", 10.0, 30.0, 10.0, 8,
+                                flow_speed=1e-9)
+    assert len(at_once.holds) == 2 and np.isnan(at_once.theta_start)   # flowed from the start
+    with pytest.raises(ValueError, match="out_dir: .* holds an ascent with other settings: "
+                                         "model dry [(]asked gluey[)]"):
+        hysteresis.ascent(replace(config, model="gluey"), tmp_path / "up", 10.0, 50.0, 10.0, 8)
+    with pytest.raises(ValueError, match="confirm: must be an integer >= 1"):
+        hysteresis.ascent(config, tmp_path / "none", 10.0, 50.0, 10.0, 8, confirm=0)
+    with pytest.raises(ValueError, match="stop: must be at least one step"):
+        hysteresis.ascent(config, tmp_path / "none", 30.0, 20.0, 10.0, 8)
 
 
 def test_the_hysteresis_command_writes_one_row_per_model_and_seed(tmp_path, capsys):
