@@ -49,7 +49,7 @@ Newton system is singular at sticking contacts; a proximal-point outer loop
 (as in Siconos' PROX) makes each subproblem well posed: solve with ``W + sigma
 I`` and ``q - sigma r_k``, centre ``r_k`` at the result, shrink ``sigma`` after
 each subproblem solved (:func:`_proximal_newton`). The starting ``sigma`` values of
-:data:`STRATEGIES` are tried in turn while one stalls. Stopping: the FCLIB
+:data:`STRATEGIES` are tried in turn while one stalls far from ``tol``. Stopping: the FCLIB
 error (:func:`~lubcontact.problem.metrics.coulomb_error`, the measure every
 report uses) below ``tol``. When every strategy stalls, the best iterate goes
 to fallbacks in turn (``fallback``; in 2D Gauss-Seidel, then apgd-jacobi's fixed
@@ -103,6 +103,12 @@ granular file (measured on Siconos' and FCLIB's test problems). With a warm star
 weight is also tried from zero forces, second: in the first steps of a flow the previous step's
 forces can be a start from which every weight stalls where a cold start converges (two of three
 such gluey steps of the demo's flow)."""
+STRATEGY_GAP = 100.0
+"""The next strategy is tried only while the best FCLIB error is above this many ``tol``: a
+phase that stalled within two decades of ``tol`` goes to the fallbacks, whose Gauss-Seidel
+sweeps and Newton polish finish it. On the costliest steps of a creeping 2000-grain bed the
+first strategy stalled at 3-9 ``tol`` and the three others at 4 to 1600 ``tol``, spending
+two thirds of the step (docs/records/benchmarks.md, "newton-ac on creeping beds")."""
 SIGMA_MIN = 1e-10
 """Floor of the proximal weight, in units of the median diagonal of ``W``."""
 
@@ -412,8 +418,9 @@ def _strategies(function: AlartCurnier, unshifted: ConicProblem, forces: np.ndar
                 tol: float, max_iter: int) -> _Phase:
     """:func:`_proximal_newton` with each ``sigma`` of :data:`STRATEGIES` in turn, each from
     ``forces`` (a strategy's stalled iterate is a worse start than the warm start, measured),
-    the first also from zero forces when ``forces`` is not zero, until one converges or
-    ``max_iter`` Newton iterations are spent; the best phase is returned."""
+    the first also from zero forces when ``forces`` is not zero, until one converges, the best
+    error is within :data:`STRATEGY_GAP` of ``tol`` or ``max_iter`` Newton iterations are
+    spent; the best phase is returned."""
     best, history, tried = None, [], []
     iterations = gradient_steps = proximal_steps = 0
     cold = np.zeros_like(forces)
@@ -428,7 +435,7 @@ def _strategies(function: AlartCurnier, unshifted: ConicProblem, forces: np.ndar
         history.extend(phase.history if not history else phase.history[1:])
         if best is None or phase.error < best.error:
             best = phase
-        if phase.status == CONVERGED or iterations >= max_iter:
+        if phase.status == CONVERGED or iterations >= max_iter or best.error <= STRATEGY_GAP * tol:
             break
     return _Phase(forces=best.forces, status=best.status, iterations=iterations, error=best.error,
                   history=np.asarray(history), gradient_steps=gradient_steps,

@@ -27,7 +27,7 @@ from lubcontact.solvers import (
     solve_coulomb,
     solver_info,
 )
-from lubcontact.solvers.newton import AlartCurnier, _proximal_newton, newton_alart_curnier
+from lubcontact.solvers.newton import STRATEGY_GAP, AlartCurnier, _proximal_newton, newton_alart_curnier
 from lubcontact.solvers.registry import ALL_CONES, register, unregister
 from lubcontact.solvers.result import MethodOutput
 
@@ -185,6 +185,17 @@ def test_a_stalled_newton_without_fallback_is_inaccurate_with_its_best_iterate(s
     assert alone.info["newton_status"] == "stalled" and alone.status == INACCURATE
     assert scaled_coulomb_error(problem, alone.forces) == pytest.approx(alone.info["error"], rel=1e-6)
     assert 1e-8 < alone.info["error"] < 1e-4
+
+
+def test_a_strategy_stalled_near_tol_goes_to_the_fallbacks_without_the_other_strategies(stalling):
+    """The first strategy stalls within STRATEGY_GAP of tol: the other starting weights (which
+    stall further away on such problems) are not tried; the fallbacks finish the solve."""
+    problem, alone = stalling
+    assert alone.info["strategies"] == [(1e-3, "cold")]
+    assert alone.info["error"] <= STRATEGY_GAP * 1e-8
+    rescued = solve_coulomb(problem, "newton-ac", tol=1e-8)
+    assert rescued.status == CONVERGED and rescued.info["fallbacks"][0] == "nsgs"
+    assert scaled_coulomb_error(problem, rescued.forces) <= 1e-8
 
 
 def test_a_fallback_worse_than_newton_never_replaces_its_best_iterate(stalling):
