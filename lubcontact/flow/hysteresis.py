@@ -296,8 +296,24 @@ def _stage_rows(holds: list[Stage], where: dict[str, Any], flow_speed: float
 
 
 @dataclass
-class Descent:
-    """What :func:`descent` measured.
+class Leg:
+    """The holds of one leg of a ramp run on its own (:func:`ascent`, :func:`descent`).
+
+    Attributes
+    ----------
+    holds : list of Stage
+        The holds run, all on the leg's way (up or down).
+    failure : str or None
+        Why the run stopped early (:attr:`lubcontact.flow.run.FlowRun.failure`).
+    """
+
+    holds: list[Stage]
+    failure: str | None
+
+
+@dataclass
+class Descent(Leg):
+    """What :func:`descent` measured: its holds and failure (:class:`Leg`), and ``theta_stop``.
 
     Attributes
     ----------
@@ -305,15 +321,9 @@ class Descent:
         The angle (degrees) of the first hold that ended still: the layer
         stopped within one step above it. NaN when it still flowed at the
         last angle, was still at the first, or the run failed.
-    holds : list of Stage
-        The holds run, all on the way down.
-    failure : str or None
-        Why the run stopped early (:attr:`lubcontact.flow.run.FlowRun.failure`).
     """
 
     theta_stop: float
-    holds: list[Stage]
-    failure: str | None
 
 
 def descent(checkpoint: pathlib.Path, out_dir: pathlib.Path, start: float, stop: float,
@@ -375,8 +385,8 @@ def descent(checkpoint: pathlib.Path, out_dir: pathlib.Path, start: float, stop:
     holds = _hold_by_hold(run, hold, stages_down + 1, lambda holds: bool(holds) and abs(
         holds[-1].mean_velocity) <= flow_speed, progress)
     _write_stages(out_dir, run, holds, flow_speed)
-    flowed = bool(holds) and abs(holds[0].mean_velocity) > flow_speed
-    theta_stop = _stop_angle(holds, flow_speed) if flowed and run.failure is None else float("nan")
+    theta_stop = _transition(holds, [abs(h.mean_velocity) <= flow_speed for h in holds],
+                             run.failure)
     return Descent(theta_stop=theta_stop, holds=holds, failure=run.failure)
 
 
@@ -389,8 +399,8 @@ def _continued(base: FlowRun, config: RunConfig, out_dir: pathlib.Path) -> FlowR
 
 
 @dataclass
-class Ascent:
-    """What :func:`ascent` measured.
+class Ascent(Leg):
+    """What :func:`ascent` measured: its holds and failure (:class:`Leg`), and ``theta_start``.
 
     Attributes
     ----------
@@ -399,15 +409,9 @@ class Ascent:
         later hold: it started within one step below it. NaN when it flowed
         from the first hold (the start was not below the transition), never
         flowed up to the last angle, or the run failed.
-    holds : list of Stage
-        The holds run, all on the way up.
-    failure : str or None
-        Why the run stopped early (:attr:`lubcontact.flow.run.FlowRun.failure`).
     """
 
     theta_start: float
-    holds: list[Stage]
-    failure: str | None
 
 
 def ascent(config: RunConfig, out_dir: pathlib.Path, start: float, stop: float, step: float,
@@ -473,10 +477,18 @@ def ascent(config: RunConfig, out_dir: pathlib.Path, start: float, stop: float, 
 
     holds = _hold_by_hold(run, hold, config.ramp_stages + 1, started, progress)
     _write_stages(out_dir, run, holds, flow_speed)
-    first = _last_run([abs(h.mean_velocity) > flow_speed for h in holds])
-    bracketed = first is not None and first > 0 and run.failure is None
-    return Ascent(theta_start=holds[first].angle if bracketed else float("nan"), holds=holds,
-                  failure=run.failure)
+    theta_start = _transition(holds, [abs(h.mean_velocity) > flow_speed for h in holds],
+                              run.failure)
+    return Ascent(theta_start=theta_start, holds=holds, failure=run.failure)
+
+
+def _transition(holds: list[Stage], flags: list[bool], failure: str | None) -> float:
+    """The angle of the first hold of the final run of True ``flags`` (one per hold of a leg);
+    NaN when the last flag is False, the run begins at the leg's first hold (the transition is
+    not bracketed) or the run failed (``failure``)."""
+    first = _last_run(flags)
+    bracketed = first is not None and first > 0 and failure is None
+    return holds[first].angle if bracketed else float("nan")
 
 
 def _open_run(out_dir: pathlib.Path, config: RunConfig, what: str,

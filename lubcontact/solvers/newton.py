@@ -107,7 +107,7 @@ STRATEGY_GAP = 100.0
 """The next strategy is tried only while the best FCLIB error is above this many ``tol``: a
 phase that stalled within two decades of ``tol`` goes to the fallbacks, whose Gauss-Seidel
 sweeps and Newton polish finish it. On the costliest steps of a creeping 2000-grain bed the
-first strategy stalled at 3-9 ``tol`` and the three others at 4 to 1600 ``tol``, spending
+first strategy stalled at 3-9 ``tol`` and the three others at 4 to 4000 ``tol``, spending
 two thirds of the step (docs/records/benchmarks.md, "newton-ac on creeping beds")."""
 SIGMA_MIN = 1e-10
 """Floor of the proximal weight, in units of the median diagonal of ``W``."""
