@@ -8,7 +8,10 @@ So a signal never lands inside a solver (numba, Clarabel) or a file write: the
 step under way finishes first. A second signal, for a step that takes too long,
 restores the previous handlers and raises :class:`KeyboardInterrupt` at once
 (no checkpoint for the steps since the last one). The previous handlers are
-restored when the block ends.
+restored when the block ends. Blocks nest: an inner block (a run's
+:meth:`~lubcontact.flow.run.FlowRun.advance` inside a sweep's or a script's
+block) keeps the outer one's handlers and requests, so a signal received between
+two runs still stops the next one.
 """
 from __future__ import annotations
 
@@ -24,7 +27,8 @@ SIGNALS = tuple(s for s in (getattr(signal, "SIGINT", None), getattr(signal, "SI
 EXIT_STATUS = 130
 """Exit status of a command stopped by a signal (128 + SIGINT, the shell's convention)."""
 
-_requested: list[int] = []          # the signals received inside the block
+_requested: list[int] = []          # the signals received inside the outermost block
+_depth = [0]                        # blocks open in the main thread
 
 
 class Interrupted(Exception):
@@ -60,9 +64,9 @@ def stop_on_signals() -> Iterator[None]:
     """Turn SIGINT and SIGTERM into a stop request for the duration of the block.
 
     Outside the main thread (where handlers cannot be installed) the block runs
-    with the handlers as they are.
+    with the handlers as they are; inside an open block it adds nothing.
     """
-    if threading.current_thread() is not threading.main_thread():
+    if threading.current_thread() is not threading.main_thread() or _depth[0]:
         yield
         return
     previous = {number: signal.getsignal(number) for number in SIGNALS}
@@ -80,8 +84,10 @@ def stop_on_signals() -> Iterator[None]:
     _requested.clear()
     for number in SIGNALS:
         signal.signal(number, handler)
+    _depth[0] += 1
     try:
         yield
     finally:
+        _depth[0] -= 1
         restore()
         _requested.clear()

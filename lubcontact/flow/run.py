@@ -17,8 +17,9 @@ In its output folder a run writes:
 
 Every file is written atomically (:mod:`lubcontact.io.files`), so an
 interruption never leaves a half-written file and loses nothing already saved.
-Inside :func:`lubcontact.flow.interrupt.stop_on_signals`, a run stops between
-two steps with a checkpoint (:class:`~lubcontact.flow.interrupt.Interrupted`).
+On Ctrl-C or SIGTERM a run stops between two steps with a checkpoint
+(:class:`~lubcontact.flow.interrupt.Interrupted`), from the command line and
+from a script alike (:meth:`FlowRun.advance` handles both signals while it steps).
 
 Timings (``wall_time``, ``cpu_time`` and the steps per second) count the steps
 only: before its first step a run solves small problems of each cone family
@@ -167,9 +168,10 @@ class FlowRun:
         Raises
         ------
         Interrupted
-            When a stop was requested (:mod:`lubcontact.flow.interrupt`): the
-            step under way is finished, a checkpoint written (with an output
-            folder), then this is raised.
+            On Ctrl-C or SIGTERM (handled for the call's duration by
+            :func:`~lubcontact.flow.interrupt.stop_on_signals`, in the main
+            thread): the step under way is finished, a checkpoint written (with
+            an output folder), then this is raised.
         """
         end = min(self.config.steps, self.steps_done + n_steps)
         if end <= self.steps_done or self.failure is not None:
@@ -178,27 +180,31 @@ class FlowRun:
             self.warm_up()
         bar = _progress_bar(end - self.steps_done, progress, self.config)
         try:
-            while self.steps_done < end:
-                if interrupt.requested():
-                    raise self._interrupted()
-                if self.config.ramp_stages:
-                    self._tilt()
-                start, start_cpu = time.perf_counter(), time.process_time()
-                try:
-                    report = self.sim.step()
-                except SolverError as exc:
-                    self.failure = f"step {self.steps_done + 1}: {exc}"
-                    break
-                finally:                           # a failed step's time was spent too
-                    self.wall_time += time.perf_counter() - start
-                    self.cpu_time += time.process_time() - start_cpu
-                if self.statuses is not None:
-                    status = report.result.status
-                    self.statuses[status] = self.statuses.get(status, 0) + 1
-                self.last_report = report
-                self._measure(report)
-                if bar is not None:
-                    bar.update(1)
+            with interrupt.stop_on_signals():     # Ctrl-C / SIGTERM: stop after this step
+                while self.steps_done < end:
+                    if interrupt.requested():
+                        raise self._interrupted()
+                    if self.config.ramp_stages:
+                        self._tilt()
+                    start, start_cpu = time.perf_counter(), time.process_time()
+                    try:
+                        report = self.sim.step()
+                    except SolverError as exc:
+                        self.failure = f"step {self.steps_done + 1}: {exc}"
+                        break
+                    finally:                           # a failed step's time was spent too
+                        self.wall_time += time.perf_counter() - start
+                        self.cpu_time += time.process_time() - start_cpu
+                    if self.statuses is not None:
+                        status = report.result.status
+                        self.statuses[status] = self.statuses.get(status, 0) + 1
+                    self.last_report = report
+                    self._measure(report)
+                    if bar is not None:
+                        bar.update(1)
+                else:                       # a request during the last step: the block's end
+                    if interrupt.requested():       # would forget it
+                        raise self._interrupted()
         finally:
             if bar is not None:
                 bar.close()

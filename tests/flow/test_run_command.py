@@ -169,6 +169,59 @@ def test_ctrl_c_stops_a_sweep_with_a_checkpoint_and_one_line(tmp_path):
     assert json.loads((run_dir / "summary.json").read_text())["steps"] == 800
 
 
+SCRIPT = """
+import pathlib, sys
+from lubcontact.flow.bed import initial_scene
+from lubcontact.flow.config import RunConfig
+from lubcontact.flow.interrupt import Interrupted
+from lubcontact.flow.run import FlowRun
+out = pathlib.Path(sys.argv[1])
+config = RunConfig(scene="inclined_flow", n_grains=24, width=12.0, model="dry", angle=22.0,
+                   steps=800, dt_fraction=0.02, settle_steps=0, checkpoint_every=50,
+                   sample_every=10)
+run = FlowRun(config, initial_scene(config, out), out)
+try:
+    run.advance(800)
+except Interrupted as stop:
+    print("stopped", stop.step, run.steps_done)
+"""
+
+
+@pytest.mark.parametrize("signal_", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+def test_a_signal_stops_a_scripted_run_after_its_step_with_a_checkpoint(tmp_path, signal_):
+    """``FlowRun.advance`` called from a script (no command line around it) handles Ctrl-C
+    and SIGTERM itself: the step under way ends, a checkpoint of it is written, and
+    ``Interrupted`` says which step (before, Ctrl-C raised ``KeyboardInterrupt`` inside a
+    step and SIGTERM killed the process: the steps since the last checkpoint were lost)."""
+    out = tmp_path / "run"
+    process = subprocess.Popen([sys.executable, "-c", SCRIPT, str(out)], env=ENV,
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        wait_for(out / "checkpoint.npz", process)
+        process.send_signal(signal_)
+        stdout, stderr = process.communicate(timeout=60)
+    finally:
+        if process.poll() is None:
+            process.kill()
+    assert process.returncode == 0, stderr
+    step, steps_done = map(int, re.search(r"stopped (\d+) (\d+)", stdout).groups())
+    assert step == steps_done == stored(out)[0]
+    assert 50 <= step < 800
+
+
+def test_a_signal_between_two_runs_stops_the_next_one_inside_an_outer_block(tmp_path):
+    """Blocks of ``stop_on_signals`` nest: a request noted by an outer block (a sweep between
+    two runs) is kept by the run's own block, which stops before its first step."""
+    from lubcontact.flow import interrupt
+    run = small_run(tmp_path / "run", steps=12, done=2)
+    with interrupt.stop_on_signals():
+        os.kill(os.getpid(), signal.SIGINT)
+        time.sleep(0.1)                         # the handler runs in the main thread
+        with pytest.raises(interrupt.Interrupted) as stop:
+            run.advance(10)
+    assert stop.value.step == run.steps_done == stored(tmp_path / "run")[0] == 2
+
+
 # -- defect 5: help, argument errors, progress bar, import cost ------------------------------------
 def help_blocks(text):
     """``{invocation: help text}`` of each option (and positional) of an argparse help page."""
