@@ -65,6 +65,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from ..problem.cones import Cones
 from ..problem.conic import ConicProblem
 from ..problem.metrics import coulomb_error
 from ..problem.step import diagonal_scaled
@@ -129,13 +130,19 @@ FINISH_ITERATIONS = 2
 quadratic convergence takes a solution at ``tol`` to round-off where the Jacobian is regular."""
 
 FALLBACKS_2D = ("nsgs", "apgd-jacobi")
+FALLBACKS_UNION = ("nsgs",)
 FALLBACKS_3D = ("apgd-jacobi",)
 """Fallbacks (``fallback="auto"``) tried in turn from the best iterate so far when every Newton
 strategy stalls, until one's polished answer is below tol. In 2D first Gauss-Seidel with exact
 local solves (:mod:`.gauss_seidel`): on gluey flow steps where Newton stalled at FCLIB errors
 2e-5 to 1e-4 it reached 1e-6 in 0.3 s, or 5e-6 at its cap, where apgd-jacobi's fixed point ran
 out at 1e-4; then apgd-jacobi's fixed point on ``s``, which solves Siconos' 2020-contact file
-to 1e-8 where Gauss-Seidel stops at 2.8e-7 (docs/records/benchmarks.md)."""
+to 1e-8 where Gauss-Seidel stops at 2.8e-7 (docs/records/benchmarks.md). On 2D problems with
+UNION contacts (gluey + friction) Gauss-Seidel alone: the fixed point fixes each union contact
+on one piece and flips pieces by its branch rule, which on a gluey bed coming to rest flipped
+5 to 22 contacts at every outer iteration without settling: 50 outer iterations, three
+quarters of the step (34-36 s at 2000 grains), and a polished answer 10 to 30 times worse
+than Gauss-Seidel's (docs/records/benchmarks.md, "The gluey bed coming to rest")."""
 
 STALLED = "stalled"
 """Status of a Newton phase that stalled (reported in ``info``, never as a result's status)."""
@@ -341,8 +348,8 @@ def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = 5
     warm_start : ndarray, shape (n_rows,), optional
         Initial forces (scaled); zero otherwise.
     fallback : str or None
-        Registered method (``"auto"``: the chain :data:`FALLBACKS_2D` on 2D
-        problems, :data:`FALLBACKS_3D` on 3D ones) whose exact-Coulomb solve
+        Registered method, or ``"auto"`` for a chain of them (:func:`fallback_chain`),
+        whose exact-Coulomb solve
         (:func:`~lubcontact.solvers.solve_coulomb`) takes over from the best
         Newton iterate when every strategy stalls (the FCLIB error did not fall
         by :data:`STALL_FACTOR` in :data:`STALL_WINDOW` iterations), fails or
@@ -381,12 +388,7 @@ def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = 5
     info = {"newton_iterations": phase.iterations, "gradient_steps": phase.gradient_steps,
             "proximal_steps": phase.proximal_steps, "strategies": phase.strategies,
             "newton_status": phase.status, "error": phase.error}
-    if phase.status == CONVERGED or fallback is None:
-        chain = ()
-    elif fallback == "auto":
-        chain = FALLBACKS_2D if problem.cones.tangent_dim == 1 else FALLBACKS_3D
-    else:
-        chain = (fallback,)
+    chain = () if phase.status == CONVERGED else fallback_chain(problem.cones, fallback)
     best_error = phase.error
     for name in chain:
         rescue = solve_coulomb(problem, name, tol=tol, tol_fp=tol, warm_start=forces)
@@ -412,6 +414,19 @@ def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = 5
     return MethodOutput(forces, status, iterations, setup_time=setup_time,
                         solve_time=time.perf_counter() - start - setup_time,
                         residual_history=phase.history, info=info)
+
+
+def fallback_chain(cones: Cones, fallback: str | None) -> tuple[str, ...]:
+    """The methods newton-ac hands a stalled solve to, in turn: none for None, ``fallback``
+    alone for a registered name, and for ``"auto"`` :data:`FALLBACKS_3D` on 3D cones,
+    :data:`FALLBACKS_UNION` on 2D ones with UNION contacts, :data:`FALLBACKS_2D` otherwise."""
+    if fallback is None:
+        return ()
+    if fallback != "auto":
+        return (fallback,)
+    if cones.tangent_dim > 1:
+        return FALLBACKS_3D
+    return FALLBACKS_2D if cones.is_convex else FALLBACKS_UNION
 
 
 def _strategies(function: AlartCurnier, unshifted: ConicProblem, forces: np.ndarray,
