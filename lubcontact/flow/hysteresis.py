@@ -45,8 +45,14 @@ from .sweep import group_folder, mean_spread, run_all, write_csv
 
 END_FRACTION = 0.25
 """The part of a hold (its last quarter) whose samples give the hold's end velocity."""
-STAGE_COLUMNS = ("model", "seed", "stage", "leg", "angle", "mean_velocity", "acceleration",
-                 "flowing")
+REST_FACTOR = 0.5
+"""A descent ends within a hold, at least half way through it, once the mean downhill velocity
+over the hold's last :data:`END_FRACTION` of steps is below this fraction of ``flow_speed``: the
+layer is at rest, and a layer at rest does not start again on the way down, while each step of
+a bed at rest costs tens of seconds at a few thousand grains (docs/records/poster-experiment.md,
+"theta_stop at 2000 grains"; the hold is then recorded shortened, :attr:`Stage.steps`)."""
+STAGE_COLUMNS = ("model", "seed", "stage", "leg", "angle", "steps", "mean_velocity",
+                 "acceleration", "flowing")
 """Columns of ``stages.csv``: one row per hold of each run (``flowing``: 1 or 0;
 ``mean_velocity`` in ``sqrt(g' d)``, ``acceleration`` in ``g'``: :class:`Stage`)."""
 RESULT_COLUMNS = ("model", "seed", "theta_start", "theta_stop", "width", "ramp_step",
@@ -75,6 +81,11 @@ class Stage:
         :data:`END_FRACTION` of the hold over the time between their middles,
         in units of ``g'``: about 0 where the layer, as it is, flows steadily
         at that angle; > 0 accelerating, < 0 slowing down.
+    steps : int
+        Steps run in the hold: ``hold_steps``, fewer for the last hold of a
+        descent that ended it once the layer was at rest (:data:`REST_FACTOR`;
+        its windows are then the first and last :data:`END_FRACTION` of a full
+        hold's steps within the steps run).
     """
 
     stage: int
@@ -82,6 +93,7 @@ class Stage:
     angle: float
     mean_velocity: float
     acceleration: float
+    steps: int
 
 
 def ramp_config(config: RunConfig, start: float, stop: float, step: float, hold: int) -> RunConfig:
@@ -165,26 +177,33 @@ def stages(series: dict[str, np.ndarray], config: RunConfig) -> list[Stage]:
         last :data:`END_FRACTION` (samples too sparse for the hold).
     """
     steps = np.asarray(series["step"], dtype=float)
-    velocity = np.asarray(series["mean_velocity"], dtype=float)
     hold = int(config.hold_steps)
-    legs = ("up", "down") if config.ramp_step > 0 else ("down", "up")
     out = []
     for stage in range(2 * int(config.ramp_stages) + 1):
-        first = stage * hold
-        if steps.size == 0 or steps.max() < first + hold:
+        if steps.size == 0 or steps.max() < (stage + 1) * hold:
             break                                          # not reached (yet)
-        end = (steps > first + (1.0 - END_FRACTION) * hold) & (steps <= first + hold)
-        start = (steps > first) & (steps <= first + END_FRACTION * hold)
-        checks.require(bool(end.any() and start.any()), "series",
-                       f"no sample in the first or the last {END_FRACTION:g} of hold {stage} "
-                       f"(steps {first + 1}-{first + hold})", steps.size)
-        angle = config.ramp_stage(first)[1]
-        elapsed = (1.0 - END_FRACTION) * hold * config.dt_fraction     # in sqrt(d / g')
-        out.append(Stage(stage=stage, leg=legs[stage > config.ramp_stages],
-                         angle=angle, mean_velocity=float(np.mean(velocity[end])),
-                         acceleration=float(np.mean(velocity[end]) - np.mean(velocity[start]))
-                         / elapsed))
+        out.append(_stage(series, config, stage, hold))
     return out
+
+
+def _stage(series: dict[str, np.ndarray], config: RunConfig, stage: int, length: int) -> Stage:
+    """Hold ``stage`` of a ramp read over its first ``length`` steps (:func:`stages`; ``length``
+    below ``hold_steps``: a hold ended early, :data:`REST_FACTOR`)."""
+    steps = np.asarray(series["step"], dtype=float)
+    velocity = np.asarray(series["mean_velocity"], dtype=float)
+    window = END_FRACTION * config.hold_steps
+    first = stage * config.hold_steps
+    end = (steps > first + length - window) & (steps <= first + length)
+    start = (steps > first) & (steps <= first + window)
+    checks.require(bool(end.any() and start.any()), "series",
+                   f"no sample in the first or the last {END_FRACTION:g} of hold {stage} "
+                   f"(steps {first + 1}-{first + length})", steps.size)
+    legs = ("up", "down") if config.ramp_step > 0 else ("down", "up")
+    elapsed = (length - window) * config.dt_fraction                   # in sqrt(d / g')
+    return Stage(stage=stage, leg=legs[stage > config.ramp_stages],
+                 angle=config.ramp_stage(first)[1], mean_velocity=float(np.mean(velocity[end])),
+                 acceleration=float(np.mean(velocity[end]) - np.mean(velocity[start])) / elapsed,
+                 steps=length)
 
 
 def onset_angles(holds: list[Stage], flow_speed: float = FLOW_SPEED) -> tuple[float, float]:
@@ -290,7 +309,7 @@ def _stage_rows(holds: list[Stage], where: dict[str, Any], flow_speed: float
                 ) -> list[dict[str, Any]]:
     """Rows of ``stages.csv`` (:data:`STAGE_COLUMNS`) of one run's holds; ``where``: its model
     and seed."""
-    return [{**where, "stage": h.stage, "leg": h.leg, "angle": h.angle,
+    return [{**where, "stage": h.stage, "leg": h.leg, "angle": h.angle, "steps": h.steps,
              "mean_velocity": h.mean_velocity, "acceleration": h.acceleration,
              "flowing": int(abs(h.mean_velocity) > flow_speed)} for h in holds]
 
@@ -336,9 +355,10 @@ def descent(checkpoint: pathlib.Path, out_dir: pathlib.Path, start: float, stop:
     start; only the incline turns, a ramp with ``ramp_step = -step`` (the
     holds and the threshold as in the module's ramps). The descent ends after
     the first hold that ends still (a lower angle does not set a layer at rest
-    moving, and a bed at rest is the costliest kind of step), or at ``stop``.
-    A checkpoint is written after each hold; called again with the same
-    arguments, it continues from ``out_dir``'s checkpoint or reads the
+    moving, and a bed at rest is the costliest kind of step), within that hold
+    once the layer is at rest (:data:`REST_FACTOR`), or at ``stop``. A
+    checkpoint is written after each hold and at such an end; called again with
+    the same arguments, it continues from ``out_dir``'s checkpoint or reads the
     finished descent back. ``stages.csv`` lists the holds.
 
     Parameters
@@ -383,7 +403,7 @@ def descent(checkpoint: pathlib.Path, out_dir: pathlib.Path, start: float, stop:
                      hold_steps=hold, steps=(2 * stages_down + 1) * hold)
     run = _open_run(out_dir, config, "a descent", lambda: _continued(base, config, out_dir))
     holds = _hold_by_hold(run, hold, stages_down + 1, lambda holds: bool(holds) and abs(
-        holds[-1].mean_velocity) <= flow_speed, progress)
+        holds[-1].mean_velocity) <= flow_speed, progress, rest_speed=REST_FACTOR * flow_speed)
     _write_stages(out_dir, run, holds, flow_speed)
     theta_stop = _transition(holds, [abs(h.mean_velocity) <= flow_speed for h in holds],
                              run.failure)
@@ -511,15 +531,26 @@ def _shown(value: Any) -> str:
 
 
 def _hold_by_hold(run: FlowRun, hold: int, last: int, ended: Callable[[list[Stage]], bool],
-                  progress: bool) -> list[Stage]:
+                  progress: bool, rest_speed: float | None = None) -> list[Stage]:
     """Advance a ramp ``run`` one ``hold`` at a time, a checkpoint after each, until it has run
-    ``last`` holds, failed or ``ended(holds)``; its holds (:func:`stages`)."""
+    ``last`` holds, failed or ``ended(holds)``; its holds (:func:`stages`). With ``rest_speed``
+    a hold goes in parts of a third of its end window, and the run also ends in a hold's second
+    half once the mean velocity over the window is below ``rest_speed``: the holds then end with
+    that one, shortened (:data:`REST_FACTOR`)."""
+    part = hold if rest_speed is None else max(1, int(END_FRACTION * hold) // 3)
     while True:
-        holds = stages(_series(run.measurements()), run.config)
+        series = _series(run.measurements())
+        holds = stages(series, run.config)
         if run.failure is not None or len(holds) == last or ended(holds):
             return holds
-        run.advance(hold - run.steps_done % hold, progress)
-        run.save_checkpoint()
+        done = run.steps_done % hold
+        if rest_speed is not None and done >= 2 * END_FRACTION * hold:
+            shortened = _stage(series, run.config, len(holds), done)
+            if abs(shortened.mean_velocity) <= rest_speed:
+                return [*holds, shortened]
+        run.advance(min(part, hold - done), progress)
+        if run.steps_done % hold == 0 or rest_speed is not None:
+            run.save_checkpoint()
 
 
 def _write_stages(out_dir: pathlib.Path, run: FlowRun, holds: list[Stage], flow_speed: float

@@ -249,11 +249,14 @@ def test_a_descent_continues_a_flowing_layer_hold_by_hold_and_ends_at_a_still_ho
 
     still = hysteresis.descent(checkpoint, tmp_path / "still", 26.0, 22.0, 2.0, 8, flow_speed=1e9)
     assert len(still.holds) == 1 and np.isnan(still.theta_stop)     # never flowed: no theta_stop
+    assert still.holds[0].steps == 4                  # "at rest" from the first check, half way
     held = FlowRun.resume(tmp_path / "still" / "checkpoint.npz")
-    assert held.steps_done == 8
-    np.testing.assert_allclose(held.sim.scene.grains.positions, onward.sim.scene.grains.positions,
+    assert held.steps_done == 4
+    halfway = FlowRun.resume(checkpoint, out_dir=tmp_path / "halfway", steps=16)
+    halfway.advance(4)
+    np.testing.assert_allclose(held.sim.scene.grains.positions, halfway.sim.scene.grains.positions,
                                rtol=0, atol=1e-12)
-    np.testing.assert_array_equal(held.sim.state.pairs.gamma, onward.sim.state.pairs.gamma)
+    np.testing.assert_array_equal(held.sim.state.pairs.gamma, halfway.sim.state.pairs.gamma)
     with pytest.raises(ValueError, match="out_dir: .* holds a descent with other settings: "
                                          "hold_steps 8 [(]asked 16[)]"):
         hysteresis.descent(checkpoint, tmp_path / "down", 26.0, 22.0, 2.0, 16)
@@ -261,6 +264,54 @@ def test_a_descent_continues_a_flowing_layer_hold_by_hold_and_ends_at_a_still_ho
         hysteresis.descent(checkpoint, tmp_path / "up", 22.0, 26.0, 2.0, 8)
     with pytest.raises(ValueError, match="hold: must be an integer >= 1"):
         hysteresis.descent(checkpoint, tmp_path / "none", 26.0, 22.0, 2.0, 0)
+
+
+def test_a_descent_ends_within_a_hold_once_the_layer_is_at_rest(tmp_path):
+    """In a hold's second half (checked every third of the end window), once the mean velocity
+    over the hold's end window (its last quarter of steps) falls below REST_FACTOR x flow_speed,
+    the descent ends there: that hold is its last, shortened and still, and theta_stop is its
+    angle; the same call reads it back."""
+    config = RunConfig(n_grains=16, width=10.0, model="gluey", dt_fraction=0.05, settle_steps=40,
+                       solver="newton-ac", fixed_point=True, checkpoint_every=4, sample_every=1,
+                       angle=26.0, steps=8)
+    layer = FlowRun(config, initial_scene(config, tmp_path), tmp_path / "layer")
+    layer.advance(8)
+    layer.save_checkpoint()
+    checkpoint = tmp_path / "layer" / "checkpoint.npz"
+    hold, window, part = 24, 6, 2                  # the end window, a third of it
+    assert window == hysteresis.END_FRACTION * hold
+    whole = hysteresis.descent(checkpoint, tmp_path / "whole", 26.0, 2.0, 8.0, hold,
+                               flow_speed=1e-9)    # never still: every hold run to its end
+    velocity = FlowRun.resume(tmp_path / "whole" / "checkpoint.npz").series["mean_velocity"]
+    assert [h.angle for h in whole.holds] == [26.0, 18.0, 10.0, 2.0]   # slows down at 2 degrees
+
+    def window_mean(step):                         # over the window ending after ``step`` steps
+        return abs(np.mean(velocity[step - window:step]))
+
+    # the first check of the rule (rest checks from half a hold on, then the hold's end) that
+    # a threshold can make the first "at rest" while every earlier hold ended flowing
+    checks = [k * hold + done for k in range(4) for done in [*range(hold // 2, hold, part), hold]]
+    for index, step in enumerate(checks):
+        threshold = 2.0 * window_mean(step) * (1.0 + 1e-9)
+        earlier = checks[:index]
+        if step > hold and step % hold and all(window_mean(c) > threshold / 2 for c in earlier) \
+                and all(window_mean(c) > threshold for c in earlier if c % hold == 0):
+            break
+    else:
+        pytest.fail("no threshold stops this descent within a hold")
+    rest = hysteresis.descent(checkpoint, tmp_path / "rest", 26.0, 2.0, 8.0, hold,
+                              flow_speed=threshold)
+    stage, done = divmod(step, hold)
+    assert [h.steps for h in rest.holds] == [hold] * stage + [done]
+    assert rest.theta_stop == 26.0 - 8.0 * stage and rest.failure is None
+    assert rest.holds[-1].mean_velocity == pytest.approx(np.mean(velocity[step - window:step]),
+                                                         rel=1e-9)
+    assert FlowRun.resume(tmp_path / "rest" / "checkpoint.npz").steps_done == step
+    assert [int(row["steps"]) for row in read_csv(tmp_path / "rest" / "stages.csv")][-1] == done
+    again = hysteresis.descent(checkpoint, tmp_path / "rest", 26.0, 2.0, 8.0, hold,
+                               flow_speed=threshold)
+    assert [h.steps for h in again.holds] == [h.steps for h in rest.holds]
+    assert FlowRun.resume(tmp_path / "rest" / "checkpoint.npz").steps_done == step
 
 
 def test_an_ascent_is_the_way_up_of_the_ramp_ended_once_the_layer_flows(tmp_path):
