@@ -47,7 +47,7 @@ END_FRACTION = 0.25
 """The part of a hold (its last quarter) whose samples give the hold's end velocity."""
 REST_FACTOR = 0.5
 """A descent ends within a hold, at least half way through it, once the mean downhill velocity
-over the hold's last :data:`END_FRACTION` of steps is below this fraction of ``flow_speed``: the
+over its last ``END_FRACTION x hold`` steps is below this fraction of ``flow_speed``: the
 layer is at rest, and a layer at rest does not start again on the way down, while each step of
 a bed at rest costs tens of seconds at a few thousand grains (docs/records/poster-experiment.md,
 "theta_stop at 2000 grains"; the hold is then recorded shortened, :attr:`Stage.steps`)."""
