@@ -141,7 +141,7 @@ to 1e-8 where Gauss-Seidel stops at 2.8e-7 (docs/records/benchmarks.md). On 2D p
 UNION contacts (gluey + friction) Gauss-Seidel alone: the fixed point fixes each union contact
 on one piece and flips pieces by its branch rule, which on a gluey bed coming to rest flipped
 5 to 22 contacts at every outer iteration without settling: 50 outer iterations, three
-quarters of the step (34-36 s at 2000 grains), and a polished answer 10 to 30 times worse
+quarters of the step (34-36 s at 2000 grains), and a polished answer 9 to 37 times worse
 than Gauss-Seidel's (docs/records/benchmarks.md, "The gluey bed coming to rest")."""
 
 STALLED = "stalled"

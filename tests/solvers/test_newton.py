@@ -103,7 +103,7 @@ def test_newton_that_runs_out_hands_over_to_the_fallback_and_says_so():
 def test_a_gluey_problem_falls_back_on_gauss_seidel_alone():
     """The fixed point on s flips union contacts by its branch rule; on a gluey bed coming to rest
     it flipped some at every outer iteration for 50 of them (three quarters of the step, an answer
-    10-30 times worse than Gauss-Seidel's): 2D problems with UNION contacts fall back on nsgs
+    9-37 times worse than Gauss-Seidel's): 2D problems with UNION contacts fall back on nsgs
     alone, convex 2D ones on nsgs then apgd-jacobi's fixed point (Siconos' 2020-contact file
     needs it), 3D ones on apgd-jacobi."""
     with np.load(Path(__file__).parents[1] / "flow" / "data" / "gluey-flow-step.npz") as data:
