@@ -222,6 +222,26 @@ def test_a_signal_between_two_runs_stops_the_next_one_inside_an_outer_block(tmp_
     assert stop.value.step == run.steps_done == stored(tmp_path / "run")[0] == 2
 
 
+def test_a_signal_during_the_last_step_of_a_call_still_stops_the_run(tmp_path):
+    """A signal that arrives while ``advance`` takes its last step is not forgotten when the
+    call's block ends: the step is finished, checkpointed, and ``Interrupted`` raised."""
+    from lubcontact.flow import interrupt
+    run = small_run(tmp_path / "run", steps=12, done=2)
+    step = run.sim.step
+
+    def step_with_ctrl_c(*args, **kwargs):
+        report = step(*args, **kwargs)
+        if run.sim.steps_done == 5:             # the third and last step of the call below
+            os.kill(os.getpid(), signal.SIGINT)
+            time.sleep(0.1)                     # the handler runs in the main thread
+        return report
+
+    run.sim.step = step_with_ctrl_c
+    with pytest.raises(interrupt.Interrupted) as stop:
+        run.advance(3)
+    assert stop.value.step == run.steps_done == stored(tmp_path / "run")[0] == 5
+
+
 # -- defect 5: help, argument errors, progress bar, import cost ------------------------------------
 def help_blocks(text):
     """``{invocation: help text}`` of each option (and positional) of an argparse help page."""
