@@ -219,18 +219,24 @@ def test_a_ramp_with_a_negative_step_goes_down_first():
                                                  ("up", 13.0), ("up", 14.0)]
 
 
-def test_a_descent_continues_a_flowing_layer_hold_by_hold_and_ends_at_a_still_hold(tmp_path):
-    """The descent's first hold is the layer's own next steps (velocities, glue states and warm
-    start carried over), the incline turns by the step every hold, a layer still at the end of
-    a hold ends the descent there, and the same call again reads the descent back."""
+def flowing_layer(tmp_path):
+    """A 16-grain gluey layer flowing at 26 degrees after 8 steps, and its checkpoint (the
+    start of the descents below)."""
     config = RunConfig(n_grains=16, width=10.0, model="gluey", dt_fraction=0.05, settle_steps=40,
                        solver="newton-ac", fixed_point=True, checkpoint_every=4, sample_every=1,
                        angle=26.0, steps=8)
     layer = FlowRun(config, initial_scene(config, tmp_path), tmp_path / "layer")
     layer.advance(8)
     layer.save_checkpoint()
+    return layer, tmp_path / "layer" / "checkpoint.npz"
+
+
+def test_a_descent_continues_a_flowing_layer_hold_by_hold_and_ends_at_a_still_hold(tmp_path):
+    """The descent's first hold is the layer's own next steps (velocities, glue states and warm
+    start carried over), the incline turns by the step every hold, a layer still at the end of
+    a hold ends the descent there, and the same call again reads the descent back."""
+    layer, checkpoint = flowing_layer(tmp_path)
     assert np.count_nonzero(layer.sim.state.pairs.gamma) >= 4      # glued contacts to carry over
-    checkpoint = tmp_path / "layer" / "checkpoint.npz"
     onward = FlowRun.resume(checkpoint, out_dir=tmp_path / "onward", steps=16)
     onward.advance(8)
 
@@ -271,13 +277,7 @@ def test_a_descent_ends_within_a_hold_once_the_layer_is_at_rest(tmp_path):
     over the hold's end window (its last quarter of steps) falls below REST_FACTOR x flow_speed,
     the descent ends there: that hold is its last, shortened and still, and theta_stop is its
     angle; the same call reads it back."""
-    config = RunConfig(n_grains=16, width=10.0, model="gluey", dt_fraction=0.05, settle_steps=40,
-                       solver="newton-ac", fixed_point=True, checkpoint_every=4, sample_every=1,
-                       angle=26.0, steps=8)
-    layer = FlowRun(config, initial_scene(config, tmp_path), tmp_path / "layer")
-    layer.advance(8)
-    layer.save_checkpoint()
-    checkpoint = tmp_path / "layer" / "checkpoint.npz"
+    _, checkpoint = flowing_layer(tmp_path)
     hold, window, part = 24, 6, 2                  # the end window, a third of it
     assert window == hysteresis.END_FRACTION * hold
     whole = hysteresis.descent(checkpoint, tmp_path / "whole", 26.0, 2.0, 8.0, hold,
