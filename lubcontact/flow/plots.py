@@ -21,6 +21,7 @@ from matplotlib.figure import Figure  # noqa: E402
 from matplotlib.patches import Circle, Patch  # noqa: E402
 
 from ..io.files import atomic_path  # noqa: E402
+from ..model.contacts import Contacts  # noqa: E402
 from ..model.scene import Scene  # noqa: E402
 from ..scenes import inclined  # noqa: E402
 from ..sim import Simulation, StepReport  # noqa: E402
@@ -47,7 +48,8 @@ def _disks(ax: Axes, centres: np.ndarray, radii: np.ndarray, scale: float, **sty
     ax.add_collection(PatchCollection(patches, **style))
 
 
-def contact_segments(sim: Simulation, report: StepReport) -> tuple[np.ndarray, np.ndarray, float]:
+def contact_segments(sim: Simulation, contacts: Contacts, gamma: np.ndarray, normal: np.ndarray
+                     ) -> tuple[np.ndarray, np.ndarray, float]:
     """Centre-to-centre segments of the active grain-grain contacts and their gamma.
 
     Across the periodic boundary a segment is drawn from grain ``b`` to the
@@ -56,8 +58,11 @@ def contact_segments(sim: Simulation, report: StepReport) -> tuple[np.ndarray, n
     Parameters
     ----------
     sim : Simulation
-        After the step of ``report``.
-    report : StepReport
+        After the step of the contacts.
+    contacts : Contacts
+    gamma, normal : ndarray, shape (nc,)
+        Their glue state and normal impulse
+        (:meth:`~lubcontact.sim.simulation.Simulation.last_contacts`).
 
     Returns
     -------
@@ -67,11 +72,10 @@ def contact_segments(sim: Simulation, report: StepReport) -> tuple[np.ndarray, n
     gamma_floor : float
         The lowest finite gamma_min among the contacts (colour scale bottom).
     """
-    scene, contacts = sim.scene, report.contacts
+    scene = sim.scene
     n, n_fixed = scene.grains.count, len(scene.fixed_radii)
     centres = np.vstack([scene.grains.positions, scene.fixed_positions])
-    normal = report.result.forces[: contacts.count]
-    active = (report.gamma < 0) | (normal > 0)
+    active = (gamma < 0) | (normal > 0)
     grain_pair = contacts.body_a < n + n_fixed
     use = active & grain_pair
     b = centres[contacts.body_b[use]]
@@ -81,8 +85,8 @@ def contact_segments(sim: Simulation, report: StepReport) -> tuple[np.ndarray, n
     segments = np.stack([b, b - delta], axis=1)
     floors = sim.law.gamma_min(contacts)
     finite = floors[np.isfinite(floors)]
-    floor = float(finite.min()) if finite.size else min(float(report.gamma.min(initial=0.0)), -1e-30)
-    return segments, report.gamma[use], floor
+    floor = float(finite.min()) if finite.size else min(float(gamma.min(initial=0.0)), -1e-30)
+    return segments, gamma[use], floor
 
 
 def snapshot(sim: Simulation, report: StepReport | None, path: pathlib.Path,
@@ -93,7 +97,7 @@ def snapshot(sim: Simulation, report: StepReport | None, path: pathlib.Path,
     ----------
     sim : Simulation
     report : StepReport or None
-        The last step (None: no contacts drawn).
+        The last step; None: the contacts of ``sim``'s state (none before its first step).
     path : pathlib.Path
         The image file (format from its suffix).
     title : str, optional
@@ -107,8 +111,9 @@ def snapshot(sim: Simulation, report: StepReport | None, path: pathlib.Path,
     _disks(ax, scene.fixed_positions, scene.fixed_radii, d, facecolor="0.35", edgecolor="none")
     _disks(ax, scene.grains.positions, scene.grains.radii, d, facecolor="0.85", edgecolor="0.6",
            linewidth=0.3)
-    if report is not None and report.contacts.count:
-        segments, gamma, floor = contact_segments(sim, report)
+    drawn = sim.last_contacts(report)
+    if drawn is not None and drawn[0].count:
+        segments, gamma, floor = contact_segments(sim, *drawn)
         lines = LineCollection(segments / d, cmap=GAMMA_COLORMAP, linewidths=1.8)
         lines.set_array(gamma)
         lines.set_clim(floor, 0.0)

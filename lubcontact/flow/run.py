@@ -615,15 +615,16 @@ def frame_arrays(sim: Simulation, report: StepReport | None) -> dict[str, np.nda
     ----------
     sim : Simulation
     report : StepReport or None
-        The last step (None: the frame has no contacts).
+        The last step; None: the contacts of ``sim``'s state
+        (:meth:`~lubcontact.sim.simulation.Simulation.last_contacts`; none before its first step).
 
     Returns
     -------
     dict of str to ndarray
         ``time``; ``positions`` and ``velocities`` (N, 2), ``spins`` (N, 1)
         and ``radii`` (N,) of the free grains; ``fixed_positions``
-        (M, 2) and ``fixed_radii`` (M,); ``period`` (0: not periodic); with a
-        report, per contact (nc,): ``contact_a``, ``contact_b`` (body
+        (M, 2) and ``fixed_radii`` (M,); ``period`` (0: not periodic); after a
+        step, per contact (nc,): ``contact_a``, ``contact_b`` (body
         indices), ``contact_gamma``, ``contact_gamma_min``, ``contact_force``
         (normal impulse).
     """
@@ -632,12 +633,12 @@ def frame_arrays(sim: Simulation, report: StepReport | None) -> dict[str, np.nda
            "radii": scene.grains.radii, "velocities": scene.grains.velocities,
            "spins": scene.grains.spins, "fixed_positions": scene.fixed_positions,
            "fixed_radii": scene.fixed_radii, "period": np.float64(scene.period or 0.0)}
-    if report is not None:
-        contacts = report.contacts
+    drawn = sim.last_contacts(report)
+    if drawn is not None:
+        contacts, gamma, normal = drawn
         out.update({"contact_a": contacts.body_a, "contact_b": contacts.body_b,
-                    "contact_gamma": report.gamma,
-                    "contact_gamma_min": sim.law.gamma_min(contacts),
-                    "contact_force": report.result.forces[: contacts.count]})
+                    "contact_gamma": gamma, "contact_gamma_min": sim.law.gamma_min(contacts),
+                    "contact_force": normal})
     return out
 
 

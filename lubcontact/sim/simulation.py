@@ -21,7 +21,7 @@ import numpy as np
 
 from .. import checks
 from ..model.assemble import assemble
-from ..model.contacts import Contacts, find_contacts
+from ..model.contacts import Contacts, find_contacts, lookup_by_key
 from ..model.laws import Law, PairState
 from ..model.scene import Scene
 from ..problem.step import StepProblem
@@ -339,6 +339,32 @@ class Simulation:
             if callback is not None:
                 callback(self, report)
         return self.trajectory
+
+    def last_contacts(self, report: StepReport | None = None
+                      ) -> tuple[Contacts, np.ndarray, np.ndarray] | None:
+        """The last step's contacts with their glue state and normal impulse (for pictures, frames).
+
+        Parameters
+        ----------
+        report : StepReport, optional
+            The last step, when at hand. Without it (a run resumed from its
+            checkpoint) the state answers: the candidate contacts of the current
+            configuration (:meth:`search_distance`), their gamma and the last
+            step's normal impulse matched by pair key (0 for a pair new to them).
+
+        Returns
+        -------
+        (Contacts, ndarray, ndarray) or None
+            Contacts, gamma (nc,) and normal impulse (nc,); None before the first step.
+        """
+        if report is not None:
+            return report.contacts, report.gamma, report.result.forces[: report.contacts.count]
+        previous = self.state.previous
+        if previous is None:
+            return None
+        contacts = find_contacts(self.scene, self.search_distance())
+        return (contacts, self.gamma_of(contacts.keys),
+                lookup_by_key(previous.keys, previous.normal, contacts.keys))
 
     def gamma_of(self, keys: np.ndarray) -> np.ndarray:
         """Current gamma of the given pairs (0 if unglued or unknown)."""

@@ -12,7 +12,7 @@ from lubcontact.flow import demo as flow_demo
 from lubcontact.flow import measure, plots
 from lubcontact.flow.bed import initial_scene
 from lubcontact.flow.config import RunConfig
-from lubcontact.flow.run import FlowRun
+from lubcontact.flow.run import FlowRun, frame_arrays
 
 SMALL = ["--n", "24", "--width", "12", "--dt", "0.05", "--settle-steps", "0", "--solver",
          "clarabel", "--checkpoint-every", "3", "--sample-every", "3", "--no-progress"]
@@ -153,3 +153,33 @@ def test_the_snapshot_shows_the_bed_and_gravity_and_fractions_stay_off_the_frame
                             "fraction_glued": 1.0, "fraction_frictional": 0.0}], tmp_path / "s.png")
     low, high = saved[-1].axes[0].get_ylim()
     assert low < 0.0 and high > 1.0
+
+
+def test_a_resumed_run_draws_the_contacts_of_its_last_step(tmp_path, figures):
+    """A run resumed from its checkpoint, no step taken since, draws and exports the contacts of
+    its last step: the same pairs, glue states and impulses, found again from the state (its
+    snapshot had no contacts before, a sweep run read back at its last step drew bare grains)."""
+    config = RunConfig(n_grains=16, width=10.0, model="gluey", dt_fraction=0.05, settle_steps=40,
+                       solver="newton-ac", fixed_point=True, checkpoint_every=4, sample_every=1,
+                       angle=26.0, steps=8)
+    run = FlowRun(config, initial_scene(config, tmp_path), tmp_path / "run")
+    assert run.sim.last_contacts() is None                   # no step yet: nothing to draw
+    run.advance(8)
+    run.save_checkpoint()
+    resumed = FlowRun.resume(tmp_path / "run" / "checkpoint.npz")
+    assert resumed.last_report is None and resumed.steps_done == 8
+    stepped = plots.contact_segments(run.sim, *run.sim.last_contacts(run.last_report))
+    found = plots.contact_segments(resumed.sim, *resumed.sim.last_contacts())
+    assert len(stepped[0]) >= 6 and np.count_nonzero(stepped[1]) >= 2   # glued pairs among them
+    np.testing.assert_array_equal(found[0], stepped[0])
+    np.testing.assert_array_equal(found[1], stepped[1])
+    assert found[2] == stepped[2]
+    plots.snapshot(resumed.sim, None, tmp_path / "snapshot.png")
+    drawn = figures["snapshot.png"].axes[0].collections[-1]
+    np.testing.assert_array_equal(drawn.get_array(), stepped[1])
+
+    def active(frame):
+        on = (frame["contact_gamma"] < 0) | (frame["contact_force"] > 0)
+        return set(zip(*(frame[name][on].tolist() for name in (
+            "contact_a", "contact_b", "contact_gamma", "contact_force"))))
+    assert active(frame_arrays(resumed.sim, None)) == active(frame_arrays(run.sim, run.last_report))
