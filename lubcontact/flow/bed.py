@@ -11,10 +11,12 @@ from dataclasses import replace
 
 import numpy as np
 
+from .. import checks
 from ..io.files import save_npz
 from ..io.scene_arrays import scene_arrays, scene_from_arrays
 from ..model.scene import Scene
 from ..scenes import inclined
+from ..sim.state import SimulationState
 from .config import RunConfig
 from .run import FlowRun
 
@@ -26,7 +28,9 @@ def initial_scene(config: RunConfig, out_dir: pathlib.Path | None = None,
     ``sedimentation`` starts from grains released above the rough bed;
     ``inclined_flow`` tilts a settled bed by ``config.angle``: the one at
     ``config.bed``, else ``out_dir/bed.npz`` when it exists, else one settled
-    here by :func:`settle` (and saved to that path when there is one).
+    here by :func:`settle` (and saved to that path when there is one); with
+    ``config.start_from``, the grains of that run's checkpoint instead,
+    velocities kept (:func:`started_scene`).
 
     Parameters
     ----------
@@ -39,8 +43,10 @@ def initial_scene(config: RunConfig, out_dir: pathlib.Path | None = None,
     Returns
     -------
     Scene
-        Periodic along x, at rest for ``inclined_flow``.
+        Periodic along x, at rest for ``inclined_flow`` from a bed.
     """
+    if config.start_from:
+        return started_scene(config)
     params = config.params
     bed_scene = inclined.sedimentation(config.n_grains, params,
                                        width=config.width * params.radius, seed=config.seed)
@@ -57,6 +63,40 @@ def initial_scene(config: RunConfig, out_dir: pathlib.Path | None = None,
         if bed_path is not None:
             save_npz(bed_path, **scene_arrays(settled))
     return inclined.inclined_flow(settled, config.angle)
+
+
+def started_scene(config: RunConfig) -> Scene:
+    """The grains of the run at ``config.start_from``, tilted to ``config.angle``, still moving.
+
+    Parameters
+    ----------
+    config : RunConfig
+        An ``inclined_flow`` with ``start_from`` the path of a run's ``checkpoint.npz``.
+
+    Returns
+    -------
+    Scene
+        The checkpoint's scene (positions, velocities, spins, rough bed, time), its gravity
+        turned to ``config.angle``.
+
+    Raises
+    ------
+    ValueError
+        Naming ``start_from`` when the file is missing, is not a run's checkpoint, or holds
+        another number of grains or another period than ``config``.
+    """
+    path = pathlib.Path(config.start_from)
+    checks.require(path.is_file(), "start_from", f"no such file: {path}")
+    with np.load(path) as data:
+        checks.require("steps_done" in data, "start_from",
+                       f"{path} is not a run's checkpoint.npz (a settled bed goes to bed)")
+        scene = SimulationState.from_arrays(data).scene
+    period = config.width * config.params.radius
+    checks.require(scene.grains.count == config.n_grains and scene.period is not None
+                   and np.isclose(scene.period, period), "start_from",
+                   f"{path} holds {scene.grains.count} grains over a period {scene.period}, the "
+                   f"run {config.n_grains} grains over {period:g} (n_grains, width)")
+    return inclined.inclined_flow(scene, config.angle, keep_velocities=True)
 
 
 def settle(config: RunConfig, scene: Scene, progress: bool = False) -> Scene:

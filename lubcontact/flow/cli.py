@@ -41,6 +41,7 @@ FLAGS = {"scene": "SCENE", "n_grains": "--n", "preset": "--preset", "model": "--
          "checkpoint_every": "--checkpoint-every", "sample_every": "--sample-every",
          "frame_every": "--frame-every", "cross_check_every": "--cross-check-every",
          "settle_steps": "--settle-steps", "settle_model": "--settle-model", "bed": "--bed",
+         "start_from": "--start-from", "average_from": "--average-from",
          "width": "--width", "seed": "--seed", "viscosity": "--viscosity",
          "roughness": "--roughness"}
 """The option of each :class:`RunConfig` field (the name used in error messages)."""
@@ -120,12 +121,14 @@ def _default(name: str) -> str:
         f"(default: {DEFAULTS[name]})"
 
 
-def _add_common(parser: argparse.ArgumentParser, resume: bool, steps: bool = True) -> None:
+def _add_common(parser: argparse.ArgumentParser, resume: bool, steps: bool = True,
+                start: bool = True) -> None:
     """The options ``run``, ``sweep`` and ``hysteresis`` share (defaults: :class:`RunConfig`,
     filled after parsing).
 
     ``resume``: the parser has ``--resume`` (the help says what it does to ``--steps`` and
-    ``--mu``); ``steps``: it has ``--steps`` (a ramp's length follows from its stages).
+    ``--mu``); ``steps``: it has ``--steps`` (a ramp's length follows from its stages);
+    ``start``: it has ``--start-from`` (a ramp starts from rest).
     """
     add = parser.add_argument
     add("--n", dest="n_grains", type=_number(int, 1), default=None, metavar="N",
@@ -176,6 +179,15 @@ def _add_common(parser: argparse.ArgumentParser, resume: bool, steps: bool = Tru
     add("--bed", default=None, metavar="NPZ",
         help="settled bed to tilt: a bed.npz or a sedimentation checkpoint (default: OUT/bed.npz "
              "when it exists, else one settled first and saved there)")
+    if start:
+        add("--start-from", dest="start_from", default=None, metavar="CHECKPOINT",
+            help="start inclined_flow from the grains of a run's checkpoint.npz, velocities "
+                 "kept, tilted to the angle (a developed flow turned to another angle; no bed "
+                 "is settled); in a sweep, {model} and {seed} in the path are each run's "
+                 "(default: none, the bed at rest)")
+    add("--average-from", type=_number(float, 0, high=1), default=None, metavar="FRACTION",
+        help="time averages (Q, fractions, profiles) over the steps after this fraction of "
+             f"each run {_default('average_from')}")
     add("--width", type=_number(float, 0, above=True), default=None, metavar="RADII",
         help=f"period along x in mean grain radii {_default('width')}")
     add("--seed", type=_number(int, 0), default=None,
@@ -228,7 +240,8 @@ def sweep_parser() -> argparse.ArgumentParser:
     parser = _Parser(
         prog="lubcontact sweep",
         description="Q(theta) and the contact states of inclined flows, for each model and "
-                    "angle, all tilted from one settled bed; each run is resumable (run the same "
+                    "angle, all tilted from one settled bed (or from a run's state, "
+                    "--start-from); each run is resumable (run the same "
                     "command again). Writes sweep.csv and figures in OUT. "
                     f"Flow rates Q are given in units of {Q_UNIT} (d: mean grain diameter, "
                     "g': reduced gravity).")
@@ -290,7 +303,7 @@ def hysteresis_parser() -> argparse.ArgumentParser:
     parser.add_argument("--out", type=pathlib.Path, default=pathlib.Path("out/hysteresis"),
                         help="output folder (default: out/hysteresis)")
     _add_parallel(parser)
-    _add_common(parser, resume=False, steps=False)
+    _add_common(parser, resume=False, steps=False, start=False)
     return parser
 
 
@@ -473,6 +486,7 @@ def run_main(argv: list[str] | None = None) -> int:
         run = _resume(args, parser, given)
     else:
         config = _config(args, parser)
+        _check_start(config, parser)
     resume = f"lubcontact run --out {shlex.quote(str(args.out))} --resume"
     try:
         with interrupt.stop_on_signals():
@@ -523,6 +537,20 @@ def _check_runs(runs: list, parser: argparse.ArgumentParser,
         if done > config.steps and not (run_dir / "summary.json").exists():
             parser.error(f"argument {flags['steps']}: {config.steps} is below the step {done} "
                          f"that the unfinished run in {run_dir} has reached")
+        if not (run_dir / "checkpoint.npz").exists():
+            _check_start(config, parser)
+
+
+def _check_start(config: RunConfig, parser: argparse.ArgumentParser) -> None:
+    """Refuse, before any work, a ``--start-from`` state that a new run cannot start from."""
+    if not config.start_from:
+        return
+    from .bed import started_scene
+
+    try:
+        started_scene(config)
+    except ValueError as exc:
+        parser.error(f"argument --start-from: {str(exc).partition(': ')[2]}")
 
 
 def _models(text: str, parser: argparse.ArgumentParser) -> list[str]:

@@ -32,8 +32,8 @@ REFERENCE_SOLVER = "clarabel"
 """The default otherwise (always registered)."""
 
 DEFINING_FIELDS = ("scene", "n_grains", "preset", "model", "angle", "dt_fraction", "width", "seed",
-                   "bed", "settle_steps", "settle_model", "bins_per_radius", "viscosity",
-                   "roughness", "ramp_step", "ramp_stages", "hold_steps")
+                   "bed", "start_from", "settle_steps", "settle_model", "bins_per_radius",
+                   "viscosity", "roughness", "ramp_step", "ramp_stages", "hold_steps")
 """Fields that define a run's scene or physics: a resumed run keeps its checkpoint's.
 
 The state in a checkpoint was made by them (the grains, the bed, the tilt, the
@@ -143,6 +143,14 @@ class RunConfig:
         Model of that sedimentation (``frictionless`` settles fastest).
     bed : str
         Path of a settled bed (a sedimentation checkpoint); empty: settle here.
+    start_from : str
+        Path of a run's ``checkpoint.npz`` whose grains, with their velocities
+        and spins, the run starts from instead of a bed at rest, tilted to
+        ``angle`` (``inclined_flow`` only): a developed flow turned to another
+        angle, the way the 2000-grain runs of docs/records/poster-experiment.md
+        reach each angle without each one's onset. The run's own contact
+        states start afresh. A sweep replaces ``{model}`` and ``{seed}`` in it
+        by each run's (:func:`~lubcontact.flow.sweep.sweep_runs`). Empty: the bed.
     average_from : float
         Profiles and means are time-averaged over steps after this fraction
         of the run.
@@ -185,6 +193,7 @@ class RunConfig:
     settle_steps: int = 600
     settle_model: str = "frictionless"
     bed: str = ""
+    start_from: str = ""
     average_from: float = 0.5
     width: float = 40.0
     seed: int = 0
@@ -217,6 +226,9 @@ class RunConfig:
                 raise ValueError(f"{name}: must be > 0, got {getattr(self, name)}")
         if self.friction is not None and not self.friction >= 0:
             raise ValueError(f"friction: must be >= 0, got {self.friction}")
+        if self.start_from and self.scene != "inclined_flow":
+            raise ValueError(f"start_from: only an inclined_flow starts from a run's state, "
+                             f"got {self.start_from!r} for a {self.scene}")
         if not 0 <= self.average_from < 1:
             raise ValueError(f"average_from: must be in [0, 1), got {self.average_from}")
         for name in ("viscosity", "roughness"):

@@ -6,7 +6,8 @@ In the sweep's folder: ``bed.npz`` (the bed every run tilts), one folder per run
 or physical parameters (:data:`AXES`) repeats that layout in one folder per
 combination, ``seed_<k>/eta_<eta>/eps_<eps>/`` (only the axes it varies), each
 with its own bed, and adds ``sweep_means.csv``: the means over seeds and their
-spread (:func:`seed_means`). Each run is
+spread (:func:`seed_means`). With ``start_from`` no bed is settled: each run
+starts from its model's and seed's developed flow (:func:`start_path`). Each run is
 resumable: a finished one (its ``summary.json`` exists) is read back, an
 interrupted one continues from its checkpoint. A folder holding a run that
 another scene or physics made (:data:`~lubcontact.flow.config.DEFINING_FIELDS`)
@@ -229,16 +230,37 @@ def sweep(config: RunConfig, angles: np.ndarray, models: list[str], out_dir: pat
 
 def sweep_runs(config: RunConfig, angles: np.ndarray, models: list[str], out_dir: pathlib.Path,
                groups: list[dict[str, Any]] | None = None) -> list[tuple[RunConfig, pathlib.Path]]:
-    """The runs of :func:`sweep` (same parameters): each config and folder, in sweep order."""
+    """The runs of :func:`sweep` (same parameters): each config and folder, in sweep order.
+
+    Each run tilts its group's ``bed.npz``, or, with ``config.start_from``, the state of that
+    path with ``{model}`` and ``{seed}`` replaced by the run's (:func:`start_path`).
+    """
     runs = []
     for group in groups or [{}]:
         folder = group_folder(out_dir, group)
         for model in models:
             for angle in angles:
-                runs.append((replace(config, **group, model=model, angle=float(angle),
-                                     bed=str(folder / "bed.npz")),
+                run = replace(config, **group, model=model, angle=float(angle))
+                start = start_path(run)
+                runs.append((replace(run, start_from=start,
+                                     bed="" if start else str(folder / "bed.npz")),
                              run_folder(folder, model, angle)))
     return runs
+
+
+def start_path(config: RunConfig) -> str:
+    """``config.start_from`` with ``{model}`` and ``{seed}`` replaced by the config's values.
+
+    Raises
+    ------
+    ValueError
+        Naming ``start_from`` when it holds another placeholder or a stray brace.
+    """
+    try:
+        return config.start_from.format(model=config.model, seed=config.seed)
+    except (KeyError, IndexError, ValueError) as exc:
+        raise ValueError(f"start_from: the placeholders are {{model}} and {{seed}} ({exc}), "
+                         f"got {config.start_from!r}") from None
 
 
 def run_all(runs: list[tuple[RunConfig, pathlib.Path]], progress: bool = False, workers: int = 1,
@@ -287,7 +309,7 @@ def run_all(runs: list[tuple[RunConfig, pathlib.Path]], progress: bool = False, 
         check_folder(run_dir, run_config)
     beds = {}
     for run_config, run_dir in runs:
-        if not (run_dir / "summary.json").exists():
+        if not (run_dir / "summary.json").exists() and not run_config.start_from:
             beds.setdefault(run_config.bed, run_config)
     for run_config in beds.values():      # each bed settled once, saved, before the runs
         initial_scene(run_config, None, progress)

@@ -420,3 +420,55 @@ def test_a_step_that_fails_beyond_the_accepted_residual_stops_the_run_before_it_
             {"model": "dry", "angle": 20.0, "flow_rate": 90.0, "state": "failed"}]
     mean = sweep.seed_means(rows)[0]
     assert (mean["flow_rate"], mean["seeds"], mean["failed"]) == (1.0, 1, 1)
+
+
+# -- runs from a developed flow -----------------------------------------------------------------------
+def test_a_sweep_starts_each_run_from_its_model_and_seeds_developed_state(tmp_path, capsys):
+    """``--start-from`` with {model} and {seed}: each run is that state tilted to its angle, the
+    grains still moving (the 2000-grain protocol of the records, by hand before), no bed settled."""
+    layer, _ = flowing_layer(tmp_path / "gluey-seed0")
+    start = tmp_path / "{model}-seed{seed}" / "layer" / "checkpoint.npz"
+    argv = ["--n", "16", "--width", "10", "--dt", "0.05", "--solver", "newton-ac",
+            "--fixed-point", "--checkpoint-every", "4", "--sample-every", "1", "--steps", "4",
+            "--average-from", "0.25", "--models", "gluey", "--angles", "22", "--seeds", "0",
+            "--start-from", str(start), "--no-progress", "--out", str(tmp_path / "sweep")]
+    assert flow_cli.sweep_main(argv) == 0
+    run_dir = tmp_path / "sweep" / "seed_0" / "gluey" / "angle_22.00"
+    stored = FlowRun.resume(run_dir / "checkpoint.npz")
+    assert stored.config.start_from == str(tmp_path / "gluey-seed0" / "layer" / "checkpoint.npz")
+    assert stored.config.average_from == 0.25 and stored.config.bed == ""
+    assert not list((tmp_path / "sweep").rglob("bed.npz"))
+
+    scene = layer.sim.scene.copy()                       # the protocol written out by hand
+    inclined.tilt(scene, 22.0)
+    by_hand = FlowRun(replace(stored.config, start_from=""), scene)
+    by_hand.advance(4)
+    np.testing.assert_array_equal(stored.sim.scene.grains.positions,
+                                  by_hand.sim.scene.grains.positions)
+    first = stored.series["mean_velocity"][0]
+    assert first > 0.5 * measure.mean_velocity(layer.sim.scene) > 0    # still moving at step 1
+
+
+def test_start_from_errors_are_one_line_naming_the_flag(tmp_path, capsys):
+    """A missing state, a bed instead of a run's checkpoint, another number of grains, an
+    unknown placeholder and a sedimentation from a state: each one line naming --start-from."""
+    _, checkpoint = flowing_layer(tmp_path)
+    bed = tmp_path / "bed.npz"
+    common = ["--n", "16", "--width", "10", "--dt", "0.05", "--steps", "2", "--no-progress",
+              "--models", "gluey", "--angles", "20"]
+    cases = {"no such file": [*common, "--start-from", str(tmp_path / "none.npz")],
+             "not a run's checkpoint": [*common, "--start-from", str(bed)],
+             "holds 16 grains": [*common[:1], "17", *common[2:], "--start-from", str(checkpoint)],
+             "placeholders are {model} and {seed}": [*common, "--start-from",
+                                                     str(tmp_path / "{angle}.npz")]}
+    for number, (said, argv) in enumerate(cases.items()):
+        with pytest.raises(SystemExit) as exit_:
+            flow_cli.sweep_main([*argv, "--out", str(tmp_path / f"sweep{number}")])
+        err = capsys.readouterr().err.strip()
+        assert exit_.value.code == 2 and len(err.splitlines()) == 1, err
+        assert "argument --start-from: " in err and said in err, err
+    with pytest.raises(SystemExit) as exit_:
+        flow_cli.run_main(["sedimentation", "--start-from", str(checkpoint), "--out",
+                           str(tmp_path / "run")])
+    err = capsys.readouterr().err.strip()
+    assert exit_.value.code == 2 and "--start-from" in err and len(err.splitlines()) == 1
