@@ -143,6 +143,7 @@ def demo_report(summary: dict[str, Any], config: RunConfig) -> str:
         f"| steps not converged | {summary['unconverged_steps']} |",
         (f"| speed | {summary['steps_per_second']:.1f} steps/s (after an untimed warm-up of "
          f"{summary.get('warm_up_time', 0.0):.2g} s: compilation, first imports) |"), "",
-        ("Figures: `flow_snapshot.png` (contacts coloured by gamma, gamma_min frictional to 0 "
-         "lubricated), `flow_profile.png` (velocity and packing-fraction profiles)."), ""]
+        ("Figures: `flow_snapshot.png` (contacts coloured by their glue level gamma / gamma_min, "
+         "1 frictional to 0 lubricated), `flow_profile.png` (velocity and packing-fraction "
+         "profiles)."), ""]
     return "\n".join(lines)

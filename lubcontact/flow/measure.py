@@ -223,22 +223,6 @@ def kinetic_energy(scene: Scene) -> float:
                  + 0.5 * grains.inertias @ np.sum(grains.spins**2, axis=1))
 
 
-def state_masks(gamma: np.ndarray, gamma_min: np.ndarray, active: np.ndarray) -> np.ndarray:
-    """Which active contacts are in each state ``(unglued, glued, frictional)``, shape (3, nc).
-
-    Parameters
-    ----------
-    gamma, gamma_min : ndarray, shape (nc,)
-        Gluey state after the step and its floor (``-inf`` if none).
-    active : ndarray of bool, shape (nc,)
-        Contacts that carry a force or are glued.
-    """
-    frictional = active & np.isfinite(gamma_min) & (gamma <= gamma_min)
-    glued = active & (gamma < 0) & ~frictional
-    unglued = active & (gamma == 0)
-    return np.stack([unglued, glued, frictional])
-
-
 def coordination(masks: np.ndarray, a_is_free: np.ndarray, n_grains: int) -> np.ndarray:
     """Contacts per free grain in each state, shape (len(masks),).
 
@@ -248,7 +232,7 @@ def coordination(masks: np.ndarray, a_is_free: np.ndarray, n_grains: int) -> np.
     Parameters
     ----------
     masks : ndarray of bool, shape (k, nc)
-        Contacts in each state (:func:`state_masks`).
+        Contacts in each state (:meth:`~lubcontact.model.laws.Law.contact_states`).
     a_is_free : ndarray of bool, shape (nc,)
         Whether each contact's first body is a free grain (``Contacts.a_is_free``).
     n_grains : int
@@ -258,14 +242,21 @@ def coordination(masks: np.ndarray, a_is_free: np.ndarray, n_grains: int) -> np.
     return (masks @ ends) / max(int(n_grains), 1)
 
 
+def glue_level(gamma: np.ndarray, gamma_min: np.ndarray) -> np.ndarray:
+    """``gamma / gamma_min`` clipped to ``[0, 1]``, shape (nc,): 0 unglued or just glued
+    (lubricated), 1 at the floor (frictional); 0 where the floor is not finite."""
+    floored = np.isfinite(gamma_min) & (gamma_min < 0)
+    return np.where(floored, np.clip(gamma / np.where(floored, gamma_min, -1.0), 0.0, 1.0), 0.0)
+
+
 def gamma_histogram(gamma: np.ndarray, gamma_min: np.ndarray, bins: int = 20) -> np.ndarray:
-    """Histogram of ``gamma / gamma_min`` in ``[0, 1]`` over glued contacts, shape (bins,).
+    """Histogram of :func:`glue_level` over glued contacts with a floor, shape (bins,).
 
     0 is lubricated (just glued), 1 is frictional (at the floor).
     """
     glued = (gamma < 0) & np.isfinite(gamma_min)
-    ratio = gamma[glued] / gamma_min[glued]
-    return np.histogram(np.clip(ratio, 0.0, 1.0), bins=bins, range=(0.0, 1.0))[0]
+    return np.histogram(glue_level(gamma[glued], gamma_min[glued]), bins=bins,
+                        range=(0.0, 1.0))[0]
 
 
 def layer_height(prof: Profile, fraction: float = 0.5) -> float:

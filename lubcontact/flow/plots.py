@@ -29,7 +29,8 @@ from . import measure  # noqa: E402
 from .config import Q_UNIT  # noqa: E402
 from .sweep import AXES, group_folder, run_folder, seed_means  # noqa: E402
 
-GAMMA_COLORMAP = "plasma"
+GLUE_COLORMAP = "plasma_r"
+"""Contacts from lubricated (0, light) to frictional (1, dark), as the poster draws them."""
 
 
 def _save(fig: Figure, path: pathlib.Path) -> None:
@@ -49,8 +50,8 @@ def _disks(ax: Axes, centres: np.ndarray, radii: np.ndarray, scale: float, **sty
 
 
 def contact_segments(sim: Simulation, contacts: Contacts, gamma: np.ndarray, normal: np.ndarray
-                     ) -> tuple[np.ndarray, np.ndarray, float]:
-    """Centre-to-centre segments of the active grain-grain contacts and their gamma.
+                     ) -> tuple[np.ndarray, np.ndarray]:
+    """Centre-to-centre segments of the active grain-grain contacts and their glue level.
 
     Across the periodic boundary a segment is drawn from grain ``b`` to the
     nearest image of ``a``.
@@ -68,30 +69,30 @@ def contact_segments(sim: Simulation, contacts: Contacts, gamma: np.ndarray, nor
     -------
     segments : ndarray, shape (m, 2, 2)
         End points (length, the run's units).
-    gamma : ndarray, shape (m,)
-    gamma_floor : float
-        The lowest finite gamma_min among the contacts (colour scale bottom).
+    level : ndarray, shape (m,)
+        1 for a frictional contact (at its floor gamma_min, or any contact of a dry
+        Coulomb law), ``gamma / gamma_min`` for a glued one, 0 for an unglued one
+        (:meth:`~lubcontact.model.laws.Law.contact_states`,
+        :func:`~lubcontact.flow.measure.glue_level`).
     """
     scene = sim.scene
     n, n_fixed = scene.grains.count, len(scene.fixed_radii)
     centres = np.vstack([scene.grains.positions, scene.fixed_positions])
     active = (gamma < 0) | (normal > 0)
-    grain_pair = contacts.body_a < n + n_fixed
-    use = active & grain_pair
+    _, glued, frictional = sim.law.contact_states(contacts, gamma, active)
+    level = np.where(frictional, 1.0, np.where(glued, measure.glue_level(
+        gamma, sim.law.gamma_min(contacts)), 0.0))
+    use = active & (contacts.body_a < n + n_fixed)
     b = centres[contacts.body_b[use]]
     delta = b - centres[contacts.body_a[use]]
     if scene.period is not None:
         delta[:, 0] -= scene.period * np.round(delta[:, 0] / scene.period)
-    segments = np.stack([b, b - delta], axis=1)
-    floors = sim.law.gamma_min(contacts)
-    finite = floors[np.isfinite(floors)]
-    floor = float(finite.min()) if finite.size else min(float(gamma.min(initial=0.0)), -1e-30)
-    return segments, gamma[use], floor
+    return np.stack([b, b - delta], axis=1), level[use]
 
 
 def snapshot(sim: Simulation, report: StepReport | None, path: pathlib.Path,
              title: str | None = None) -> None:
-    """Grains, rough bed and contacts coloured by gamma (gamma_min frictional, 0 lubricated).
+    """Grains, rough bed and contacts coloured by their glue level (1 frictional, 0 lubricated).
 
     Parameters
     ----------
@@ -113,14 +114,14 @@ def snapshot(sim: Simulation, report: StepReport | None, path: pathlib.Path,
            linewidth=0.3)
     drawn = sim.last_contacts(report)
     if drawn is not None and drawn[0].count:
-        segments, gamma, floor = contact_segments(sim, *drawn)
-        lines = LineCollection(segments / d, cmap=GAMMA_COLORMAP, linewidths=1.8)
-        lines.set_array(gamma)
-        lines.set_clim(floor, 0.0)
+        segments, level = contact_segments(sim, *drawn)
+        lines = LineCollection(segments / d, cmap=GLUE_COLORMAP, linewidths=1.8)
+        lines.set_array(level)
+        lines.set_clim(0.0, 1.0)
         ax.add_collection(lines)
         bar = fig.colorbar(lines, ax=ax, fraction=0.03, pad=0.01)
-        bar.set_label("gamma (impulse per unit depth)\n"
-                      "gamma_min: frictional  ...  0: lubricated")
+        bar.set_label("glue level gamma / gamma_min (-)\n"
+                      "0: unglued or lubricated  ...  1: frictional")
     ax.set_xlim(0, width / d)
     ax.set_ylim(0, height / d)
     ax.set_aspect("equal")

@@ -279,10 +279,7 @@ class FlowRun:
         gamma_min = self.sim.law.gamma_min(contacts)
         normal = report.result.forces[: contacts.count]
         active = (report.gamma < 0) | (normal > self.config.tol * report.result.force_scale)
-        if self.config.model == "dry":       # every active contact is a Coulomb contact
-            masks = np.stack([np.zeros_like(active), np.zeros_like(active), active])
-        else:
-            masks = measure.state_masks(report.gamma, gamma_min, active)
+        masks = self.sim.law.contact_states(contacts, report.gamma, active)
         values = (self.steps_done, scene.time, measure.kinetic_energy(scene),
                   measure.flow_rate(scene) / flow_rate_unit(self.params),
                   int(np.count_nonzero(active)), *np.count_nonzero(masks, axis=1),

@@ -325,9 +325,9 @@ def run_sweep_point(config: RunConfig, run_dir: pathlib.Path,
                     progress: bool = False) -> tuple[dict[str, Any], bool]:
     """One run of a sweep: read back when finished, continued from its checkpoint, or started.
 
-    A new run starts from the bed at ``config.bed`` (settled there when absent). A run
-    computed here also draws its last state, contacts coloured by gamma, in
-    ``run_dir/snapshot.png``.
+    A new run starts from the bed at ``config.bed`` (settled there when absent) or from
+    ``config.start_from``. A run finished here, started or continued from its checkpoint, also
+    draws its last state, contacts coloured by their glue level, in ``run_dir/snapshot.png``.
 
     Returns
     -------
@@ -537,7 +537,8 @@ def write_report(out_dir: pathlib.Path, rows: list[dict[str, Any]], command: str
     lines += ["", "Files: `sweep.csv` (one row per run), `sweep_means.csv` (the table above, "
               "with standard errors), each run's folder (`summary.json`, `measurements.npz` with "
               "the time series, profiles and gamma histogram, `checkpoint.npz`, "
-              "`snapshot.png`: the last state, contacts coloured by gamma).", "",
+              "`snapshot.png`: the last state, contacts coloured by their glue level gamma / "
+              "gamma_min).", "",
               "Figures:", ""] + [f"- `{name}`" for name in figures]
     save_text(out_dir / "report.md", "\n".join(lines) + "\n")
 

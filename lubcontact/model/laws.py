@@ -62,10 +62,13 @@ class Law:
     has_friction : bool
         Whether some contact may get a friction cone (then the integrator runs
         the fixed point on s unless told otherwise).
+    has_glue : bool
+        Whether contacts carry a gluey state (gamma < 0 while glued).
     """
 
     needs_rotation = False
     has_friction = False
+    has_glue = False
 
     def cones(self, contacts: Contacts, gamma: np.ndarray) -> Cones:
         """Force sets for the contacts given their current gamma."""
@@ -74,6 +77,35 @@ class Law:
     def gamma_min(self, contacts: Contacts) -> np.ndarray:
         """Lower bound of gamma per contact (``-inf`` when roughness does not cap it)."""
         return np.full(contacts.count, -np.inf)
+
+    def contact_states(self, contacts: Contacts, gamma: np.ndarray, active: np.ndarray
+                       ) -> np.ndarray:
+        """Which active contacts are unglued, glued or frictional.
+
+        With glue, a contact at its floor (``gamma <= gamma_min``, finite) is
+        frictional, one above it with ``gamma < 0`` glued, one with ``gamma = 0``
+        unglued; without glue every active contact is frictional when the law
+        has friction (dry Coulomb) and unglued when it has none.
+
+        Parameters
+        ----------
+        contacts : Contacts
+        gamma : ndarray, shape (nc,)
+            Glue state after the step.
+        active : ndarray of bool, shape (nc,)
+            Contacts that carry a force or are glued.
+
+        Returns
+        -------
+        ndarray of bool, shape (3, nc)
+            The masks ``(unglued, glued, frictional)``.
+        """
+        none = np.zeros_like(active)
+        if not self.has_glue:
+            return np.stack([none, none, active] if self.has_friction else [active, none, none])
+        floor = self.gamma_min(contacts)
+        frictional = active & np.isfinite(floor) & (gamma <= floor)
+        return np.stack([active & (gamma == 0), active & (gamma < 0) & ~frictional, frictional])
 
     def update_gamma(self, contacts: Contacts, gamma: np.ndarray, normal_forces: np.ndarray,
                      dt: float, force_scale: float, *, gaps_after: np.ndarray | None = None,
@@ -199,6 +231,8 @@ class GlueyLubrication(Law):
     state_rtol : float
         Relative tolerance snapping gamma to 0 or gamma_min.
     """
+
+    has_glue = True
 
     def __init__(self, gamma_min: float | None = None, *, viscosity: float | None = None,
                  roughness: float | None = None, state_rtol: float = 1e-6):

@@ -1,6 +1,7 @@
 """Flow experiment: scenes, measurements, checkpoint/resume (short runs only)."""
 import json
 from dataclasses import replace
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -11,6 +12,7 @@ from lubcontact.flow import measure
 from lubcontact.flow.bed import initial_scene
 from lubcontact.flow.config import RunConfig
 from lubcontact.flow.run import FlowRun
+from lubcontact.model import laws
 from lubcontact.model.scene import Grains, Scene
 from lubcontact.scenes import inclined as flow
 from lubcontact.solvers import methods
@@ -144,11 +146,19 @@ def test_bagnold_fit_rejects_too_few_slabs_and_a_surface_below_the_bed():
         measure.fit_bagnold(prof, bottom=2.0, surface=42.0, diameter=0.0)
 
 
-def test_contact_states_and_gamma_histogram():
+def test_contact_states_by_law_and_gamma_histogram():
+    """With glue: frictional at the floor, glued above it, unglued at 0 (no floor: never
+    frictional); dry Coulomb: every active contact frictional; frictionless: all unglued."""
     gamma = np.array([0.0, 0.0, -0.5, -1.0, -0.2, 0.0])
-    floor = np.array([-1.0, -1.0, -1.0, -1.0, -np.inf, -1.0])
     active = np.array([True, True, True, True, True, False])
-    np.testing.assert_array_equal(measure.state_masks(gamma, floor, active).sum(axis=1), [2, 2, 1])
+    contacts = SimpleNamespace(count=6)
+    for law, counts in ((laws.GlueyCoulomb(0.3, gamma_min=-1.0), [2, 2, 1]),
+                        (laws.GlueyLubrication(), [2, 3, 0]), (laws.Coulomb(0.3), [0, 0, 5]),
+                        (laws.Inelastic(), [5, 0, 0])):
+        masks = law.contact_states(contacts, gamma, active)
+        np.testing.assert_array_equal(masks.sum(axis=1), counts, err_msg=type(law).__name__)
+    floor = np.array([-1.0, -1.0, -1.0, -1.0, -np.inf, -1.0])
+    np.testing.assert_array_equal(measure.glue_level(gamma, floor), [0, 0, 0.5, 1, 0, 0])
     hist = measure.gamma_histogram(gamma, floor, bins=4)
     np.testing.assert_array_equal(hist, [0, 0, 1, 1])     # 0.5 and 1.0 (the -inf floor is skipped)
 

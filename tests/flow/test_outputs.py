@@ -173,7 +173,6 @@ def test_a_resumed_run_draws_the_contacts_of_its_last_step(tmp_path, figures):
     assert len(stepped[0]) >= 6 and np.count_nonzero(stepped[1]) >= 2   # glued pairs among them
     np.testing.assert_array_equal(found[0], stepped[0])
     np.testing.assert_array_equal(found[1], stepped[1])
-    assert found[2] == stepped[2]
     plots.snapshot(resumed.sim, None, tmp_path / "snapshot.png")
     drawn = figures["snapshot.png"].axes[0].collections[-1]
     np.testing.assert_array_equal(drawn.get_array(), stepped[1])

@@ -11,6 +11,7 @@ from lubcontact.flow import hysteresis, measure, sweep
 from lubcontact.flow.bed import initial_scene
 from lubcontact.flow.config import RunConfig
 from lubcontact.flow.run import FlowRun
+from lubcontact.model import laws
 from lubcontact.scenes import inclined
 
 TINY = ["--n", "16", "--width", "10", "--dt", "0.05", "--settle-steps", "10", "--solver",
@@ -130,9 +131,9 @@ def test_coordination_counts_both_ends_of_a_grain_grain_contact_and_one_of_a_bed
     """Three free grains (0, 1, 2), fixed bodies from 3 on: contacts (0,1) glued, (3,1) frictional,
     (1,2) frictional, (4,2) inactive."""
     gamma = np.array([-0.5, -1.0, -1.0, -2.0])
-    floor = np.full(4, -1.0)
     active = np.array([True, True, True, False])
-    masks = measure.state_masks(gamma, floor, active)
+    masks = laws.GlueyCoulomb(0.3, gamma_min=-1.0).contact_states(SimpleNamespace(count=4), gamma,
+                                                                 active)
     np.testing.assert_array_equal(masks.sum(axis=1), [0, 1, 2])
     a_is_free = np.array([0, 3, 1, 4]) < 3
     np.testing.assert_allclose(measure.coordination(masks, a_is_free, 3), [0.0, 2 / 3, 3 / 3])
