@@ -182,3 +182,30 @@ def test_a_resumed_run_draws_the_contacts_of_its_last_step(tmp_path, figures):
         return set(zip(*(frame[name][on].tolist() for name in (
             "contact_a", "contact_b", "contact_gamma", "contact_force"))))
     assert active(frame_arrays(resumed.sim, None)) == active(frame_arrays(run.sim, run.last_report))
+
+
+def test_a_snapshot_colours_contacts_by_their_glue_level(tmp_path, figures):
+    """Dry Coulomb contacts are frictional (level 1; they were drawn 'lubricated' on a scale
+    from -1e-30 to 0); gluey ones run from 0 (lubricated) to 1 (at their own gamma_min)."""
+    for model in ("dry", "gluey"):
+        config = RunConfig(n_grains=16, width=10.0, model=model, dt_fraction=0.05,
+                           settle_steps=40, solver="newton-ac", fixed_point=True, angle=26.0,
+                           steps=8)
+        run = FlowRun(config, initial_scene(config, tmp_path / model))
+        run.advance(8)
+        plots.snapshot(run.sim, run.last_report, tmp_path / f"{model}.png")
+        drawn = figures[f"{model}.png"].axes[0].collections[-1]
+        level = np.asarray(drawn.get_array())
+        assert drawn.get_clim() == (0.0, 1.0) and level.size >= 6
+        contacts, gamma, normal = run.sim.last_contacts(run.last_report)
+        _, glued, frictional = run.sim.law.contact_states(contacts, gamma,
+                                                          (gamma < 0) | (normal > 0))
+        if model == "dry":
+            np.testing.assert_array_equal(level, 1.0)
+        else:
+            partial = (level > 0) & (level < 1)
+            assert np.count_nonzero(level == 1.0) >= 1 and np.count_nonzero(partial) >= 1
+            floor = run.sim.law.gamma_min(contacts)
+            np.testing.assert_allclose(np.sort(level[partial]), np.sort(
+                (gamma / floor)[glued & (contacts.body_a < 16 + len(run.sim.scene.fixed_radii))
+                                & (gamma > floor)]))
