@@ -161,6 +161,14 @@ def is_incline(scene: Scene) -> bool:
     return scene.metadata.get("name") != "sedimentation"
 
 
+def line_colours(count: int) -> list:
+    """Colours of ``count`` lines in order: matplotlib's ten-colour cycle, or, for more lines
+    than it holds (it would repeat), a sequential colour map from dark to light."""
+    if count <= 10:
+        return [f"C{k}" for k in range(count)]
+    return list(plt.get_cmap("viridis")(np.linspace(0.0, 0.9, count)))
+
+
 def profiles(curves: list[tuple[str, measure.Profile]], path: pathlib.Path,
              params: inclined.FlowParameters, incline: bool = True) -> None:
     """Velocity u(z) and packing fraction phi(z), one line per labelled profile.
@@ -179,10 +187,10 @@ def profiles(curves: list[tuple[str, measure.Profile]], path: pathlib.Path,
     """
     d, speed = 2.0 * params.radius, params.velocity_scale
     fig, (ax_u, ax_phi) = plt.subplots(1, 2, figsize=(9, 4.5), sharey=True)
-    for label, prof in curves:
+    for (label, prof), colour in zip(curves, line_colours(len(curves))):
         z = prof.centres / d
-        ax_u.plot(prof.velocity / speed, z, label=label)
-        ax_phi.plot(prof.packing, z, label=label)
+        ax_u.plot(prof.velocity / speed, z, label=label, color=colour)
+        ax_phi.plot(prof.packing, z, label=label, color=colour)
     if incline:
         ax_u.set_xlabel("u / sqrt(g' d)  (downhill velocity)")
         ax_u.set_ylabel("z / d  (height above the plane under the bed, normal to it)")
@@ -427,9 +435,9 @@ def gamma_histograms(runs: list[tuple[str, pathlib.Path]], path: pathlib.Path) -
     if not histograms:
         return
     fig, ax = plt.subplots(figsize=(6, 4.5))
-    for label, counts in histograms:
+    for (label, counts), colour in zip(histograms, line_colours(len(histograms))):
         edges = np.linspace(0.0, 1.0, counts.size + 1)
-        ax.stairs(counts / counts.sum(), edges, label=label)
+        ax.stairs(counts / counts.sum(), edges, label=label, color=colour)
     ax.set_xlabel("gamma / gamma_min (0: just glued, lubricated ... 1: frictional)")
     ax.set_ylabel("fraction of glued contact samples (-)")
     ax.set_yscale("log")

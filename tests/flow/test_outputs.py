@@ -3,9 +3,11 @@ import csv
 import functools
 import json
 import math
+import pathlib
 
 import numpy as np
 import pytest
+from matplotlib.colors import to_hex, to_rgba
 
 from lubcontact.flow import cli as flow_cli
 from lubcontact.flow import demo as flow_demo
@@ -209,3 +211,18 @@ def test_a_snapshot_colours_contacts_by_their_glue_level(tmp_path, figures):
             np.testing.assert_allclose(np.sort(level[partial]), np.sort(
                 (gamma / floor)[glued & (contacts.body_a < 16 + len(run.sim.scene.fixed_radii))
                                 & (gamma > floor)]))
+
+
+def test_fourteen_angles_get_fourteen_colours(figures):
+    """A sweep's profiles and gamma histograms over 15-28 degrees: one colour per angle (the
+    ten-colour cycle gave 15 and 25 degrees the same blue)."""
+    edges = np.linspace(0.0, 10.0, 11)
+    prof = measure.Profile(edges, np.full(10, 0.8), np.linspace(0.0, 5.0, 10))
+    params = RunConfig(preset="poster").params
+    plots.profiles([(f"{a} deg", prof) for a in range(15, 29)], pathlib.Path("p.png"),
+                   params)
+    for ax in figures["p.png"].axes:
+        colours = {tuple(np.round(to_rgba(line.get_color()), 6))
+                   for line in ax.get_lines()}
+        assert len(ax.get_lines()) == 14 and len(colours) == 14
+    assert len({to_hex(c) for c in plots.line_colours(5)}) == 5
