@@ -59,7 +59,7 @@ def main(quick: bool = False, out: Path = Path("out/gallery")) -> dict[str, floa
     lines = ax.add_collection(LineCollection([], cmap=GLUE_COLORMAP, linewidths=2.5))
     lines.set_clim(0.0, 1.0)
     fig.colorbar(lines, ax=ax, fraction=0.04, label="glue level gamma / gamma_min (-)\n"
-                 "0: lubricated ... 1: frictional")
+                 "0: unglued or lubricated ... 1: frictional")
     ax.set(xlim=(0, WIDTH), ylim=(0, 16), aspect="equal", xlabel="x, downhill (r, periodic)",
            ylabel="y, normal to the bed (r)")
     fig.tight_layout()

@@ -7,6 +7,7 @@ sweep, and a run started again, all tilt the same bed.
 from __future__ import annotations
 
 import pathlib
+import zipfile
 from dataclasses import replace
 
 import numpy as np
@@ -87,9 +88,14 @@ def started_scene(config: RunConfig) -> Scene:
     """
     path = pathlib.Path(config.start_from)
     checks.require(path.is_file(), "start_from", f"no such file: {path}")
-    with np.load(path) as data:
-        checks.require("steps_done" in data, "start_from",
-                       f"{path} is not a run's checkpoint.npz (a settled bed goes to bed)")
+    not_a_checkpoint = f"{path} is not a run's checkpoint.npz (a settled bed goes to bed)"
+    try:
+        data = np.load(path)
+    except (OSError, ValueError, zipfile.BadZipFile):
+        raise ValueError(f"start_from: {not_a_checkpoint}") from None
+    checks.require(isinstance(data, np.lib.npyio.NpzFile), "start_from", not_a_checkpoint)
+    with data:
+        checks.require("steps_done" in data, "start_from", not_a_checkpoint)
         scene = SimulationState.from_arrays(data).scene
     period = config.width * config.params.radius
     checks.require(scene.grains.count == config.n_grains and scene.period is not None

@@ -128,7 +128,8 @@ def _add_common(parser: argparse.ArgumentParser, resume: bool, steps: bool = Tru
 
     ``resume``: the parser has ``--resume`` (the help says what it does to ``--steps`` and
     ``--mu``); ``steps``: it has ``--steps`` (a ramp's length follows from its stages);
-    ``start``: it has ``--start-from`` (a ramp starts from rest).
+    ``start``: it has ``--start-from`` and ``--average-from`` (a ramp starts from a bed at rest
+    and reads its holds, not an averaging window).
     """
     add = parser.add_argument
     add("--n", dest="n_grains", type=_number(int, 1), default=None, metavar="N",
@@ -183,11 +184,13 @@ def _add_common(parser: argparse.ArgumentParser, resume: bool, steps: bool = Tru
         add("--start-from", dest="start_from", default=None, metavar="CHECKPOINT",
             help="start inclined_flow from the grains of a run's checkpoint.npz, velocities "
                  "kept, tilted to the angle (a developed flow turned to another angle; no bed "
-                 "is settled); in a sweep, {model} and {seed} in the path are each run's "
-                 "(default: none, the bed at rest)")
-    add("--average-from", type=_number(float, 0, high=1), default=None, metavar="FRACTION",
-        help="time averages (Q, fractions, profiles) over the steps after this fraction of "
-             f"each run {_default('average_from')}")
+                 "is settled; the contacts' glue states and the solver's warm start begin "
+                 "afresh); in a sweep, {model} and {seed} in the path are each run's, a "
+                 "literal brace is written twice (default: none, the bed at rest)")
+        add("--average-from", type=_number(float, 0, high=1), default=None,
+            metavar="FRACTION",
+            help="time averages (Q, fractions, profiles) over the steps after this fraction "
+                 f"of each run; fixed once a run has started {_default('average_from')}")
     add("--width", type=_number(float, 0, above=True), default=None, metavar="RADII",
         help=f"period along x in mean grain radii {_default('width')}")
     add("--seed", type=_number(int, 0), default=None,
@@ -207,7 +210,8 @@ def run_parser() -> argparse.ArgumentParser:
     parser = _Parser(
         prog="lubcontact run",
         description="One run of the flow experiment with checkpoints: sedimentation (grains "
-                    "settle on a rough bed) or inclined_flow (a settled bed tilted by --angle). "
+                    "settle on a rough bed) or inclined_flow (a settled bed tilted by --angle, "
+                    "or a run's state with --start-from). "
                     "Writes checkpoint.npz, measurements.npz, summary.json and figures in OUT; "
                     "--resume continues the run stored there. Ctrl-C stops it with a checkpoint. "
                     f"Flow rates are given in units of {Q_UNIT}, the time step in {DT_UNIT} "
@@ -229,8 +233,8 @@ def run_parser() -> argparse.ArgumentParser:
     parser.add_argument("--resume", action="store_true",
                         help="continue the run of OUT/checkpoint.npz to its stored total; "
                              "--steps, the solver options, --mu and the output periods may "
-                             "change, the options that define the scene or the physics may not "
-                             "(default: off, a new run)")
+                             "change, the options that define the scene or the physics and "
+                             "--average-from may not (default: off, a new run)")
     _add_common(parser, resume=True)
     return parser
 
@@ -266,7 +270,8 @@ def _add_parallel(parser: argparse.ArgumentParser) -> None:
                              "depend on it (default: 1)")
     parser.add_argument("--scheduler", default=None, metavar="ADDRESS",
                         help="run the runs on the Dask cluster of this scheduler "
-                             "(tcp://host:port; its workers must see --out; needs the optional "
+                             "(tcp://host:port; its workers must see the files the runs read "
+                             "and write; needs the optional "
                              "dependency distributed) (default: none, local processes)")
 
 
@@ -411,6 +416,10 @@ def _resume(args: argparse.Namespace, parser: argparse.ArgumentParser, given: se
     stored = stored_config(checkpoint)
     conflicts = [name for name in DEFINING_FIELDS if name in given
                  and getattr(args, name) != getattr(stored, name)]
+    if "average_from" in given and args.average_from != stored.average_from:
+        parser.error(f"argument --average-from: the checkpoint's run averages from "
+                     f"{stored.average_from:g} of its steps and its profiles were accumulated so; "
+                     "drop the option, or start a new run in another --out")
     if conflicts:
         parser.error("--resume: " + ", ".join(_show(n, getattr(args, n)) for n in conflicts)
                      + " differ from the checkpoint's run ("

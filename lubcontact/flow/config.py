@@ -146,11 +146,13 @@ class RunConfig:
     start_from : str
         Path of a run's ``checkpoint.npz`` whose grains, with their velocities
         and spins, the run starts from instead of a bed at rest, tilted to
-        ``angle`` (``inclined_flow`` only): a developed flow turned to another
-        angle, the way the 2000-grain runs of docs/records/poster-experiment.md
-        reach each angle without each one's onset. The run's own contact
-        states start afresh. A sweep replaces ``{model}`` and ``{seed}`` in it
-        by each run's (:func:`~lubcontact.flow.sweep.sweep_runs`). Empty: the bed.
+        ``angle`` (``inclined_flow`` only, not with ``bed`` nor a ramp): a
+        developed flow turned to another angle, the way the 2000-grain runs of
+        docs/records/poster-experiment.md reach each angle without each one's
+        onset. The contacts' glue states and the solver's warm start start
+        afresh (a descent of :mod:`~lubcontact.flow.hysteresis` keeps them). A
+        sweep replaces ``{model}`` and ``{seed}`` in it by each run's
+        (:func:`~lubcontact.flow.sweep.start_path`). Empty: the bed.
     average_from : float
         Profiles and means are time-averaged over steps after this fraction
         of the run.
@@ -229,6 +231,12 @@ class RunConfig:
         if self.start_from and self.scene != "inclined_flow":
             raise ValueError(f"start_from: only an inclined_flow starts from a run's state, "
                              f"got {self.start_from!r} for a {self.scene}")
+        if self.start_from and self.bed:
+            raise ValueError(f"start_from: a run starts from a bed or from a run's state, not "
+                             f"both, got {self.start_from!r} and the bed {self.bed!r}")
+        if self.start_from and self.ramp_stages:
+            raise ValueError(f"start_from: an angle ramp starts from a bed at rest, got "
+                             f"{self.start_from!r}")
         if not 0 <= self.average_from < 1:
             raise ValueError(f"average_from: must be in [0, 1), got {self.average_from}")
         for name in ("viscosity", "roughness"):

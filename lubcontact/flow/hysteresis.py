@@ -400,7 +400,7 @@ def descent(checkpoint: pathlib.Path, out_dir: pathlib.Path, start: float, stop:
     base = FlowRun.resume(pathlib.Path(checkpoint), out_dir=out_dir)
     _check_sampling(base.config, hold)
     config = replace(base.config, angle=float(start), ramp_step=-step, ramp_stages=stages_down,
-                     hold_steps=hold, steps=(2 * stages_down + 1) * hold)
+                     hold_steps=hold, steps=(2 * stages_down + 1) * hold, start_from="")
     run = _open_run(out_dir, config, "a descent", lambda: _continued(base, config, out_dir))
     holds = _hold_by_hold(run, hold, stages_down + 1, lambda holds: bool(holds) and abs(
         holds[-1].mean_velocity) <= flow_speed, progress, rest_speed=REST_FACTOR * flow_speed)

@@ -9,10 +9,10 @@ height ``y_i`` and radius ``r_i`` covers the area ``A_i(k)`` of slab ``k``
 - flow rate (area flux per unit depth, length^2 / time)
   ``Q = int phi u dz = sum_i pi r_i^2 v_x,i / L``.
 
-Contacts are classified by their gluey state after a step: *unglued*
-(``gamma = 0``), *glued* (``gamma_min < gamma < 0``, lubricated) and
-*frictional* (``gamma = gamma_min``, asperities touch); only contacts that
-carry a force or are glued count (a candidate with an open gap does not).
+Contacts are *unglued*, *glued* (lubricated) or *frictional* (asperities
+touch) by the law's rule (:meth:`~lubcontact.model.laws.Law.contact_states`);
+only contacts that carry a force or are glued count (a candidate with an open
+gap does not).
 """
 from __future__ import annotations
 
@@ -243,8 +243,19 @@ def coordination(masks: np.ndarray, a_is_free: np.ndarray, n_grains: int) -> np.
 
 
 def glue_level(gamma: np.ndarray, gamma_min: np.ndarray) -> np.ndarray:
-    """``gamma / gamma_min`` clipped to ``[0, 1]``, shape (nc,): 0 unglued or just glued
-    (lubricated), 1 at the floor (frictional); 0 where the floor is not finite."""
+    """How deep each contact is in its glue, relative to its floor.
+
+    Parameters
+    ----------
+    gamma, gamma_min : ndarray, shape (nc,)
+        Glue state and its floor (impulse; ``-inf``: no floor).
+
+    Returns
+    -------
+    ndarray, shape (nc,)
+        ``gamma / gamma_min`` clipped to ``[0, 1]`` (dimensionless): 0 unglued or just glued
+        (lubricated), 1 at the floor (frictional); 0 where the floor is not finite.
+    """
     floored = np.isfinite(gamma_min) & (gamma_min < 0)
     return np.where(floored, np.clip(gamma / np.where(floored, gamma_min, -1.0), 0.0, 1.0), 0.0)
 

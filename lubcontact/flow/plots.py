@@ -2,7 +2,8 @@
 
 Lengths are shown in mean diameters ``d = 2 r``, velocities in ``sqrt(g' d)``
 and flow rates in ``d sqrt(g' d)`` (``g'`` the buoyant gravity), whatever the
-unit system of the run; gamma keeps the run's units (impulse per unit depth).
+unit system of the run; contacts show their glue level ``gamma / gamma_min``
+(dimensionless).
 An inclined flow's axes are the incline's (x downhill, y normal to it); a
 sedimentation's are horizontal x and vertical z, with no angle.
 """
@@ -62,8 +63,8 @@ def contact_segments(sim: Simulation, contacts: Contacts, gamma: np.ndarray, nor
         After the step of the contacts.
     contacts : Contacts
     gamma, normal : ndarray, shape (nc,)
-        Their glue state and normal impulse
-        (:meth:`~lubcontact.sim.simulation.Simulation.last_contacts`).
+        Their glue state and normal impulse (impulse per unit depth, the run's units;
+        :meth:`~lubcontact.sim.simulation.Simulation.last_contacts`).
 
     Returns
     -------
@@ -162,8 +163,19 @@ def is_incline(scene: Scene) -> bool:
 
 
 def line_colours(count: int) -> list:
-    """Colours of ``count`` lines in order: matplotlib's ten-colour cycle, or, for more lines
-    than it holds (it would repeat), a sequential colour map from dark to light."""
+    """Colours of lines drawn in order, one per line.
+
+    Parameters
+    ----------
+    count : int
+        Number of lines.
+
+    Returns
+    -------
+    list
+        Matplotlib colours: the ten-colour cycle ``C0..C9`` up to ten lines; beyond (the
+        cycle would repeat) a sequential colour map from dark to light.
+    """
     if count <= 10:
         return [f"C{k}" for k in range(count)]
     return list(plt.get_cmap("viridis")(np.linspace(0.0, 0.9, count)))
@@ -272,10 +284,11 @@ def _state_plot(rows: list[dict], quantity: str, ylabel: str) -> tuple[Figure, A
     :func:`_curves`, seed means with their standard deviation over seeds as error bars."""
     fig, ax = plt.subplots(figsize=(6.5, 4.5))
     styles = ["-", "--", ":", "-."]
-    for index, (label, (model, curve)) in enumerate(_curves(rows).items()):
-        states = ("frictional",) if model == "dry" else measure.STATES
-        for state in states:                               # dry: every contact is Coulomb
+    for index, (label, (_, curve)) in enumerate(_curves(rows).items()):
+        for state in measure.STATES:
             values = [r[f"{quantity}_{state}"] for r in curve]
+            if np.all(np.asarray(values, dtype=float) == 0.0):
+                continue              # a state no run has (a dry law's glued ones) is not drawn
             errors = [r[f"{quantity}_{state}_sd"] for r in curve]
             ax.errorbar([float(r["angle"]) for r in curve], values,
                         yerr=None if np.all(np.isnan(errors)) else errors,
@@ -283,7 +296,8 @@ def _state_plot(rows: list[dict], quantity: str, ylabel: str) -> tuple[Figure, A
                         marker="o", markersize=4, capsize=2, label=f"{label}: {state}")
     ax.set_xlabel("incline angle theta (degrees)")
     ax.set_ylabel(ylabel)
-    ax.legend(fontsize=7)
+    if ax.get_legend_handles_labels()[0]:
+        ax.legend(fontsize=7)
     ax.grid(alpha=0.3)
     return fig, ax
 

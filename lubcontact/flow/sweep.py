@@ -143,9 +143,10 @@ def stored_steps(checkpoint: pathlib.Path) -> int:
 def folder_conflicts(run_dir: pathlib.Path, config: RunConfig) -> dict[str, tuple]:
     """The fields of the run in ``run_dir`` that differ from ``config`` and must not.
 
-    Those are the :data:`~lubcontact.flow.config.DEFINING_FIELDS` and the
-    friction coefficient (the runs of one sweep share it); ``bed``, a path
-    that may be spelled differently, is not compared.
+    Those are the :data:`~lubcontact.flow.config.DEFINING_FIELDS`, the
+    friction coefficient (the runs of one sweep share it) and ``average_from``
+    (a finished run is read back with its own averaging window); ``bed`` and
+    ``start_from``, paths that may be spelled differently, are not compared.
 
     Returns
     -------
@@ -156,7 +157,8 @@ def folder_conflicts(run_dir: pathlib.Path, config: RunConfig) -> dict[str, tupl
     if not checkpoint.exists():
         return {}
     stored = stored_config(checkpoint)
-    names = tuple(name for name in DEFINING_FIELDS if name != "bed")
+    names = tuple(name for name in DEFINING_FIELDS if name not in ("bed", "start_from")) \
+        + ("average_from",)
     changed = stored.differences(config, names)
     if "preset" not in changed and stored.params.friction != config.params.friction:
         changed["friction"] = (stored.friction, config.friction)
@@ -190,8 +192,8 @@ def sweep(config: RunConfig, angles: np.ndarray, models: list[str], out_dir: pat
     Parameters
     ----------
     config : RunConfig
-        Settings of every run (``model``, ``angle``, ``bed`` and the fields
-        of ``groups`` are set per run).
+        Settings of every run (``model``, ``angle``, ``bed``, ``start_from``
+        and the fields of ``groups`` are set per run: :func:`sweep_runs`).
     angles : ndarray, shape (n,)
         Incline angles (degrees).
     models : list of str
@@ -258,14 +260,14 @@ def start_path(config: RunConfig) -> str:
     """
     try:
         return config.start_from.format(model=config.model, seed=config.seed)
-    except (KeyError, IndexError, ValueError) as exc:
-        raise ValueError(f"start_from: the placeholders are {{model}} and {{seed}} ({exc}), "
-                         f"got {config.start_from!r}") from None
+    except (KeyError, IndexError, ValueError, AttributeError, TypeError) as exc:
+        raise ValueError(f"start_from: the placeholders are {{model}} and {{seed}}, a literal "
+                         f"brace is written twice ({exc}), got {config.start_from!r}") from None
 
 
 def run_all(runs: list[tuple[RunConfig, pathlib.Path]], progress: bool = False, workers: int = 1,
             scheduler: str | None = None) -> list[dict[str, Any]]:
-    """Independent runs, each in its folder, from the beds their configs name.
+    """Independent runs, each in its folder, from the beds or the states their configs name.
 
     The beds that unfinished runs need are settled first, here, one after
     the other (:func:`~lubcontact.flow.bed.initial_scene`); then the runs go
@@ -275,7 +277,8 @@ def run_all(runs: list[tuple[RunConfig, pathlib.Path]], progress: bool = False, 
     Parameters
     ----------
     runs : list of (RunConfig, pathlib.Path)
-        Each run's config (its ``bed`` a path, settled there when absent)
+        Each run's config (its ``bed`` a path, settled there when absent, or its
+        ``start_from`` a run's checkpoint)
         and folder.
     progress : bool
         Show progress bars (sequential runs only).

@@ -62,13 +62,10 @@ class Law:
     has_friction : bool
         Whether some contact may get a friction cone (then the integrator runs
         the fixed point on s unless told otherwise).
-    has_glue : bool
-        Whether contacts carry a gluey state (gamma < 0 while glued).
     """
 
     needs_rotation = False
     has_friction = False
-    has_glue = False
 
     def cones(self, contacts: Contacts, gamma: np.ndarray) -> Cones:
         """Force sets for the contacts given their current gamma."""
@@ -82,10 +79,9 @@ class Law:
                        ) -> np.ndarray:
         """Which active contacts are unglued, glued or frictional.
 
-        With glue, a contact at its floor (``gamma <= gamma_min``, finite) is
-        frictional, one above it with ``gamma < 0`` glued, one with ``gamma = 0``
-        unglued; without glue every active contact is frictional when the law
-        has friction (dry Coulomb) and unglued when it has none.
+        Here (no glue, no friction) every active contact is unglued; :class:`Coulomb`
+        makes its contacts with ``mu > 0`` frictional, :class:`GlueyLubrication` sorts
+        them by their glue state.
 
         Parameters
         ----------
@@ -101,11 +97,7 @@ class Law:
             The masks ``(unglued, glued, frictional)``.
         """
         none = np.zeros_like(active)
-        if not self.has_glue:
-            return np.stack([none, none, active] if self.has_friction else [active, none, none])
-        floor = self.gamma_min(contacts)
-        frictional = active & np.isfinite(floor) & (gamma <= floor)
-        return np.stack([active & (gamma == 0), active & (gamma < 0) & ~frictional, frictional])
+        return np.stack([active, none, none])
 
     def update_gamma(self, contacts: Contacts, gamma: np.ndarray, normal_forces: np.ndarray,
                      dt: float, force_scale: float, *, gaps_after: np.ndarray | None = None,
@@ -189,6 +181,13 @@ class Coulomb(Law):
         kinds = np.where(mu > 0, ConeKind.COULOMB, ConeKind.NONNEG)
         return _friction_cones(kinds, mu, contacts.dim)
 
+    def contact_states(self, contacts: Contacts, gamma: np.ndarray, active: np.ndarray
+                       ) -> np.ndarray:
+        """:meth:`Law.contact_states`: an active contact is frictional where ``mu > 0``,
+        unglued where ``mu = 0``; none is glued."""
+        frictional = active & (self.mu(contacts) > 0)
+        return np.stack([active & ~frictional, np.zeros_like(active), frictional])
+
 
 def pushing(normal_forces: np.ndarray, gaps_after: np.ndarray, force_scale: float,
             length_scale: float) -> np.ndarray:
@@ -232,8 +231,6 @@ class GlueyLubrication(Law):
         Relative tolerance snapping gamma to 0 or gamma_min.
     """
 
-    has_glue = True
-
     def __init__(self, gamma_min: float | None = None, *, viscosity: float | None = None,
                  roughness: float | None = None, state_rtol: float = 1e-6):
         if gamma_min is not None:
@@ -262,6 +259,15 @@ class GlueyLubrication(Law):
     def cones(self, contacts: Contacts, gamma: np.ndarray) -> Cones:
         kinds = np.where(gamma < 0, ConeKind.FREE, ConeKind.NONNEG)
         return Cones.frictionless(kinds, contacts.dim - 1)
+
+    def contact_states(self, contacts: Contacts, gamma: np.ndarray, active: np.ndarray
+                       ) -> np.ndarray:
+        """:meth:`Law.contact_states`: an active contact at its floor (``gamma <= gamma_min``,
+        finite) is frictional, one above it with ``gamma < 0`` glued, one with ``gamma = 0``
+        unglued (with or without friction: the floor is where asperities touch)."""
+        floor = self.gamma_min(contacts)
+        frictional = active & np.isfinite(floor) & (gamma <= floor)
+        return np.stack([active & (gamma == 0), active & (gamma < 0) & ~frictional, frictional])
 
     def update_gamma(self, contacts: Contacts, gamma: np.ndarray, normal_forces: np.ndarray,
                      dt: float, force_scale: float, *, gaps_after: np.ndarray | None = None,

@@ -148,13 +148,16 @@ def test_bagnold_fit_rejects_too_few_slabs_and_a_surface_below_the_bed():
 
 def test_contact_states_by_law_and_gamma_histogram():
     """With glue: frictional at the floor, glued above it, unglued at 0 (no floor: never
-    frictional); dry Coulomb: every active contact frictional; frictionless: all unglued."""
+    frictional); dry Coulomb: frictional where mu > 0, unglued where mu = 0; frictionless: all
+    unglued."""
     gamma = np.array([0.0, 0.0, -0.5, -1.0, -0.2, 0.0])
     active = np.array([True, True, True, True, True, False])
     contacts = SimpleNamespace(count=6)
     for law, counts in ((laws.GlueyCoulomb(0.3, gamma_min=-1.0), [2, 2, 1]),
                         (laws.GlueyLubrication(), [2, 3, 0]), (laws.Coulomb(0.3), [0, 0, 5]),
-                        (laws.Inelastic(), [5, 0, 0])):
+                        (laws.Coulomb(0.0), [5, 0, 0]), (laws.Inelastic(), [5, 0, 0]),
+                        (laws.Coulomb(lambda c: np.array([0.3, 0, 0.3, 0, 0.3, 0.3])),
+                         [2, 0, 3])):
         masks = law.contact_states(contacts, gamma, active)
         np.testing.assert_array_equal(masks.sum(axis=1), counts, err_msg=type(law).__name__)
     floor = np.array([-1.0, -1.0, -1.0, -1.0, -np.inf, -1.0])

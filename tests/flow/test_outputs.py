@@ -7,7 +7,7 @@ import pathlib
 
 import numpy as np
 import pytest
-from matplotlib.colors import to_hex, to_rgba
+from matplotlib.colors import to_hex
 
 from lubcontact.flow import cli as flow_cli
 from lubcontact.flow import demo as flow_demo
@@ -213,7 +213,7 @@ def test_a_snapshot_colours_contacts_by_their_glue_level(tmp_path, figures):
                                 & (gamma > floor)]))
 
 
-def test_fourteen_angles_get_fourteen_colours(figures):
+def test_fourteen_angles_get_fourteen_colours(tmp_path, figures):
     """A sweep's profiles and gamma histograms over 15-28 degrees: one colour per angle (the
     ten-colour cycle gave 15 and 25 degrees the same blue)."""
     edges = np.linspace(0.0, 10.0, 11)
@@ -221,8 +221,12 @@ def test_fourteen_angles_get_fourteen_colours(figures):
     params = RunConfig(preset="poster").params
     plots.profiles([(f"{a} deg", prof) for a in range(15, 29)], pathlib.Path("p.png"),
                    params)
+    runs = []
+    for angle in range(15, 29):
+        np.savez(tmp_path / f"{angle}.npz", gamma_histogram=np.arange(1, 5))
+        runs.append((f"{angle} deg", tmp_path / f"{angle}.npz"))
+    plots.gamma_histograms(runs, pathlib.Path("g.png"))
     for ax in figures["p.png"].axes:
-        colours = {tuple(np.round(to_rgba(line.get_color()), 6))
-                   for line in ax.get_lines()}
-        assert len(ax.get_lines()) == 14 and len(colours) == 14
-    assert len({to_hex(c) for c in plots.line_colours(5)}) == 5
+        assert len({to_hex(line.get_color()) for line in ax.get_lines()}) == 14
+    stairs = figures["g.png"].axes[0].patches
+    assert len(stairs) == 14 and len({to_hex(step.get_edgecolor()) for step in stairs}) == 14

@@ -424,7 +424,8 @@ def test_a_step_that_fails_beyond_the_accepted_residual_stops_the_run_before_it_
 
 
 # -- runs from a developed flow -----------------------------------------------------------------------
-def test_a_sweep_starts_each_run_from_its_model_and_seeds_developed_state(tmp_path, capsys):
+def test_a_sweep_starts_each_run_from_its_model_and_seeds_developed_state(tmp_path, capsys,
+                                                                          monkeypatch):
     """``--start-from`` with {model} and {seed}: each run is that state tilted to its angle, the
     grains still moving (the 2000-grain protocol of the records, by hand before), no bed settled."""
     layer, _ = flowing_layer(tmp_path / "gluey-seed0")
@@ -449,6 +450,17 @@ def test_a_sweep_starts_each_run_from_its_model_and_seeds_developed_state(tmp_pa
     first = stored.series["mean_velocity"][0]
     assert first > 0.5 * measure.mean_velocity(layer.sim.scene) > 0    # still moving at step 1
 
+    # the same sweep again, the state's path spelled relative: read back, not refused
+    relative = [a if a != str(start) else str(start.relative_to(tmp_path)) for a in argv]
+    monkeypatch.chdir(tmp_path)
+    assert flow_cli.sweep_main(relative) == 0
+    assert len(read_csv(tmp_path / "sweep" / "sweep.csv")) == 1
+    capsys.readouterr()
+    with pytest.raises(SystemExit) as exit_:          # another window: refused, not mixed
+        flow_cli.sweep_main([*relative, "--average-from", "0.5"])
+    err = capsys.readouterr().err
+    assert exit_.value.code == 2 and "--average-from 0.25 (here: --average-from 0.5)" in err
+
 
 def test_start_from_errors_are_one_line_naming_the_flag(tmp_path, capsys):
     """A missing state, a bed instead of a run's checkpoint, another number of grains, an
@@ -457,19 +469,51 @@ def test_start_from_errors_are_one_line_naming_the_flag(tmp_path, capsys):
     bed = tmp_path / "bed.npz"
     common = ["--n", "16", "--width", "10", "--dt", "0.05", "--steps", "2", "--no-progress",
               "--models", "gluey", "--angles", "20"]
+    (tmp_path / "text.npz").write_text("not an archive")
+    np.save(tmp_path / "array.npy", np.zeros(3))
     cases = {"no such file": [*common, "--start-from", str(tmp_path / "none.npz")],
              "not a run's checkpoint": [*common, "--start-from", str(bed)],
+             "text.npz is not a run's checkpoint": [*common, "--start-from",
+                                                    str(tmp_path / "text.npz")],
+             "array.npy is not a run's checkpoint": [*common, "--start-from",
+                                                     str(tmp_path / "array.npy")],
              "holds 16 grains": [*common[:1], "17", *common[2:], "--start-from", str(checkpoint)],
              "placeholders are {model} and {seed}": [*common, "--start-from",
-                                                     str(tmp_path / "{angle}.npz")]}
+                                                     str(tmp_path / "{angle}.npz")],
+             "a literal brace is written twice": [*common, "--start-from",
+                                                  str(tmp_path / "{model.x}.npz")]}
     for number, (said, argv) in enumerate(cases.items()):
         with pytest.raises(SystemExit) as exit_:
             flow_cli.sweep_main([*argv, "--out", str(tmp_path / f"sweep{number}")])
         err = capsys.readouterr().err.strip()
         assert exit_.value.code == 2 and len(err.splitlines()) == 1, err
         assert "argument --start-from: " in err and said in err, err
+    for argv in (["sedimentation", "--start-from", str(checkpoint)],
+                 ["inclined_flow", "--start-from", str(checkpoint), "--bed", str(bed)]):
+        with pytest.raises(SystemExit) as exit_:
+            flow_cli.run_main([*argv, "--out", str(tmp_path / "run")])
+        err = capsys.readouterr().err.strip()
+        assert exit_.value.code == 2 and "argument --start-from: " in err, err
+        assert len(err.splitlines()) == 1
+    with pytest.raises(ValueError, match="start_from: an angle ramp starts from a bed at rest"):
+        hysteresis.ramp_config(replace(RunConfig(sample_every=1), start_from=str(checkpoint)),
+                               20, 22, 1, 8)
+
+
+def test_a_resumed_run_keeps_its_averaging_window(tmp_path, capsys):
+    """--average-from cannot change on --resume: the profiles were accumulated over the old
+    window (one line naming the flag)."""
+    out = tmp_path / "run"
+    small = ["--n", "16", "--width", "10", "--dt", "0.05", "--settle-steps", "10", "--solver",
+             "clarabel", "--checkpoint-every", "2", "--sample-every", "1", "--no-progress"]
+    assert flow_cli.run_main(["inclined_flow", "--steps", "4", "--average-from", "0.25",
+                              "--out", str(out), *small]) == 0
+    capsys.readouterr()
     with pytest.raises(SystemExit) as exit_:
-        flow_cli.run_main(["sedimentation", "--start-from", str(checkpoint), "--out",
-                           str(tmp_path / "run")])
+        flow_cli.run_main(["--resume", "--steps", "6", "--average-from", "0.5", "--out",
+                           str(out)])
     err = capsys.readouterr().err.strip()
-    assert exit_.value.code == 2 and "--start-from" in err and len(err.splitlines()) == 1
+    assert exit_.value.code == 2 and err.count("\n") == 0
+    assert "argument --average-from: the checkpoint's run averages from 0.25" in err
+    assert flow_cli.run_main(["--resume", "--steps", "6", "--average-from", "0.25", "--out",
+                              str(out)]) == 0
