@@ -7,7 +7,8 @@ Each VTU file (written with meshio) holds
   (1/time, 3 components);
 - one ``line`` cell per grain-grain contact (optional), with cell data
   ``gamma`` (the glue state, <= 0; 0 unglued), ``normal_force`` (force) and
-  ``state`` (0 unglued, 1 glued, 2 frictional: ``gamma = gamma_min``);
+  ``state`` (0 unglued or inactive, 1 glued, 2 frictional: the law's
+  :meth:`~lubcontact.model.laws.Law.contact_states`);
 
 and the vertex cells carry the same cell fields set to 0, as VTK requires a
 value on every cell. In ParaView, show the points as spheres scaled by
@@ -36,7 +37,7 @@ def _three(vectors: np.ndarray) -> np.ndarray:
 
 def write_vtu(path: str | Path, scene: Scene, contacts: Contacts | None = None,
               gamma: np.ndarray | None = None, normal_force: np.ndarray | None = None,
-              gamma_min: np.ndarray | None = None) -> Path:
+              states: np.ndarray | None = None) -> Path:
     """Write the grains (and their grain-grain contacts) of ``scene`` to a ``.vtu`` file.
 
     Parameters
@@ -46,8 +47,12 @@ def write_vtu(path: str | Path, scene: Scene, contacts: Contacts | None = None,
     scene : Scene
     contacts : Contacts, optional
         The step's contacts; contacts with a plane or a fixed grain are left out.
-    gamma, normal_force, gamma_min : ndarray, shape (nc,), optional
-        Per-contact glue state, normal force and floor of gamma (zeros when not given).
+    gamma, normal_force : ndarray, shape (nc,), optional
+        Per-contact glue state and normal force (zeros when not given).
+    states : ndarray of bool, shape (3, nc), optional
+        The masks ``(unglued, glued, frictional)`` of the law's
+        :meth:`~lubcontact.model.laws.Law.contact_states` (``state`` 0 everywhere when not
+        given).
 
     Returns
     -------
@@ -66,10 +71,8 @@ def write_vtu(path: str | Path, scene: Scene, contacts: Contacts | None = None,
         values = {"gamma": gamma, "normal_force": normal_force}
         values = {k: np.zeros(contacts.count) if v is None else np.asarray(v, dtype=float)
                   for k, v in values.items()}
-        floor = np.full(contacts.count, -np.inf) if gamma_min is None else np.asarray(gamma_min)
-        state = np.where(values["gamma"] < 0, 1.0, 0.0)
-        state[(values["gamma"] < 0) & (values["gamma"] <= floor)] = 2.0
-        values["state"] = state
+        values["state"] = np.zeros(contacts.count) if states is None else \
+            np.asarray(states, dtype=float)[1] + 2.0 * np.asarray(states, dtype=float)[2]
         cells.append(("line", np.stack([contacts.body_a[pairs], contacts.body_b[pairs]], axis=1)))
         for name in CONTACT_FIELDS:
             cell_data[name].append(values[name][pairs])
