@@ -63,7 +63,9 @@ GAMMA_BINS = 20
 """Bins of the gamma / gamma_min histogram over [0, 1]."""
 STEP_FAILURE_RESIDUAL = 1e-2
 """A step whose solve did not converge and ends with a residual above this is not a solution:
-the run stops before applying it (:attr:`FlowRun.failure`, ``state = "failed"`` in its summary).
+it is solved once more by Clarabel (the simulation's ``fallback_solver``), and when that too
+ends above, the run stops before applying it (:attr:`FlowRun.failure`, ``state = "failed"`` in
+its summary).
 Steps that end below it, though not converged, are applied and counted (``unconverged_steps``).
 Measured: applying steps at residual ~1 (no method solved them) drove a gluey run at 28 degrees
 from Q = 5 to 114 d sqrt(g' d) in 40 steps (docs/records/poster-experiment.md)."""

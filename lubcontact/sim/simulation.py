@@ -71,7 +71,9 @@ class Simulation:
         The solver used by ``on_failure="fallback"`` (default ``clarabel``).
     max_residual : float, optional
         Whatever ``on_failure`` says, a solve that did not converge and ends
-        with a residual above this (or NaN) is never applied: it raises
+        with a residual above this (or NaN) is never applied: the step is
+        solved once more with ``fallback_solver`` (recorded as with
+        ``fallback``), and if that too ends above, it raises
         :class:`~lubcontact.solvers.SolverError` before the state is touched
         (default: no bound).
     warm_start : bool
@@ -238,7 +240,8 @@ class Simulation:
         contacts, gamma, problem, guess, shift = self._build_problem(timings, searched)
         start = time.perf_counter()
         result = settings.solve(problem, guess, shift)
-        if not result.success and self.on_failure == "fallback" \
+        unusable = self.max_residual is not None and not result.residual <= self.max_residual
+        if not result.success and (self.on_failure == "fallback" or unusable) \
                 and self.fallback_solver != settings.method:
             failed = result
             fallback = replace(settings, method=self.fallback_solver, max_iter=None, options={})

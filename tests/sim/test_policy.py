@@ -47,6 +47,21 @@ def test_fallback_resolves_the_step_with_the_reference():
     assert report.gaps_after.min() >= -1e-9
 
 
+def test_a_step_beyond_max_residual_is_solved_again_before_it_fails():
+    """With ``ignore`` (the flow runner's policy) a solve above ``max_residual`` is re-solved
+    once by the reference before the step fails (a gluey 2000-grain descent stopped on such a
+    step, newton-ac's residual 1.2e-2, that Clarabel's fixed point solves to 4.4e-4); a solve
+    between the tolerance and ``max_residual`` is applied as it is."""
+    sim = starved("ignore", max_residual=1e-12)
+    report = run_until(sim, lambda r: "fallback_from" in r.result.info)
+    assert report.result.status == "converged" and report.result.method == "clarabel"
+    method, status, residual = report.result.info["fallback_from"]
+    assert (method, status) == ("apgd", "max_iter") and residual > 1e-12
+    loose = starved("ignore", max_residual=1e3)
+    report = run_until(loose, lambda r: r.result.status != "converged")
+    assert report.result.method == "apgd" and "fallback_from" not in report.result.info
+
+
 def test_fixed_point_options_reach_only_frictional_steps():
     """``joint`` is an option of the fixed point on s: frictionless steps must not receive it,
     and frictionless and frictional runs with it match the runs without it."""
