@@ -103,6 +103,9 @@ class FlowRun:
         Step and relative velocity difference of each Clarabel cross-check.
     statuses : dict of str to int, or None
         Steps per solver status (None: unknown, a checkpoint predating it).
+    rescued : int or None
+        Steps whose solve ended above :data:`STEP_FAILURE_RESIDUAL` and were solved again by
+        Clarabel (their status is Clarabel's; None: unknown, a checkpoint predating it).
     wall_time, cpu_time : float
         Stepping time (seconds), wall clock and processor.
     warm_up_time : float
@@ -136,6 +139,7 @@ class FlowRun:
         self.gamma_counts = np.zeros(GAMMA_BINS, dtype=np.int64)
         self.cross_checks: list[tuple[int, float]] = []
         self.statuses: dict[str, int] | None = {}
+        self.rescued: int | None = 0
         self.wall_time = 0.0
         self.cpu_time = 0.0
         self.warm_up_time = 0.0
@@ -200,6 +204,8 @@ class FlowRun:
                     if self.statuses is not None:
                         status = report.result.status
                         self.statuses[status] = self.statuses.get(status, 0) + 1
+                    if self.rescued is not None and "fallback_from" in report.result.info:
+                        self.rescued += 1
                     self.last_report = report
                     self._measure(report)
                     if bar is not None:
@@ -309,7 +315,8 @@ class FlowRun:
             and ``profile.samples``; ``gamma_histogram`` (GAMMA_BINS,);
             ``cross_checks`` (n, 2) of (step, relative difference);
             ``wall_time``, ``cpu_time`` and ``warm_up_time`` (seconds);
-            ``statuses``, ``config`` and ``units`` (of the series) as JSON strings.
+            ``statuses``, ``rescued``, ``config`` and ``units`` (of the series) as JSON
+            strings.
         """
         prof = self.profiles.profile()
         out = {f"series.{k}": np.asarray(v, dtype=float) for k, v in self.series.items()}
@@ -323,6 +330,7 @@ class FlowRun:
                     "cpu_time": np.float64(self.cpu_time),
                     "warm_up_time": np.float64(self.warm_up_time),
                     "statuses": np.array(json.dumps(self.statuses)),
+                    "rescued": np.array(json.dumps(self.rescued)),
                     "config": np.array(self.config.to_json()),
                     "units": np.array(json.dumps(units(self.params)))})
         return out
@@ -427,6 +435,7 @@ class FlowRun:
         self.cpu_time = float(data.get("cpu_time", np.nan))  # older checkpoints: unknown
         self.warm_up_time = float(data.get("warm_up_time", 0.0))
         self.statuses = json.loads(str(data["statuses"])) if "statuses" in data else None
+        self.rescued = json.loads(str(data["rescued"])) if "rescued" in data else None
         if not self.averaging and self.profiles.samples:
             self.profiles.reset()
             self.gamma_counts[:] = 0
@@ -454,7 +463,8 @@ class FlowRun:
             reads its stages); ``seed``, ``friction``, ``viscosity`` and ``roughness`` (the
             parameters in force; the last two None when the preset sets
             ``gamma_min`` directly); ``unconverged_steps`` (None if unknown),
-            ``step_statuses``, ``unconverged_samples``; ``max_cross_check``
+            ``step_statuses``, ``rescued_steps`` (re-solved by Clarabel,
+            :data:`STEP_FAILURE_RESIDUAL`; None if unknown), ``unconverged_samples``; ``max_cross_check``
             (NaN without cross-checks); ``wall_time`` and ``cpu_time``
             (seconds, the steps only), ``steps_per_second``,
             ``steps_per_cpu_second``, ``warm_up_time`` (seconds, untimed
@@ -498,6 +508,7 @@ class FlowRun:
                 "unconverged_steps": (None if self.statuses is None else
                                       sum(n for s, n in self.statuses.items() if s != CONVERGED)),
                 "step_statuses": self.statuses,
+                "rescued_steps": self.rescued,
                 "unconverged_samples": int(np.count_nonzero(series["converged"] == 0)),
                 "max_cross_check": float(cross[:, 1].max()) if cross.size else float("nan"),
                 "wall_time": self.wall_time,

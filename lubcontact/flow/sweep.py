@@ -41,7 +41,8 @@ SWEEP_COLUMNS = ("model", "angle", "seed", "viscosity", "roughness", "flow_rate"
                  "state", "energy_ratio", "relative_change", "fraction_unglued", "fraction_glued",
                  "fraction_frictional", "mean_velocity", "coordination_unglued",
                  "coordination_glued", "coordination_frictional",
-                 "kinetic_energy", "steps", "time", "unconverged_steps", "max_cross_check",
+                 "kinetic_energy", "steps", "time", "unconverged_steps", "rescued_steps",
+                 "max_cross_check",
                  "wall_time", "steps_per_second", "cpu_time", "steps_per_cpu_second",
                  "warm_up_time", "solver", "tol")
 """Columns of ``sweep.csv``: keys of :meth:`lubcontact.flow.run.FlowRun.summary`."""

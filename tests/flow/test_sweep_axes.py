@@ -423,6 +423,23 @@ def test_a_step_that_fails_beyond_the_accepted_residual_stops_the_run_before_it_
     assert (mean["flow_rate"], mean["seeds"], mean["failed"]) == (1.0, 1, 1)
 
 
+def test_a_step_rescued_by_clarabel_is_counted(tmp_path):
+    """A step whose fast solve ends above the failure threshold is solved again by Clarabel and
+    applied: the run goes on and counts it (summary, checkpoint), instead of stopping."""
+    config = RunConfig(n_grains=16, width=10.0, model="dry", dt_fraction=0.05, settle_steps=40,
+                       solver="apgd-jacobi", checkpoint_every=2, sample_every=1, steps=6)
+    run = FlowRun(config, initial_scene(config, tmp_path), tmp_path / "run")
+    run.advance(2)
+    assert run.rescued == 0 and run.last_report.contacts.count >= 5
+    run.sim.settings = replace(run.sim.settings, max_iter=1)     # one iteration: far off
+    run.sim.max_residual = 1e-12
+    summary = run.finish()
+    assert run.failure is None and run.steps_done == 6
+    assert 1 <= run.rescued <= 4 and summary["rescued_steps"] == run.rescued
+    assert run.statuses.get("converged", 0) == 6          # Clarabel's status, counted
+    assert FlowRun.resume(tmp_path / "run" / "checkpoint.npz").rescued == run.rescued
+
+
 # -- runs from a developed flow -----------------------------------------------------------------------
 def test_a_sweep_starts_each_run_from_its_model_and_seeds_developed_state(tmp_path, capsys,
                                                                           monkeypatch):
