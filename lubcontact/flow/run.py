@@ -63,9 +63,9 @@ GAMMA_BINS = 20
 """Bins of the gamma / gamma_min histogram over [0, 1]."""
 STEP_FAILURE_RESIDUAL = 1e-2
 """A step whose solve did not converge and ends with a residual above this is not a solution:
-it is solved once more by Clarabel (the simulation's ``fallback_solver``), and when that too
-ends above, the run stops before applying it (:attr:`FlowRun.failure`, ``state = "failed"`` in
-its summary).
+it is solved once more by Clarabel (the simulation's ``fallback_solver``; not when the run's
+solver is Clarabel), and when that too ends above, the run stops before applying it
+(:attr:`FlowRun.failure`, ``state = "failed"`` in its summary).
 Steps that end below it, though not converged, are applied and counted (``unconverged_steps``).
 Measured: applying steps at residual ~1 (no method solved them) drove a gluey run at 28 degrees
 from Q = 5 to 114 d sqrt(g' d) in 40 steps (docs/records/poster-experiment.md)."""
@@ -114,9 +114,9 @@ class FlowRun:
     last_report : StepReport or None
         What the last step computed.
     failure : str or None
-        Why the run stopped early: a step whose solve failed beyond
-        :data:`STEP_FAILURE_RESIDUAL` (not applied; the scene holds the last
-        good state). None while the run is sound.
+        Why the run stopped early: a step whose solve, and Clarabel's re-solve,
+        failed beyond :data:`STEP_FAILURE_RESIDUAL` (not applied; the scene holds
+        the last good state). None while the run is sound.
     """
 
     def __init__(self, config: RunConfig, scene: Scene, out_dir: pathlib.Path | None = None):
@@ -168,8 +168,9 @@ class FlowRun:
         progress : bool
             Show a progress bar (tqdm).
 
-        A step whose solve fails beyond :data:`STEP_FAILURE_RESIDUAL` ends
-        the run there (:attr:`failure`); later calls step no more.
+        A step whose solve, and Clarabel's re-solve, fail beyond
+        :data:`STEP_FAILURE_RESIDUAL` ends the run there (:attr:`failure`); later
+        calls step no more.
 
         Raises
         ------

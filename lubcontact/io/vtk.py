@@ -21,6 +21,7 @@ from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
+from .. import checks
 from ..model.contacts import Contacts
 from ..model.scene import Scene
 from .files import atomic_path, save_text
@@ -71,8 +72,9 @@ def write_vtu(path: str | Path, scene: Scene, contacts: Contacts | None = None,
         values = {"gamma": gamma, "normal_force": normal_force}
         values = {k: np.zeros(contacts.count) if v is None else np.asarray(v, dtype=float)
                   for k, v in values.items()}
-        values["state"] = np.zeros(contacts.count) if states is None else \
-            np.asarray(states, dtype=float)[1] + 2.0 * np.asarray(states, dtype=float)[2]
+        masks = np.zeros((3, contacts.count)) if states is None else checks.as_array(
+            "states", np.asarray(states, dtype=float), shape=(3, contacts.count))
+        values["state"] = masks[1] + 2.0 * masks[2]
         cells.append(("line", np.stack([contacts.body_a[pairs], contacts.body_b[pairs]], axis=1)))
         for name in CONTACT_FIELDS:
             cell_data[name].append(values[name][pairs])

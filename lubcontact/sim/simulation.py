@@ -25,7 +25,7 @@ from ..model.contacts import Contacts, find_contacts, lookup_by_key
 from ..model.laws import Law, PairState
 from ..model.scene import Scene
 from ..problem.step import StepProblem
-from ..solvers import SolverWarning, SolveSettings, check_status, methods
+from ..solvers import SolverError, SolverWarning, SolveSettings, check_status, methods
 from ..solvers.result import CoulombResult
 from ..solvers.verify import verify
 from .export import StepExporter
@@ -68,14 +68,16 @@ class Simulation:
         ``fallback_solver`` (same warm start and shift, recorded in
         ``result.info["fallback_from"]``) and raises if that fails too.
     fallback_solver : str
-        The solver used by ``on_failure="fallback"`` (default ``clarabel``).
+        The solver used by ``on_failure="fallback"`` and by the ``max_residual``
+        re-solve (default ``clarabel``; no re-solve when it is the step's solver).
     max_residual : float, optional
         Whatever ``on_failure`` says, a solve that did not converge and ends
-        with a residual above this (or NaN) is never applied: the step is
-        solved once more with ``fallback_solver`` (recorded as with
-        ``fallback``), and if that too ends above, it raises
-        :class:`~lubcontact.solvers.SolverError` before the state is touched
-        (default: no bound).
+        with a residual above this (or NaN) is never applied. With ``warn``
+        and ``ignore`` the step is first solved once more with
+        ``fallback_solver`` (recorded as with ``fallback``; ``warn`` warns),
+        and if that too ends above (or there is no other solver), it raises
+        :class:`~lubcontact.solvers.SolverError` before the state is touched,
+        naming both solves (default: no bound).
     warm_start : bool
         Start each solve from the previous step's forces (normal and
         tangential) and shift, matched by pair.
@@ -241,16 +243,28 @@ class Simulation:
         start = time.perf_counter()
         result = settings.solve(problem, guess, shift)
         unusable = self.max_residual is not None and not result.residual <= self.max_residual
-        if not result.success and (self.on_failure == "fallback" or unusable) \
-                and self.fallback_solver != settings.method:
+        failed = None
+        if not result.success and self.fallback_solver != settings.method and (
+                self.on_failure == "fallback" or (unusable and self.on_failure != "raise")):
             failed = result
             fallback = replace(settings, method=self.fallback_solver, max_iter=None, options={})
             result = fallback.solve(problem, guess, shift)
             result.info["fallback_from"] = (failed.method, failed.status, failed.residual)
+            if self.on_failure == "warn":
+                warnings.warn(f"step {self.steps_done + 1}: {failed.method} ended {failed.status} "
+                              f"at residual {failed.residual:.3e}, above max_residual; solved "
+                              f"again by {self.fallback_solver} ({result.status}, residual "
+                              f"{result.residual:.3e})", SolverWarning, stacklevel=2)
         timings["solve"] = time.perf_counter() - start
         start = time.perf_counter()
-        check_status(result, "raise" if self.on_failure == "fallback" else self.on_failure,
-                     self.max_residual)
+        try:
+            check_status(result, "raise" if self.on_failure == "fallback" else self.on_failure,
+                         self.max_residual)
+        except SolverError as exc:
+            if failed is None:
+                raise
+            raise SolverError(f"{failed.method}: status {failed.status}, residual "
+                              f"{failed.residual:.3e}; solved again by {exc}") from None
         if self.verify_every and (self.steps_done + 1) % self.verify_every == 0:
             self._verify(problem, result)
         if self.export_every and (self.steps_done + 1) % self.export_every == 0:

@@ -435,7 +435,7 @@ def test_a_step_rescued_by_clarabel_is_counted(tmp_path):
     run.sim.max_residual = 1e-12
     summary = run.finish()
     assert run.failure is None and run.steps_done == 6
-    assert 1 <= run.rescued <= 4 and summary["rescued_steps"] == run.rescued
+    assert run.rescued == 4 and summary["rescued_steps"] == 4          # every step after
     assert run.statuses.get("converged", 0) == 6          # Clarabel's status, counted
     assert FlowRun.resume(tmp_path / "run" / "checkpoint.npz").rescued == run.rescued
 

@@ -1,9 +1,11 @@
 """Non-convergence policies of the time stepper: raise (state untouched), warn, fallback."""
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
 from lubcontact import GlueyLubrication, Simulation, SolverError, scenes
-from lubcontact.solvers import SolverWarning
+from lubcontact.solvers import SolverWarning, SolveSettings
 
 
 def starved(on_failure, **kwargs):
@@ -60,6 +62,28 @@ def test_a_step_beyond_max_residual_is_solved_again_before_it_fails():
     loose = starved("ignore", max_residual=1e3)
     report = run_until(loose, lambda r: r.result.status != "converged")
     assert report.result.method == "apgd" and "fallback_from" not in report.result.info
+
+
+def test_the_max_residual_re_solve_keeps_raise_and_warn_and_names_both_solves(monkeypatch):
+    """``raise`` still raises at the first unconverged step; ``warn`` warns about the re-solve;
+    a re-solve that fails too raises naming the step's solver and the fallback's."""
+    with pytest.raises(SolverError, match="apgd: status max_iter"):
+        run_until(starved("raise", max_residual=1e-12), lambda r: False)
+    with pytest.warns(SolverWarning, match="solved again by clarabel"):
+        report = run_until(starved("warn", max_residual=1e-12),
+                           lambda r: "fallback_from" in r.result.info)
+    assert report.result.method == "clarabel"
+    solve = SolveSettings.solve
+
+    def fallback_fails(self, *args, **kwargs):         # the re-solve ends far off too
+        result = solve(self, *args, **kwargs)
+        return replace(result, status="inaccurate", residual=0.5) \
+            if self.method == "apgd-jacobi" else result
+    monkeypatch.setattr(SolveSettings, "solve", fallback_fails)
+    both = starved("ignore", max_residual=1e-2, fallback_solver="apgd-jacobi")
+    with pytest.raises(SolverError, match=r"^apgd: status max_iter, residual .*; solved again "
+                                          r"by apgd-jacobi: status inaccurate"):
+        run_until(both, lambda r: False)
 
 
 def test_fixed_point_options_reach_only_frictional_steps():
