@@ -141,6 +141,8 @@ def demo_report(summary: dict[str, Any], config: RunConfig) -> str:
         ("| largest Clarabel cross-check difference (relative velocity) | "
          f"{value(summary['max_cross_check'], 3)} |"),
         f"| steps not converged | {summary['unconverged_steps']} |",
+        f"| steps solved again by Clarabel (above the failure threshold) | "
+        f"{summary['rescued_steps']} |",
         (f"| speed | {summary['steps_per_second']:.1f} steps/s (after an untimed warm-up of "
          f"{summary.get('warm_up_time', 0.0):.2g} s: compilation, first imports) |"), "",
         ("Figures: `flow_snapshot.png` (contacts coloured by their glue level gamma / gamma_min, "
