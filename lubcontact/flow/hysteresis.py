@@ -324,10 +324,16 @@ class Leg:
         The holds run, all on the leg's way (up or down).
     failure : str or None
         Why the run stopped early (:attr:`lubcontact.flow.run.FlowRun.failure`).
+    step_statuses : dict of str to int, or None
+        Steps per solver status over the whole run (:attr:`~lubcontact.flow.run.FlowRun.statuses`).
+    rescued_steps : int or None
+        Steps solved again by Clarabel (:attr:`~lubcontact.flow.run.FlowRun.rescued`).
     """
 
     holds: list[Stage]
     failure: str | None
+    step_statuses: dict[str, int] | None
+    rescued_steps: int | None
 
 
 @dataclass
@@ -407,7 +413,8 @@ def descent(checkpoint: pathlib.Path, out_dir: pathlib.Path, start: float, stop:
     _write_stages(out_dir, run, holds, flow_speed)
     theta_stop = _transition(holds, [abs(h.mean_velocity) <= flow_speed for h in holds],
                              run.failure)
-    return Descent(theta_stop=theta_stop, holds=holds, failure=run.failure)
+    return Descent(theta_stop=theta_stop, holds=holds, failure=run.failure,
+                   step_statuses=run.statuses, rescued_steps=run.rescued)
 
 
 def _continued(base: FlowRun, config: RunConfig, out_dir: pathlib.Path) -> FlowRun:
@@ -499,7 +506,8 @@ def ascent(config: RunConfig, out_dir: pathlib.Path, start: float, stop: float, 
     _write_stages(out_dir, run, holds, flow_speed)
     theta_start = _transition(holds, [abs(h.mean_velocity) > flow_speed for h in holds],
                               run.failure)
-    return Ascent(theta_start=theta_start, holds=holds, failure=run.failure)
+    return Ascent(theta_start=theta_start, holds=holds, failure=run.failure,
+                  step_statuses=run.statuses, rescued_steps=run.rescued)
 
 
 def _transition(holds: list[Stage], flags: list[bool], failure: str | None) -> float:

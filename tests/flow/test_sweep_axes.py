@@ -245,6 +245,7 @@ def test_a_descent_continues_a_flowing_layer_hold_by_hold_and_ends_at_a_still_ho
     assert [(h.leg, h.angle) for h in down.holds] == [("down", 26.0), ("down", 24.0),
                                                       ("down", 22.0)]
     assert np.isnan(down.theta_stop) and down.failure is None       # still flowing at 22
+    assert sum(down.step_statuses.values()) == 24 and down.rescued_steps == 0
     series = FlowRun.resume(tmp_path / "down" / "checkpoint.npz").series
     assert series["angle"] == [26.0] * 8 + [24.0] * 8 + [22.0] * 8
     np.testing.assert_allclose(series["mean_velocity"][:8], onward.series["mean_velocity"][-8:],
