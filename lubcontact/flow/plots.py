@@ -216,7 +216,7 @@ def profiles(curves: list[tuple[str, measure.Profile]], path: pathlib.Path,
     _save(fig, path)
 
 
-def _curves(rows: list[dict]) -> dict[str, tuple[str, list[dict]]]:
+def _curves(rows: list[dict]) -> dict[str, list[dict]]:
     """Sweep rows averaged over seeds (:func:`~lubcontact.flow.sweep.seed_means`), grouped into
     curves by model and the varied viscosity / roughness, each curve sorted by angle.
 
@@ -225,8 +225,8 @@ def _curves(rows: list[dict]) -> dict[str, tuple[str, list[dict]]]:
 
     Returns
     -------
-    dict of str to (str, list of dict)
-        Per label, the model and the curve's seed means.
+    dict of str to list of dict
+        Per label, the curve's seed means.
     """
     means = seed_means(rows)
     varied = [key for key in ("viscosity", "roughness")
@@ -235,8 +235,7 @@ def _curves(rows: list[dict]) -> dict[str, tuple[str, list[dict]]]:
     for mean in means:
         label = " ".join([mean["model"]] + [f"{AXES[key]} {mean[key]:g}" for key in varied])
         curves.setdefault(label, []).append(mean)
-    return {label: (c[0]["model"], sorted(c, key=lambda row: float(row["angle"])))
-            for label, c in curves.items()}
+    return {label: sorted(c, key=lambda row: float(row["angle"])) for label, c in curves.items()}
 
 
 def flow_rate_curve(rows: list[dict], path: pathlib.Path) -> None:
@@ -257,7 +256,7 @@ def flow_rate_curve(rows: list[dict], path: pathlib.Path) -> None:
     """
     fig, ax = plt.subplots(figsize=(6, 4.5))
     counts = set()
-    for label, (_, curve) in _curves(rows).items():
+    for label, curve in _curves(rows).items():
         counts |= {int(row["seeds"]) for row in curve}
         errors = [row["flow_rate_sd"] if row["seeds"] > 1 else row["flow_rate_std"]
                   for row in curve]
@@ -284,7 +283,7 @@ def _state_plot(rows: list[dict], quantity: str, ylabel: str) -> tuple[Figure, A
     :func:`_curves`, seed means with their standard deviation over seeds as error bars."""
     fig, ax = plt.subplots(figsize=(6.5, 4.5))
     styles = ["-", "--", ":", "-."]
-    for index, (label, (_, curve)) in enumerate(_curves(rows).items()):
+    for index, (label, curve) in enumerate(_curves(rows).items()):
         for state in measure.STATES:
             values = [r[f"{quantity}_{state}"] for r in curve]
             if np.all(np.asarray(values, dtype=float) == 0.0):

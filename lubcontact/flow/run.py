@@ -465,8 +465,8 @@ class FlowRun:
             parameters in force; the last two None when the preset sets
             ``gamma_min`` directly); ``unconverged_steps`` (None if unknown),
             ``step_statuses``, ``rescued_steps`` (re-solved by Clarabel,
-            :data:`STEP_FAILURE_RESIDUAL`; None if unknown), ``unconverged_samples``; ``max_cross_check``
-            (NaN without cross-checks); ``wall_time`` and ``cpu_time``
+            :data:`STEP_FAILURE_RESIDUAL`; None if unknown), ``unconverged_samples``;
+            ``max_cross_check`` (NaN without cross-checks); ``wall_time`` and ``cpu_time``
             (seconds, the steps only), ``steps_per_second``,
             ``steps_per_cpu_second``, ``warm_up_time`` (seconds, untimed
             compilation and first imports); ``solver`` and ``tol``;
