@@ -169,8 +169,9 @@ class FlowRun:
             Show a progress bar (tqdm).
 
         A step whose solve, and Clarabel's re-solve, fail beyond
-        :data:`STEP_FAILURE_RESIDUAL` ends the run there (:attr:`failure`); later
-        calls step no more.
+        :data:`STEP_FAILURE_RESIDUAL` ends the run there (:attr:`failure`; with an
+        output folder, a checkpoint of the last good state and the failed step's
+        problem in ``failed_step.npz`` are written); later calls step no more.
 
         Raises
         ------
@@ -198,6 +199,7 @@ class FlowRun:
                         report = self.sim.step()
                     except SolverError as exc:
                         self.failure = f"step {self.steps_done + 1}: {exc}"
+                        self._keep_failed_step()
                         break
                     finally:                           # a failed step's time was spent too
                         self.wall_time += time.perf_counter() - start
@@ -217,6 +219,18 @@ class FlowRun:
         finally:
             if bar is not None:
                 bar.close()
+
+    def _keep_failed_step(self) -> None:
+        """With an output folder, what a failed step leaves: the checkpoint of the last good
+        state (the steps since the last checkpoint are not lost) and the failed step's problem in
+        ``failed_step.npz`` (:meth:`StepProblem.to_arrays`, plus ``warm_start`` and
+        ``warm_shift``, the run's warm start, when there is one), to reproduce the solve alone."""
+        if self.out_dir is None:
+            return
+        self.save_checkpoint()
+        _, _, problem, guess, shift = self.sim.next_problem()
+        warm = {} if guess is None else {"warm_start": guess, "warm_shift": shift}
+        save_npz(self._file("failed_step.npz"), **problem.to_arrays(), **warm)
 
     def _tilt(self) -> None:
         """Set the incline of the coming step's ramp stage (:meth:`RunConfig.ramp_stage`)."""

@@ -396,8 +396,9 @@ def test_a_step_that_fails_beyond_the_accepted_residual_stops_the_run_before_it_
         def __getattr__(self, name):
             return getattr(self.settings, name)
 
-        def solve(self, *args, **kwargs):
-            result = self.settings.solve(*args, **kwargs)
+        def solve(self, problem, *args, **kwargs):
+            self.problem, self.warm_start = problem, args[0]
+            result = self.settings.solve(problem, *args, **kwargs)
             return replace_result(result, status="inaccurate", residual=self.residual)
 
     config = RunConfig(n_grains=16, width=10.0, model="dry", dt_fraction=0.05, settle_steps=10,
@@ -409,15 +410,20 @@ def test_a_step_that_fails_beyond_the_accepted_residual_stops_the_run_before_it_
     run.advance(1)                               # below 1e-2: applied, counted
     assert run.steps_done == 3 and run.statuses["inaccurate"] == 1 and run.failure is None
     before = run.sim.scene.grains.positions.copy()
-    run.sim.settings = Failing(settings, 0.5)
+    run.sim.settings = failing = Failing(settings, 0.5)
     wall_before = run.wall_time
-    summary = run.finish()
+    run.advance(3)
     assert run.steps_done == 3 and run.failure.startswith("step 4: clarabel: status inaccurate")
     np.testing.assert_array_equal(run.sim.scene.grains.positions, before)
+    with np.load(tmp_path / "run" / "checkpoint.npz") as data:   # the last good state, kept
+        assert int(data["steps_done"]) == 3                       # (the last periodic one: 2)
+    with np.load(tmp_path / "run" / "failed_step.npz") as data:   # the failed step, to reproduce
+        for name, value in failing.problem.to_arrays().items():
+            np.testing.assert_array_equal(data[name], value)
+        assert failing.warm_start is None and "warm_start" not in data.files   # Clarabel's run
+    summary = run.finish()
     assert summary["state"] == "failed" and summary["failure"] == run.failure
     assert summary["wall_time"] > wall_before                # the failed step counted
-    with np.load(tmp_path / "run" / "checkpoint.npz") as data:
-        assert int(data["steps_done"]) == 3
     rows = [{"model": "dry", "angle": 20.0, "flow_rate": 1.0, "state": "steady"},
             {"model": "dry", "angle": 20.0, "flow_rate": 90.0, "state": "failed"}]
     mean = sweep.seed_means(rows)[0]
