@@ -45,6 +45,7 @@ from ..problem.step import StepProblem
 from ..scenes import inclined
 from ..sim import Simulation, SimulationState, StepReport
 from ..solvers import CONVERGED, SolverError, solve
+from ..solvers.result import SUSPICIOUS_RESIDUAL
 from . import interrupt, measure
 from .config import DEFINING_FIELDS, DT_UNIT, Q_UNIT, RunConfig, flow_rate_unit
 
@@ -61,14 +62,18 @@ grain per state (``coordination_<state>``). Checkpoints written before a series 
 it NaN samples."""
 GAMMA_BINS = 20
 """Bins of the gamma / gamma_min histogram over [0, 1]."""
-STEP_FAILURE_RESIDUAL = 1e-2
-"""A step whose solve did not converge and ends with a residual above this is not a solution:
-it is solved once more by Clarabel (the simulation's ``fallback_solver``; not when the run's
-solver is Clarabel), and when that too ends above, the run stops before applying it
+STEP_FAILURE_RESIDUAL = SUSPICIOUS_RESIDUAL
+"""A step whose solve did not converge and ends with a residual per row above this (1e-3, the
+figure above which the solvers call a converged claim wrong) is not a solution: it is solved
+once more by Clarabel (the simulation's ``fallback_solver``; not when the run's solver is
+Clarabel), and when that too ends above, the run stops before applying it
 (:attr:`FlowRun.failure`, ``state = "failed"`` in its summary).
 Steps that end below it, though not converged, are applied and counted (``unconverged_steps``).
-Measured: applying steps at residual ~1 (no method solved them) drove a gluey run at 28 degrees
-from Q = 5 to 114 d sqrt(g' d) in 40 steps (docs/records/poster-experiment.md)."""
+Measured: applying steps at residuals per row of 0.05 to 1.3 (no method solved them) drove a
+gluey run at 28 degrees from Q = 5 to 114 d sqrt(g' d) in 40 steps; the bound was 1e-2 on the
+residual's 2-norm until 2026-11-28, which tightens with the size (1e-4 per row at 4 500
+contacts) and stopped two 2000-grain beds at rest on steps Newton had brought to 1.2e-4 and
+6.3e-4 per row (docs/records/poster-experiment.md)."""
 WARM_UP_TOL = 1e-2
 WARM_UP_ITERATIONS = 20
 """Tolerance and iteration cap of the untimed warm-up solves (:meth:`FlowRun.warm_up`)."""

@@ -72,7 +72,9 @@ class Simulation:
         re-solve (default ``clarabel``; no re-solve when it is the step's solver).
     max_residual : float, optional
         Whatever ``on_failure`` says, a solve that did not converge and ends
-        with a residual above this (or NaN) is never applied. With ``warn``
+        with a residual per row (``SolveResult.residual_per_row``, the rms of
+        the natural residual over the rows: a bound that does not tighten with
+        the problem's size) above this (or NaN) is never applied. With ``warn``
         and ``ignore`` the step is first solved once more with
         ``fallback_solver`` (recorded as with ``fallback``; ``warn`` warns),
         and if that too ends above (or there is no other solver), it raises
@@ -242,7 +244,7 @@ class Simulation:
         contacts, gamma, problem, guess, shift = self._build_problem(timings, searched)
         start = time.perf_counter()
         result = settings.solve(problem, guess, shift)
-        unusable = self.max_residual is not None and not result.residual <= self.max_residual
+        unusable = self.max_residual is not None and not result.residual_per_row <= self.max_residual
         failed = None
         if not result.success and self.fallback_solver != settings.method and (
                 self.on_failure == "fallback" or (unusable and self.on_failure != "raise")):

@@ -32,7 +32,16 @@ from .. import checks
 from ..problem.cones import ConeKind
 from ..problem.conic import ConicProblem
 from ..problem.step import StepProblem
-from .result import CONVERGED, DIVERGED, FAILED, INACCURATE, SUSPICIOUS_RESIDUAL, MethodOutput, SolveResult
+from .result import (
+    CONVERGED,
+    DIVERGED,
+    FAILED,
+    INACCURATE,
+    SUSPICIOUS_RESIDUAL,
+    MethodOutput,
+    SolveResult,
+    residual_per_row,
+)
 
 FIRST_ORDER = "first-order"
 INTERIOR_POINT = "interior-point"
@@ -242,7 +251,7 @@ def solve(problem: ConicProblem, method: str = "clarabel", *, tol: float = 1e-9,
     scaled_velocities = scaled.velocity(forces)      # the residual's and the result's
     residual = scaled.cones.natural_residual(forces, scaled.constraint_values(scaled_velocities)) \
         if forces.size else 0.0
-    if status == CONVERGED and residual > SUSPICIOUS_RESIDUAL * np.sqrt(max(forces.size, 1)):
+    if status == CONVERGED and residual_per_row(residual, forces.size) > SUSPICIOUS_RESIDUAL:
         status = INACCURATE          # the method's claim does not survive an independent check
         out.info["claimed_status"] = CONVERGED
     physical = forces * scale.force

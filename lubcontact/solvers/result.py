@@ -19,10 +19,17 @@ FAILED = "failed"
 STATUSES = (CONVERGED, MAX_ITER, DIVERGED, INACCURATE, FAILED)
 
 SUSPICIOUS_RESIDUAL = 1e-3
-"""A ``converged`` claim whose natural residual (normalised units, per sqrt(row))
+"""A ``converged`` claim whose natural residual per row (:func:`residual_per_row`)
 exceeds this is downgraded to ``inaccurate``: solutions this far from optimal
 are wrong, whatever the method says (e.g. an interior point drifting along an
 unbounded optimal face of the dual)."""
+
+
+def residual_per_row(residual: float, n_rows: int) -> float:
+    """A natural residual's 2-norm divided by ``sqrt(n_rows)`` (an rms over the rows): the
+    figure that does not grow with the problem's size, which the result checks compare
+    (:data:`SUSPICIOUS_RESIDUAL`, ``max_residual`` of :func:`check_status`)."""
+    return residual / np.sqrt(max(n_rows, 1))
 
 
 class SolverError(RuntimeError):
@@ -123,6 +130,11 @@ class SolveResult:
     def success(self) -> bool:
         return self.status == CONVERGED
 
+    @property
+    def residual_per_row(self) -> float:
+        """``residual / sqrt(n_rows)`` (:func:`residual_per_row`)."""
+        return residual_per_row(self.residual, self.x.size)
+
 
 @dataclass
 class CoulombResult(SolveResult):
@@ -181,21 +193,23 @@ def check_status(result: SolveResult, policy: str, max_residual: float | None = 
     policy : str
         What a status other than ``converged`` does.
     max_residual : float, optional
-        A result that did not converge with a residual above this (or NaN) is
-        not a solution whatever the policy: it raises.
+        A result that did not converge with a residual per row
+        (:attr:`SolveResult.residual_per_row`) above this (or NaN) is not a
+        solution whatever the policy: it raises.
 
     Raises
     ------
     SolverError
         When the status is not ``converged`` and ``policy == "raise"``, or its
-        residual is above ``max_residual``.
+        residual per row is above ``max_residual``.
     """
     if result.success:
         return
     message = (f"{result.method}: status {result.status} after {result.iterations} iterations, "
                f"residual {result.residual:.3e}")
-    if max_residual is not None and not result.residual <= max_residual:
-        raise SolverError(f"{message}, above the largest accepted {max_residual:g}")
+    if max_residual is not None and not result.residual_per_row <= max_residual:
+        raise SolverError(f"{message} ({result.residual_per_row:.3e} per row), above the largest "
+                          f"accepted {max_residual:g}")
     if policy == "ignore":
         return
     if policy == "raise":

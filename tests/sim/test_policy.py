@@ -100,3 +100,20 @@ def test_fixed_point_options_reach_only_frictional_steps():
             runs.append(sim.scene.grains.velocities.copy())
         speed = np.abs(runs[0]).max()
         np.testing.assert_allclose(runs[1], runs[0], rtol=0, atol=1e-6 * speed)
+
+
+def test_max_residual_bounds_the_residual_per_row_whatever_the_size():
+    """The bound was on the residual's 2-norm, which grows as sqrt(rows) for the same per-row
+    accuracy: it stopped 2000-grain beds at rest (9 000 rows) on steps at 1.2e-4 per row that a
+    100-grain run would apply. The same per-row figure is now judged alike at both sizes."""
+    from lubcontact.solvers.result import SolveResult, check_status
+
+    def unconverged(n_rows, per_row):
+        return SolveResult(x=np.zeros(n_rows), velocities=np.zeros(3), status="max_iter",
+                           iterations=10, residual=per_row * np.sqrt(n_rows), method="newton-ac")
+
+    for n_rows in (400, 9000):
+        check_status(unconverged(n_rows, 1.2e-4), "ignore", max_residual=1e-3)      # applied
+        with pytest.raises(SolverError, match="per row"):
+            check_status(unconverged(n_rows, 2e-3), "ignore", max_residual=1e-3)
+    assert unconverged(9000, 1.2e-4).residual_per_row == pytest.approx(1.2e-4)
