@@ -254,7 +254,8 @@ class Simulation:
             result.info["fallback_from"] = (failed.method, failed.status, failed.residual)
             if self.on_failure == "warn":
                 warnings.warn(f"step {self.steps_done + 1}: {failed.method} ended {failed.status} "
-                              f"at residual {failed.residual:.3e}, above max_residual; solved "
+                              f"at residual {failed.residual:.3e} ({failed.residual_per_row:.3e} "
+                              f"per row), above max_residual; solved "
                               f"again by {self.fallback_solver} ({result.status}, residual "
                               f"{result.residual:.3e})", SolverWarning, stacklevel=2)
         timings["solve"] = time.perf_counter() - start
@@ -266,7 +267,8 @@ class Simulation:
             if failed is None:
                 raise
             raise SolverError(f"{failed.method}: status {failed.status}, residual "
-                              f"{failed.residual:.3e}; solved again by {exc}") from None
+                              f"{failed.residual:.3e} ({failed.residual_per_row:.3e} per row); "
+                              f"solved again by {exc}") from None
         if self.verify_every and (self.steps_done + 1) % self.verify_every == 0:
             self._verify(problem, result)
         if self.export_every and (self.steps_done + 1) % self.export_every == 0:

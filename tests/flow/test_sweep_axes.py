@@ -401,13 +401,13 @@ def test_a_step_that_fails_beyond_the_accepted_residual_stops_the_run_before_it_
             result = self.settings.solve(problem, *args, **kwargs)
             return replace_result(result, status="inaccurate", residual=self.residual)
 
-    config = RunConfig(n_grains=16, width=10.0, model="dry", dt_fraction=0.05, settle_steps=10,
+    config = RunConfig(n_grains=16, width=10.0, model="dry", dt_fraction=0.05, settle_steps=40,
                        solver="clarabel", checkpoint_every=2, sample_every=1, steps=6)
     run = FlowRun(config, initial_scene(config, tmp_path), tmp_path / "run")
     run.advance(2)
     settings = run.sim.settings
-    run.sim.settings = Failing(settings, 1e-3)
-    run.advance(1)                               # below 1e-2: applied, counted
+    run.sim.settings = Failing(settings, 1e-4)
+    run.advance(1)                               # below 1e-3 per row: applied, counted
     assert run.steps_done == 3 and run.statuses["inaccurate"] == 1 and run.failure is None
     before = run.sim.scene.grains.positions.copy()
     run.sim.settings = failing = Failing(settings, 0.5)
@@ -417,13 +417,16 @@ def test_a_step_that_fails_beyond_the_accepted_residual_stops_the_run_before_it_
     np.testing.assert_array_equal(run.sim.scene.grains.positions, before)
     with np.load(tmp_path / "run" / "checkpoint.npz") as data:   # the last good state, kept
         assert int(data["steps_done"]) == 3                       # (the last periodic one: 2)
+    assert failing.problem.n_contacts >= 5 and failing.warm_start is not None
     with np.load(tmp_path / "run" / "failed_step.npz") as data:   # the failed step, to reproduce
         for name, value in failing.problem.to_arrays().items():
             np.testing.assert_array_equal(data[name], value)
-        assert failing.warm_start is None and "warm_start" not in data.files   # Clarabel's run
+        np.testing.assert_array_equal(data["warm_start"], failing.warm_start)
+        assert int(data["step"]) == 4 and str(data["failure"]) == run.failure
+    with np.load(tmp_path / "run" / "checkpoint.npz") as data:    # the failed step's time in it
+        assert float(data["wall_time"]) == run.wall_time > wall_before
     summary = run.finish()
     assert summary["state"] == "failed" and summary["failure"] == run.failure
-    assert summary["wall_time"] > wall_before                # the failed step counted
     rows = [{"model": "dry", "angle": 20.0, "flow_rate": 1.0, "state": "steady"},
             {"model": "dry", "angle": 20.0, "flow_rate": 90.0, "state": "failed"}]
     mean = sweep.seed_means(rows)[0]

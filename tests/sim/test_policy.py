@@ -86,6 +86,18 @@ def test_the_max_residual_re_solve_keeps_raise_and_warn_and_names_both_solves(mo
         run_until(both, lambda r: False)
 
 
+def test_the_step_re_solves_by_the_residual_per_row_not_the_2_norm():
+    """The stepper's re-solve rule reads the residual per row: a bound between a step's
+    residual per row and its 2-norm applies the step as it is (the 2-norm would re-solve it)."""
+    first = run_until(starved("ignore"), lambda r: r.result.status != "converged")
+    per_row, norm = first.result.residual_per_row, first.result.residual
+    assert norm > 2 * per_row
+    bounded = starved("ignore", max_residual=np.sqrt(per_row * norm))
+    report = run_until(bounded, lambda r: r.result.status != "converged")
+    assert "fallback_from" not in report.result.info and report.result.method == "apgd"
+    assert report.result.residual == norm
+
+
 def test_fixed_point_options_reach_only_frictional_steps():
     """``joint`` is an option of the fixed point on s: frictionless steps must not receive it,
     and frictionless and frictional runs with it match the runs without it."""
