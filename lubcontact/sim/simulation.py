@@ -255,8 +255,8 @@ class Simulation:
             if self.on_failure == "warn":
                 warnings.warn(f"step {self.steps_done + 1}: {failed.method} ended {failed.status} "
                               f"at residual {failed.residual:.3e} ({failed.residual_per_row:.3e} "
-                              f"per row), above max_residual; solved "
-                              f"again by {self.fallback_solver} ({result.status}, residual "
+                              f"per row), above max_residual; solved again by "
+                              f"{self.fallback_solver} ({result.status}, residual "
                               f"{result.residual:.3e})", SolverWarning, stacklevel=2)
         timings["solve"] = time.perf_counter() - start
         start = time.perf_counter()

@@ -417,14 +417,13 @@ def test_a_step_that_fails_beyond_the_accepted_residual_stops_the_run_before_it_
     np.testing.assert_array_equal(run.sim.scene.grains.positions, before)
     with np.load(tmp_path / "run" / "checkpoint.npz") as data:   # the last good state, kept
         assert int(data["steps_done"]) == 3                       # (the last periodic one: 2)
+        assert float(data["wall_time"]) == run.wall_time > wall_before   # the failed step's time
     assert failing.problem.n_contacts >= 5 and failing.warm_start is not None
     with np.load(tmp_path / "run" / "failed_step.npz") as data:   # the failed step, to reproduce
         for name, value in failing.problem.to_arrays().items():
             np.testing.assert_array_equal(data[name], value)
         np.testing.assert_array_equal(data["warm_start"], failing.warm_start)
         assert int(data["step"]) == 4 and str(data["failure"]) == run.failure
-    with np.load(tmp_path / "run" / "checkpoint.npz") as data:    # the failed step's time in it
-        assert float(data["wall_time"]) == run.wall_time > wall_before
     summary = run.finish()
     assert summary["state"] == "failed" and summary["failure"] == run.failure
     rows = [{"model": "dry", "angle": 20.0, "flow_rate": 1.0, "state": "steady"},
