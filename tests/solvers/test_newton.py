@@ -28,9 +28,11 @@ from lubcontact.solvers import (
     solver_info,
 )
 from lubcontact.solvers.newton import (
+    STALL_WINDOW,
     STRATEGY_GAP,
     AlartCurnier,
     _proximal_newton,
+    _stalled,
     fallback_chain,
     newton_alart_curnier,
 )
@@ -148,6 +150,33 @@ def test_a_creeping_bed_converges_by_the_proximal_loop_without_fallback():
     result = settings.solve(problem, warm_start, warm_shift)
     assert result.status == CONVERGED and result.info["strategies"] == [(1e-3, "warm")]
     assert scaled_coulomb_error(problem, result.forces) <= 1e-6
+
+
+def _errors(start: float, rate_per_window: float, windows: int) -> list[float]:
+    """FCLIB errors of a phase falling steadily by ``rate_per_window`` every STALL_WINDOW
+    iterations, ``windows`` windows long (the start first)."""
+    per_iteration = rate_per_window ** (1.0 / STALL_WINDOW)
+    return [start * per_iteration**k for k in range(windows * STALL_WINDOW + 1)]
+
+
+def test_a_phase_closing_slowly_on_tol_has_not_stalled():
+    """A creeping bed's proximal loop near tol 1e-5: 0.85 per window, 1.2 tol to go. The rule
+    of halving per window alone called it stalled and handed it to a fallback that took 3-8
+    times longer for the same distance (docs/records/benchmarks.md)."""
+    history = _errors(1.6e-5, 0.85, 2)
+    best = min(history)
+    assert 1.1e-5 < best < 1.2e-5 and best > 0.5 * min(history[:-STALL_WINDOW])
+    assert not _stalled(history, best, tol=1e-5)          # 3 windows at 0.85: 0.61 x best
+
+
+def test_a_phase_falling_too_slowly_for_tol_or_flat_has_stalled():
+    slow = _errors(1.6e-5, 0.85, 2)                        # the same pace, tol too far for it
+    assert _stalled(slow, min(slow), tol=5e-6)
+    flat = [2e-5] * (STALL_WINDOW + 5)
+    assert _stalled(flat, 2e-5, tol=1.9e-5)
+    assert not _stalled(flat[:STALL_WINDOW], 2e-5, tol=1.9e-5)   # not one window yet
+    halving = _errors(1e-3, 0.4, 2)                        # the fast phase: never stalled
+    assert not _stalled(halving, min(halving), tol=1e-12)
 
 
 def test_max_iter_is_reported_with_the_best_iterate():
