@@ -193,7 +193,7 @@ class FlowRun:
             return
         if not self._warmed:
             self.warm_up()
-        bar = _progress_bar(end - self.steps_done, progress, self.config)
+        bar = _progress_bar(end - self.steps_done, progress, describe(self.config, self._angle()))
         try:
             with interrupt.stop_on_signals():     # Ctrl-C / SIGTERM: stop after this step
                 while self.steps_done < end:
@@ -201,6 +201,8 @@ class FlowRun:
                         raise self._interrupted()
                     if self.config.ramp_stages:
                         self._tilt()
+                        if bar is not None and self.steps_done % self.config.hold_steps == 0:
+                            bar.set_description(describe(self.config, self._angle()))
                     start, start_cpu = time.perf_counter(), time.process_time()
                     try:
                         report = self.sim.step()
@@ -243,9 +245,15 @@ class FlowRun:
         save_npz(self._file("failed_step.npz"), **problem.to_arrays(), **warm,
                  step=np.int64(self.steps_done + 1), failure=np.array(self.failure))
 
+    def _angle(self) -> float | None:
+        """The incline of the coming step (degrees): its ramp stage's (:meth:`RunConfig.ramp_stage`),
+        else ``config.angle``."""
+        return self.config.ramp_stage(self.steps_done)[1] if self.config.ramp_stages \
+            else self.config.angle
+
     def _tilt(self) -> None:
-        """Set the incline of the coming step's ramp stage (:meth:`RunConfig.ramp_stage`)."""
-        inclined.tilt(self.sim.scene, self.config.ramp_stage(self.steps_done)[1])
+        """Set the incline of the coming step's ramp stage."""
+        inclined.tilt(self.sim.scene, self._angle())
 
     def warm_up(self) -> None:
         """Solve, untimed, a small problem of each cone family the run's law can produce.
@@ -596,10 +604,12 @@ def summary_json(summary: dict[str, Any]) -> str:
     return json.dumps(json_safe(summary), indent=2, allow_nan=False)
 
 
-def describe(config: RunConfig) -> str:
-    """A run in words: ``inclined_flow dry 22 deg`` or ``sedimentation frictionless``."""
+def describe(config: RunConfig, angle: float | None = None) -> str:
+    """A run in words: ``inclined_flow dry 22 deg`` or ``sedimentation frictionless``; ``angle``
+    (degrees) in place of ``config.angle``, for a ramp's current stage."""
     words = f"{config.scene} {config.model}"
-    return words if config.angle is None else f"{words} {config.angle:g} deg"
+    angle = config.angle if angle is None else angle
+    return words if angle is None else f"{words} {angle:g} deg"
 
 
 def warm_up_problems(sim: Simulation) -> list[StepProblem]:
@@ -706,10 +716,11 @@ def cross_check(report: StepReport) -> float:
     return float(np.max(np.abs(result.velocities - reference.velocities)) / scale)
 
 
-def _progress_bar(total: int, enabled: bool, config: RunConfig) -> tqdm | None:
-    """A tqdm bar over ``total`` steps, or None when disabled or there is nothing to do."""
+def _progress_bar(total: int, enabled: bool, description: str) -> tqdm | None:
+    """A tqdm bar over ``total`` steps named ``description``, or None when disabled or there is
+    nothing to do."""
     if not enabled or total <= 0:
         return None
     from tqdm import tqdm
 
-    return tqdm(total=total, desc=describe(config), unit="step", leave=False)
+    return tqdm(total=total, desc=description, unit="step", leave=False)

@@ -181,6 +181,21 @@ def test_a_ramp_run_tilts_gravity_by_stage_and_resumes_to_the_same_state(tmp_pat
         np.testing.assert_array_equal(final_state(tmp_path / "parted")[key], value, err_msg=key)
 
 
+def test_a_ramp_runs_progress_bar_names_the_angle_of_its_current_hold(tmp_path, capsys):
+    """The bar named the ramp's first angle at every hold (a 2000-grain ascent's 18-degree hold
+    showed '17 deg')."""
+    config = RunConfig(n_grains=16, width=10.0, model="dry", dt_fraction=0.05, settle_steps=10,
+                       solver="clarabel", sample_every=1, angle=20.0, ramp_step=2.0,
+                       ramp_stages=1, hold_steps=3, steps=9)
+    run = FlowRun(config, initial_scene(config, tmp_path), None)
+    run.advance(3)
+    capsys.readouterr()
+    run.advance(4, progress=True)                  # the 22-degree hold, then back at 20
+    bar = capsys.readouterr().err
+    assert "inclined_flow dry 22 deg" in bar and "inclined_flow dry 20 deg" in bar
+    assert bar.index("dry 22 deg") < bar.index("dry 20 deg")
+
+
 def test_onset_angles_read_the_last_start_up_and_the_last_stop_down():
     """theta_start: the angle from which the layer flows at every later hold up (a transient
     just after the tilt does not count); theta_stop: the angle from which it stays still."""
