@@ -193,7 +193,8 @@ class FlowRun:
             return
         if not self._warmed:
             self.warm_up()
-        bar = _progress_bar(end - self.steps_done, progress, describe(self.config, self._angle()))
+        shown = self._angle()                   # the angle the progress bar names
+        bar = _progress_bar(end - self.steps_done, progress, describe(self.config, shown))
         try:
             with interrupt.stop_on_signals():     # Ctrl-C / SIGTERM: stop after this step
                 while self.steps_done < end:
@@ -201,8 +202,9 @@ class FlowRun:
                         raise self._interrupted()
                     if self.config.ramp_stages:
                         self._tilt()
-                        if bar is not None and self.steps_done % self.config.hold_steps == 0:
-                            bar.set_description(describe(self.config, self._angle()))
+                        if bar is not None and self._angle() != shown:
+                            shown = self._angle()
+                            bar.set_description(describe(self.config, shown))
                     start, start_cpu = time.perf_counter(), time.process_time()
                     try:
                         report = self.sim.step()
@@ -245,11 +247,11 @@ class FlowRun:
         save_npz(self._file("failed_step.npz"), **problem.to_arrays(), **warm,
                  step=np.int64(self.steps_done + 1), failure=np.array(self.failure))
 
-    def _angle(self) -> float | None:
-        """The incline of the coming step (degrees): its ramp stage's (:meth:`RunConfig.ramp_stage`),
-        else ``config.angle``."""
-        return self.config.ramp_stage(self.steps_done)[1] if self.config.ramp_stages \
-            else self.config.angle
+    def _angle(self, step: int | None = None) -> float | None:
+        """The incline of step ``step`` (0-based; the coming one when None), in degrees: its ramp
+        stage's (:meth:`RunConfig.ramp_stage`), else ``config.angle``."""
+        step = self.steps_done if step is None else step
+        return self.config.ramp_stage(step)[1] if self.config.ramp_stages else self.config.angle
 
     def _tilt(self) -> None:
         """Set the incline of the coming step's ramp stage."""
@@ -284,7 +286,8 @@ class FlowRun:
         if self.out_dir is not None:
             self.save_checkpoint()
             checkpoint = self._file("checkpoint.npz")
-        return interrupt.Interrupted(self.steps_done, checkpoint, describe(self.config))
+        return interrupt.Interrupted(self.steps_done, checkpoint,
+                                     describe(self.config, self._angle(max(self.steps_done - 1, 0))))
 
     def finish(self, progress: bool = False) -> dict[str, Any]:
         """Step to ``config.steps``, then write the final checkpoint and ``summary.json``.

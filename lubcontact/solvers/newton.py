@@ -92,15 +92,18 @@ Newton step costs 15 % less (same iterations; docs/records/benchmarks.md)."""
 
 STALL_WINDOW = 60
 STALL_FACTOR = 0.5
-STALL_HORIZON = 3
-"""Newton has stalled when its best FCLIB error did not fall by ``STALL_FACTOR`` over the last
+"""Newton has stalled when its best FCLIB error did not fall by this factor over the last
 ``STALL_WINDOW`` iterations (the error of a semismooth Newton method is not monotone: its
-global phase wanders for tens of iterations before the fast local phase), unless, falling at
-that window's rate, it would reach ``tol`` within ``STALL_HORIZON`` more windows
-(:func:`_stalled`): on the steps of a 2000-grain bed creeping at 17 degrees the proximal loop
-closes the last tenths of a decade to tol 1e-5 at 0.8-0.9 per window, and `nsgs`, the
-fallback that took over, ran 16 000-20 000 sweeps for the same distance (8-9 s against
-1-3 s; docs/records/benchmarks.md, "newton-ac on creeping beds: the last tenths to tol")."""
+global phase wanders for tens of iterations before the fast local phase), with one reprieve
+(:data:`STALL_HORIZON`, :class:`_StallRule`)."""
+STALL_HORIZON = 3
+"""The reprieve: a phase that did not halve its error over the window but, falling at that
+window's rate, would reach ``tol`` within this many more windows is given those windows, once
+(until it halves its error over a window again). On 12 steps of a 2000-grain bed creeping at
+17 degrees the proximal loop closed the last tenths of a decade to tol 1e-5 at 0.76 per window
+and was called stalled on 8; `nsgs`, the fallback, took 7-9 s for the same distance where
+the longer Newton phase took 1-3 s (docs/records/benchmarks.md, "newton-ac on creeping beds:
+the last tenths to tol")."""
 
 STRATEGIES = (1e-3, 0.0, 1e-4)
 """Starting proximal weights ``sigma`` (units of the median diagonal of ``W``) tried in turn,
@@ -357,7 +360,8 @@ def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = 5
         Registered method, or ``"auto"`` for a chain of them (:func:`fallback_chain`),
         whose exact-Coulomb solve
         (:func:`~lubcontact.solvers.solve_coulomb`) takes over from the best
-        Newton iterate when every strategy stalls (:func:`_stalled`), fails or
+        Newton iterate when every strategy stalls (:data:`STALL_WINDOW`,
+        :data:`STALL_HORIZON`), fails or
         reaches ``max_iter``; None: no fallback. The answer is the fallback's
         (polished) forces only where their FCLIB error is below the best Newton
         iterate's. Newton stalls where the
@@ -482,7 +486,7 @@ def _proximal_newton(function: AlartCurnier, unshifted: ConicProblem, forces: np
     creeping beds the weight then alternated between a subproblem that moved
     nothing and a smaller one not solved in :data:`INNER_CAP` iterations until
     the phase stalled (docs/records/benchmarks.md, "creeping beds"). The best
-    iterate is what the phase returns. The phase stalls by :func:`_stalled`.
+    iterate is what the phase returns. The phase stalls by :class:`_StallRule`.
     """
     scale = sigma * function.typical
     q_norm = 1.0 + float(np.linalg.norm(function.q))
@@ -491,8 +495,9 @@ def _proximal_newton(function: AlartCurnier, unshifted: ConicProblem, forces: np
     iterations = gradient_steps = proximal_steps = 0
     status = MAX_ITER
     floor, floor_error = 0.0, np.inf                # the largest weight that failed lately
+    rule = _StallRule(tol)
     while best[0] > tol and iterations < max_iter:
-        if _stalled(history, best[0], tol):
+        if rule.stalled(history, best[0]):
             status = STALLED
             break
         function.set_proximal(scale, forces)
@@ -533,16 +538,38 @@ def _proximal_newton(function: AlartCurnier, unshifted: ConicProblem, forces: np
                   gradient_steps=gradient_steps, proximal_steps=proximal_steps)
 
 
-def _stalled(history: list[float], best: float, tol: float) -> bool:
-    """Whether a phase whose FCLIB errors are ``history`` (one per iteration, the start first)
-    and whose best error is ``best`` has stalled: over the last :data:`STALL_WINDOW` iterations
-    its best error did not fall by :data:`STALL_FACTOR`, and at that window's rate it would not
-    reach ``tol`` within :data:`STALL_HORIZON` more windows."""
-    if len(history) <= STALL_WINDOW:
-        return False
-    before = min(history[:-STALL_WINDOW])
-    rate = best / before
-    return rate > STALL_FACTOR and best * rate ** STALL_HORIZON > tol
+@dataclass
+class _StallRule:
+    """The stall test of one Newton phase at tolerance ``tol``, called once per proximal step.
+
+    The phase has stalled when its best FCLIB error did not fall by :data:`STALL_FACTOR` over
+    the last :data:`STALL_WINDOW` iterations, except once: if, falling at that window's rate, it
+    would reach ``tol`` within :data:`STALL_HORIZON` more windows, it is given those windows
+    (``spared_at``: the iteration of the reprieve; a window that halves the error ends it).
+    The reprieve is not renewed: a phase that keeps slowing down near ``tol`` stalls at most
+    ``STALL_HORIZON`` windows later than by the halving test alone.
+    """
+
+    tol: float
+    spared_at: int | None = None
+
+    def stalled(self, history: list[float], best: float) -> bool:
+        """Whether the phase whose FCLIB errors are ``history`` (one per iteration, the start
+        first) and whose best error is ``best`` (at most every entry of ``history``) has
+        stalled."""
+        if len(history) <= STALL_WINDOW:
+            return False
+        before = min(history[:-STALL_WINDOW])
+        if not best > STALL_FACTOR * before:          # halved over the window: progress
+            self.spared_at = None
+            return False
+        if self.spared_at is None:
+            # best * (best / before) ** STALL_HORIZON <= tol, without dividing
+            if best ** (STALL_HORIZON + 1) <= self.tol * before ** STALL_HORIZON:
+                self.spared_at = len(history)
+                return False
+            return True
+        return len(history) - self.spared_at > STALL_HORIZON * STALL_WINDOW
 
 
 @dataclass

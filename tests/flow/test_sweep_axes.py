@@ -1,5 +1,8 @@
 """Sweeps over seeds, viscosity and roughness; angle ramps and the hysteresis of the flow angle."""
 import csv
+import os
+import signal
+import time
 from dataclasses import replace
 from types import SimpleNamespace
 
@@ -7,7 +10,7 @@ import numpy as np
 import pytest
 
 from lubcontact.flow import cli as flow_cli
-from lubcontact.flow import hysteresis, measure, sweep
+from lubcontact.flow import hysteresis, interrupt, measure, sweep
 from lubcontact.flow.bed import initial_scene
 from lubcontact.flow.config import RunConfig
 from lubcontact.flow.run import FlowRun
@@ -183,7 +186,7 @@ def test_a_ramp_run_tilts_gravity_by_stage_and_resumes_to_the_same_state(tmp_pat
 
 def test_a_ramp_runs_progress_bar_names_the_angle_of_its_current_hold(tmp_path, capsys):
     """The bar named the ramp's first angle at every hold (a 2000-grain ascent's 18-degree hold
-    showed '17 deg')."""
+    showed '17 deg'), and so did the message of a run interrupted there."""
     config = RunConfig(n_grains=16, width=10.0, model="dry", dt_fraction=0.05, settle_steps=10,
                        solver="clarabel", sample_every=1, angle=20.0, ramp_step=2.0,
                        ramp_stages=1, hold_steps=3, steps=9)
@@ -194,6 +197,14 @@ def test_a_ramp_runs_progress_bar_names_the_angle_of_its_current_hold(tmp_path, 
     bar = capsys.readouterr().err
     assert "inclined_flow dry 22 deg" in bar and "inclined_flow dry 20 deg" in bar
     assert bar.index("dry 22 deg") < bar.index("dry 20 deg")
+    stopped = FlowRun(config, initial_scene(config, tmp_path), None)
+    stopped.advance(6)                             # the last step done: the 22-degree hold's
+    with interrupt.stop_on_signals():
+        os.kill(os.getpid(), signal.SIGINT)
+        time.sleep(0.1)                            # the handler runs in the main thread
+        with pytest.raises(interrupt.Interrupted) as stop:
+            stopped.advance(1)
+    assert stop.value.what == "inclined_flow dry 22 deg" and stop.value.step == 6
 
 
 def test_onset_angles_read_the_last_start_up_and_the_last_stop_down():

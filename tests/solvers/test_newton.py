@@ -28,11 +28,13 @@ from lubcontact.solvers import (
     solver_info,
 )
 from lubcontact.solvers.newton import (
+    STALL_FACTOR,
+    STALL_HORIZON,
     STALL_WINDOW,
     STRATEGY_GAP,
     AlartCurnier,
     _proximal_newton,
-    _stalled,
+    _StallRule,
     fallback_chain,
     newton_alart_curnier,
 )
@@ -159,24 +161,46 @@ def _errors(start: float, rate_per_window: float, windows: int) -> list[float]:
     return [start * per_iteration**k for k in range(windows * STALL_WINDOW + 1)]
 
 
+def _first_stall(history: list[float], tol: float) -> int | None:
+    """The length of ``history`` at which a phase's stall rule, asked after every iteration as
+    the phase grows, first says stalled (None: never)."""
+    rule = _StallRule(tol)
+    for length in range(1, len(history) + 1):
+        if rule.stalled(history[:length], min(history[:length])):
+            return length
+    return None
+
+
 def test_a_phase_closing_slowly_on_tol_has_not_stalled():
     """A creeping bed's proximal loop near tol 1e-5: 0.85 per window, 1.2 tol to go. The rule
-    of halving per window alone called it stalled and handed it to a fallback that took 3-8
-    times longer for the same distance (docs/records/benchmarks.md)."""
+    of halving per window alone called it stalled and handed it to a fallback that took longer
+    for the same distance (docs/records/benchmarks.md, "the last tenths to tol")."""
     history = _errors(1.6e-5, 0.85, 2)
     best = min(history)
-    assert 1.1e-5 < best < 1.2e-5 and best > 0.5 * min(history[:-STALL_WINDOW])
-    assert not _stalled(history, best, tol=1e-5)          # 3 windows at 0.85: 0.61 x best
+    assert 1.1e-5 < best < 1.2e-5 and best > STALL_FACTOR * min(history[:-STALL_WINDOW])
+    assert not _StallRule(1e-5).stalled(history, best)    # 3 windows at 0.85: 0.61 x best
 
 
 def test_a_phase_falling_too_slowly_for_tol_or_flat_has_stalled():
     slow = _errors(1.6e-5, 0.85, 2)                        # the same pace, tol too far for it
-    assert _stalled(slow, min(slow), tol=5e-6)
+    assert _StallRule(5e-6).stalled(slow, min(slow))
     flat = [2e-5] * (STALL_WINDOW + 5)
-    assert _stalled(flat, 2e-5, tol=1.9e-5)
-    assert not _stalled(flat[:STALL_WINDOW], 2e-5, tol=1.9e-5)   # not one window yet
+    assert _StallRule(1.9e-5).stalled(flat, 2e-5)
+    assert not _StallRule(1.9e-5).stalled(flat[:STALL_WINDOW], 2e-5)   # not one window yet
     halving = _errors(1e-3, 0.4, 2)                        # the fast phase: never stalled
-    assert not _stalled(halving, min(halving), tol=1e-12)
+    assert _first_stall(halving, 1e-12) is None
+
+
+def test_the_reprieve_near_tol_is_given_once():
+    """A phase whose distance to tol shrinks by 0.7 per window approaches tol without reaching
+    it: spared at its first slow window (the window's rate would reach tol within the horizon),
+    it stalls STALL_HORIZON windows later, not never (the rate of each new window spared it
+    again until max_iter)."""
+    tol = 1e-5
+    per_iteration = 0.7 ** (1.0 / STALL_WINDOW)
+    history = [tol * (1.0 + 0.5 * per_iteration**k) for k in range(10 * STALL_WINDOW)]
+    assert _first_stall(history, tol) == 2 + (1 + STALL_HORIZON) * STALL_WINDOW
+    assert _first_stall(history, 0.5 * tol) == STALL_WINDOW + 1     # no reprieve: far from tol
 
 
 def test_max_iter_is_reported_with_the_best_iterate():
