@@ -98,12 +98,12 @@ global phase wanders for tens of iterations before the fast local phase), with o
 (:data:`STALL_HORIZON`, :class:`_StallRule`)."""
 STALL_HORIZON = 3
 """The reprieve: a phase that did not halve its error over the window but, falling at that
-window's rate, would reach ``tol`` within this many more windows is given those windows, once
-(until it halves its error over a window again). On 12 steps of a 2000-grain bed creeping at
-17 degrees the proximal loop closed the last tenths of a decade to tol 1e-5 at 0.76 per window
-and was called stalled on 8; `nsgs`, the fallback, took 7-9 s for the same distance where
-the longer Newton phase took 1-3 s (docs/records/benchmarks.md, "newton-ac on creeping beds:
-the last tenths to tol")."""
+window's rate, would reach ``tol`` within this many more windows is given those windows while
+its pace still allows it, once (until it halves its error over a window again). On 12 steps
+of a 2000-grain bed creeping at 17 degrees the proximal loop closed the last tenths of a
+decade to tol 1e-5 at about 0.8 per window and was called stalled on 8; `nsgs`, the fallback,
+took 7-9 s for that distance where the longer Newton phase took 1-3 s
+(docs/records/benchmarks.md, "newton-ac on creeping beds: the last tenths to tol")."""
 
 STRATEGIES = (1e-3, 0.0, 1e-4)
 """Starting proximal weights ``sigma`` (units of the median diagonal of ``W``) tried in turn,
@@ -543,33 +543,32 @@ class _StallRule:
     """The stall test of one Newton phase at tolerance ``tol``, called once per proximal step.
 
     The phase has stalled when its best FCLIB error did not fall by :data:`STALL_FACTOR` over
-    the last :data:`STALL_WINDOW` iterations, except once: if, falling at that window's rate, it
-    would reach ``tol`` within :data:`STALL_HORIZON` more windows, it is given those windows
-    (``spared_at``: the iteration of the reprieve; a window that halves the error ends it).
-    The reprieve is not renewed: a phase that keeps slowing down near ``tol`` stalls at most
-    ``STALL_HORIZON`` windows later than by the halving test alone.
+    the last :data:`STALL_WINDOW` iterations, with one reprieve: at the first such window,
+    if falling at that window's rate it would reach ``tol`` within :data:`STALL_HORIZON` more
+    windows, it is given until then (``deadline``, an iteration count), and it stalls as soon
+    as the rate of its last window would no longer bring it to ``tol`` by the deadline. A
+    window that halves the error ends the reprieve. A phase that slows down near ``tol``
+    therefore stalls at most ``STALL_HORIZON`` windows later than by the halving test alone.
     """
 
     tol: float
-    spared_at: int | None = None
+    deadline: int | None = None
 
     def stalled(self, history: list[float], best: float) -> bool:
         """Whether the phase whose FCLIB errors are ``history`` (one per iteration, the start
         first) and whose best error is ``best`` (at most every entry of ``history``) has
         stalled."""
-        if len(history) <= STALL_WINDOW:
+        count = len(history)
+        if count <= STALL_WINDOW:
             return False
         before = min(history[:-STALL_WINDOW])
         if not best > STALL_FACTOR * before:          # halved over the window: progress
-            self.spared_at = None
+            self.deadline = None
             return False
-        if self.spared_at is None:
-            # best * (best / before) ** STALL_HORIZON <= tol, without dividing
-            if best ** (STALL_HORIZON + 1) <= self.tol * before ** STALL_HORIZON:
-                self.spared_at = len(history)
-                return False
-            return True
-        return len(history) - self.spared_at > STALL_HORIZON * STALL_WINDOW
+        if self.deadline is None:                     # before >= best > 0 from here on
+            self.deadline = count + STALL_HORIZON * STALL_WINDOW
+        windows_left = (self.deadline - count) / STALL_WINDOW
+        return best * (best / before) ** windows_left > self.tol
 
 
 @dataclass
