@@ -201,9 +201,9 @@ class FlowRun:
                     if interrupt.requested():
                         raise self._interrupted()
                     if self.config.ramp_stages:
-                        self._tilt()
-                        if bar is not None and self._angle() != shown:
-                            shown = self._angle()
+                        angle = self._tilt()
+                        if bar is not None and angle != shown:
+                            shown = angle
                             bar.set_description(describe(self.config, shown))
                     start, start_cpu = time.perf_counter(), time.process_time()
                     try:
@@ -253,9 +253,11 @@ class FlowRun:
         step = self.steps_done if step is None else step
         return self.config.ramp_stage(step)[1] if self.config.ramp_stages else self.config.angle
 
-    def _tilt(self) -> None:
-        """Set the incline of the coming step's ramp stage."""
-        inclined.tilt(self.sim.scene, self._angle())
+    def _tilt(self) -> float:
+        """Set the incline of the coming step's ramp stage; that angle (degrees)."""
+        angle = self._angle()
+        inclined.tilt(self.sim.scene, angle)
+        return angle
 
     def warm_up(self) -> None:
         """Solve, untimed, a small problem of each cone family the run's law can produce.
