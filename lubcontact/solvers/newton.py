@@ -53,7 +53,8 @@ each subproblem solved (:func:`_proximal_newton`). The starting ``sigma`` values
 error (:func:`~lubcontact.problem.metrics.coulomb_error`, the measure every
 report uses) below ``tol``. When every strategy stalls, the best iterate goes
 to fallbacks in turn (``fallback``; in 2D Gauss-Seidel, then apgd-jacobi's fixed
-point), each answer polished by Newton and kept when it beats the best so far.
+point), each answer polished by Newton and kept when it beats the best so far, the next
+fallback only while the best error is above :data:`FALLBACK_GAP` ``tol``.
 """
 from __future__ import annotations
 
@@ -152,6 +153,15 @@ on one piece and flips pieces by its branch rule, which on a gluey bed coming to
 5 to 22 contacts at every outer iteration without settling: 50 outer iterations, three
 quarters of the step (34-36 s at 2000 grains), and a polished answer 9 to 37 times worse
 than Gauss-Seidel's (docs/records/benchmarks.md, "The gluey bed coming to rest")."""
+
+FALLBACK_GAP = 10.0
+"""After a fallback, the next one in the chain runs only while the best FCLIB error is above
+this many ``tol``: within a decade of ``tol`` the next, slower first-order fallback has not
+closed the gap. On a 2000-grain dry bed creeping at 17 degrees (tol 1e-5) Gauss-Seidel's
+polished answers stopped at 1.07-1.22e-5 and apgd-jacobi's fixed point then took 10.5-10.8 s,
+half the step, for polished answers 2-2.5 times worse; on Siconos' 2020-contact file (tol
+1e-8) Gauss-Seidel's polished answer stops at 32 ``tol`` and apgd-jacobi's converges
+(docs/records/benchmarks.md, "newton-ac on creeping beds: the fallbacks near tol")."""
 
 STALLED = "stalled"
 """Status of a Newton phase that stalled (reported in ``info``, never as a result's status)."""
@@ -358,13 +368,12 @@ def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = 5
         Initial forces (scaled); zero otherwise.
     fallback : str or None
         Registered method, or ``"auto"`` for a chain of them (:func:`fallback_chain`),
-        whose exact-Coulomb solve
-        (:func:`~lubcontact.solvers.solve_coulomb`) takes over from the best
-        Newton iterate when every strategy stalls (:data:`STALL_WINDOW`,
-        :data:`STALL_HORIZON`), fails or
-        reaches ``max_iter``; None: no fallback. The answer is the fallback's
-        (polished) forces only where their FCLIB error is below the best Newton
-        iterate's. Newton stalls where the
+        whose exact-Coulomb solve (:func:`~lubcontact.solvers.solve_coulomb`) takes over
+        from the best Newton iterate when every strategy stalls (:data:`STALL_WINDOW`,
+        :data:`STALL_HORIZON`), fails or reaches ``max_iter``, each from the best iterate so
+        far and the next one only while that iterate's error is above :data:`FALLBACK_GAP`
+        ``tol``; None: no fallback. The answer is the fallback's (polished) forces only where
+        their FCLIB error is below the best Newton iterate's. Newton stalls where the
         generalised Jacobian is singular at the solution for every proximal
         weight tried (degenerate contacts, e.g. the 7002-contact Siconos
         granular file with its indefinite ``W``).
@@ -399,7 +408,9 @@ def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = 5
             "newton_status": phase.status, "error": phase.error}
     chain = () if phase.status == CONVERGED else fallback_chain(problem.cones, fallback)
     best_error = phase.error
-    for name in chain:
+    for position, name in enumerate(chain):
+        if position and best_error <= FALLBACK_GAP * tol:
+            break
         rescue = solve_coulomb(problem, name, tol=tol, tol_fp=tol, warm_start=forces)
         iterations += rescue.iterations
         info["fallback_iterations"] = info.get("fallback_iterations", 0) + rescue.iterations

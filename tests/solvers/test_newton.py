@@ -24,6 +24,7 @@ from lubcontact.solvers import (
     INACCURATE,
     MAX_ITER,
     SolveSettings,
+    newton,
     solve_coulomb,
     solver_info,
 )
@@ -279,8 +280,37 @@ def test_a_strategy_stalled_near_tol_goes_to_the_fallbacks_without_the_other_str
     assert alone.info["strategies"] == [(1e-3, "cold")]
     assert alone.info["error"] <= STRATEGY_GAP * 1e-8
     rescued = solve_coulomb(problem, "newton-ac", tol=1e-8)
-    assert rescued.status == CONVERGED and rescued.info["fallbacks"][0] == "nsgs"
+    # Gauss-Seidel's polished answer stops above FALLBACK_GAP tol: apgd-jacobi's fixed point runs
+    assert rescued.status == CONVERGED and rescued.info["fallbacks"] == ["nsgs", "apgd-jacobi"]
     assert scaled_coulomb_error(problem, rescued.forces) <= 1e-8
+
+
+def test_the_next_fallback_runs_only_while_the_best_error_is_above_the_gap(stalling, monkeypatch):
+    """Two fallbacks that hand the best iterate back unchanged: the second runs when the best
+    error after the first is above FALLBACK_GAP tol, and not when it is below."""
+    problem, _ = stalling
+
+    def echo(problem, *, tol, max_iter=1, warm_start=None):
+        return MethodOutput(np.array(warm_start, dtype=float), MAX_ITER, 1)
+
+    for name in ("echo-first-test", "echo-second-test"):
+        register(name, kind=FIRST_ORDER, cones=ALL_CONES, warm_start=True)(echo)
+    monkeypatch.setattr(newton, "FALLBACKS_2D", ("echo-first-test", "echo-second-test"))
+    try:
+        monkeypatch.setattr(newton, "FALLBACK_GAP", 0.0)
+        both = solve_coulomb(problem, "newton-ac", tol=1e-8)
+        best = both.info["error"]
+        monkeypatch.setattr(newton, "FALLBACK_GAP", 0.5 * best / 1e-8)
+        above = solve_coulomb(problem, "newton-ac", tol=1e-8)
+        monkeypatch.setattr(newton, "FALLBACK_GAP", 2.0 * best / 1e-8)
+        within = solve_coulomb(problem, "newton-ac", tol=1e-8)
+    finally:
+        for name in ("echo-first-test", "echo-second-test"):
+            unregister(name)
+    assert best > 1e-8 and both.status != CONVERGED
+    assert both.info["fallbacks"] == above.info["fallbacks"] == ["echo-first-test", "echo-second-test"]
+    assert within.info["fallbacks"] == ["echo-first-test"]
+    assert within.info["error"] == pytest.approx(best, rel=1e-12)
 
 
 def test_a_fallback_worse_than_newton_never_replaces_its_best_iterate(stalling):
