@@ -53,8 +53,8 @@ each subproblem solved (:func:`_proximal_newton`). The starting ``sigma`` values
 error (:func:`~lubcontact.problem.metrics.coulomb_error`, the measure every
 report uses) below ``tol``. When every strategy stalls, the best iterate goes
 to fallbacks in turn (``fallback``; in 2D Gauss-Seidel, then apgd-jacobi's fixed
-point), each answer polished by Newton and kept when it beats the best so far, the next
-fallback only while the best error is above :data:`FALLBACK_GAP` ``tol``.
+point), each answer polished by Newton and kept when it beats the best so far, until one is
+below ``tol``, or kept within :data:`FALLBACK_GAP` ``tol``.
 """
 from __future__ import annotations
 
@@ -143,11 +143,12 @@ FALLBACKS_2D = ("nsgs", "apgd-jacobi")
 FALLBACKS_UNION = ("nsgs",)
 FALLBACKS_3D = ("apgd-jacobi",)
 """Fallbacks (``fallback="auto"``) tried in turn from the best iterate so far when every Newton
-strategy stalls, until one's polished answer is below tol. In 2D first Gauss-Seidel with exact
-local solves (:mod:`.gauss_seidel`): on gluey flow steps where Newton stalled at FCLIB errors
-2e-5 to 1e-4 it reached 1e-6 in 0.3 s, or 5e-6 at its cap, where apgd-jacobi's fixed point ran
-out at 1e-4; then apgd-jacobi's fixed point on ``s``, which solves Siconos' 2020-contact file
-to 1e-8 where Gauss-Seidel stops at 2.8e-7 (docs/records/benchmarks.md). On 2D problems with
+strategy stalls, until one's polished answer is below tol (or kept within :data:`FALLBACK_GAP`
+``tol``). In 2D first Gauss-Seidel with exact local solves (:mod:`.gauss_seidel`): on gluey
+flow steps where Newton stalled at FCLIB errors 2e-5 to 1e-4 it reached 1e-6 in 0.3 s, or
+5e-6 at its cap, where apgd-jacobi's fixed point ran out at 1e-4; then apgd-jacobi's fixed
+point on ``s``, which solves Siconos' 2020-contact file to 1e-8 where Gauss-Seidel from
+Newton's best iterate stops at 5.7e-7 (docs/records/benchmarks.md). On 2D problems with
 UNION contacts (gluey + friction) Gauss-Seidel alone: the fixed point fixes each union contact
 on one piece and flips pieces by its branch rule, which on a gluey bed coming to rest flipped
 5 to 22 contacts at every outer iteration without settling: 50 outer iterations, three
@@ -155,12 +156,12 @@ quarters of the step (34-36 s at 2000 grains), and a polished answer 9 to 37 tim
 than Gauss-Seidel's (docs/records/benchmarks.md, "The gluey bed coming to rest")."""
 
 FALLBACK_GAP = 10.0
-"""After a fallback, the next one in the chain runs only while the best FCLIB error is above
-this many ``tol``: within a decade of ``tol`` the next, slower first-order fallback has not
-closed the gap. On a 2000-grain dry bed creeping at 17 degrees (tol 1e-5) Gauss-Seidel's
-polished answers stopped at 1.07-1.22e-5 and apgd-jacobi's fixed point then took 10.5-10.8 s,
-half the step, for polished answers 2-2.5 times worse; on Siconos' 2020-contact file (tol
-1e-8) Gauss-Seidel's polished answer stops at 32 ``tol`` and apgd-jacobi's converges
+"""A fallback whose polished answer is kept (it beats the best so far) and lies within this many
+``tol`` ends the chain: the next, slower first-order fallback has not closed such a gap. On a
+2000-grain dry bed creeping at 17 degrees (tol 1e-5) Gauss-Seidel's polished answers stopped
+at 1.07e-5 and 1.22e-5, and apgd-jacobi's fixed point then took 10.5-10.8 s, half the step,
+for polished answers 2-2.5 times worse. On Siconos' 2020-contact file (tol 1e-8) Gauss-Seidel's
+polished answer (3.2e-7) is not kept, Newton's best being 3.1e-7, and apgd-jacobi's converges
 (docs/records/benchmarks.md, "newton-ac on creeping beds: the fallbacks near tol")."""
 
 STALLED = "stalled"
@@ -371,9 +372,10 @@ def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = 5
         whose exact-Coulomb solve (:func:`~lubcontact.solvers.solve_coulomb`) takes over
         from the best Newton iterate when every strategy stalls (:data:`STALL_WINDOW`,
         :data:`STALL_HORIZON`), fails or reaches ``max_iter``, each from the best iterate so
-        far and the next one only while that iterate's error is above :data:`FALLBACK_GAP`
-        ``tol``; None: no fallback. The answer is the fallback's (polished) forces only where
-        their FCLIB error is below the best Newton iterate's. Newton stalls where the
+        far, until one's polished answer is below ``tol`` or is kept within
+        :data:`FALLBACK_GAP` ``tol``; None: no fallback. The answer is the fallback's
+        (polished) forces only where their FCLIB error is below the best iterate's so far.
+        Newton stalls where the
         generalised Jacobian is singular at the solution for every proximal
         weight tried (degenerate contacts, e.g. the 7002-contact Siconos
         granular file with its indefinite ``W``).
@@ -408,9 +410,7 @@ def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = 5
             "newton_status": phase.status, "error": phase.error}
     chain = () if phase.status == CONVERGED else fallback_chain(problem.cones, fallback)
     best_error = phase.error
-    for position, name in enumerate(chain):
-        if position and best_error <= FALLBACK_GAP * tol:
-            break
+    for name in chain:
         rescue = solve_coulomb(problem, name, tol=tol, tol_fp=tol, warm_start=forces)
         iterations += rescue.iterations
         info["fallback_iterations"] = info.get("fallback_iterations", 0) + rescue.iterations
@@ -422,14 +422,15 @@ def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = 5
                                   STRATEGIES[0])
         iterations += finish.iterations
         info["newton_iterations"] += finish.iterations
-        if finish.error < best_error:           # else the best iterate so far and its status stay
+        kept = finish.error < best_error       # else the best iterate so far and its status stay
+        if kept:
             forces, best_error = finish.forces, finish.error
             info["error"] = finish.error
             # newton-ac's test is the FCLIB error: a fallback "converged" by its own
             # measure but above tol is inaccurate here; otherwise the iterations ran out
             status = CONVERGED if finish.error <= tol else \
                 INACCURATE if rescue.status == CONVERGED else MAX_ITER
-        if status == CONVERGED:
+        if status == CONVERGED or kept and best_error <= FALLBACK_GAP * tol:
             break
     return MethodOutput(forces, status, iterations, setup_time=setup_time,
                         solve_time=time.perf_counter() - start - setup_time,

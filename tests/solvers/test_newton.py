@@ -29,6 +29,7 @@ from lubcontact.solvers import (
     solver_info,
 )
 from lubcontact.solvers.newton import (
+    FALLBACK_GAP,
     STALL_FACTOR,
     STALL_HORIZON,
     STALL_WINDOW,
@@ -280,57 +281,49 @@ def test_a_strategy_stalled_near_tol_goes_to_the_fallbacks_without_the_other_str
     assert alone.info["strategies"] == [(1e-3, "cold")]
     assert alone.info["error"] <= STRATEGY_GAP * 1e-8
     rescued = solve_coulomb(problem, "newton-ac", tol=1e-8)
-    # Gauss-Seidel's polished answer stops above FALLBACK_GAP tol: apgd-jacobi's fixed point runs
+    # Gauss-Seidel's polished answer is not kept (Newton's best is lower): apgd-jacobi's runs
     assert rescued.status == CONVERGED and rescued.info["fallbacks"] == ["nsgs", "apgd-jacobi"]
     assert scaled_coulomb_error(problem, rescued.forces) <= 1e-8
 
 
-def test_the_next_fallback_runs_only_while_the_best_error_is_above_the_gap(stalling, monkeypatch):
-    """Two fallbacks that hand the best iterate back unchanged: the second runs when the best
-    error after the first is above FALLBACK_GAP tol, and not when it is below."""
-    problem, _ = stalling
+def test_a_fallback_answer_kept_within_the_gap_ends_the_chain(stalling, monkeypatch):
+    """A first fallback whose answer (unpolished here) is kept above tol but within FALLBACK_GAP
+    tol ends the chain, and not with a smaller gap; a first fallback whose answer is not kept
+    (zero forces) never ends it, whatever Newton's own error."""
+    problem, alone = stalling
+    solution = newton_alart_curnier(problem.normalized(), tol=1e-8).forces
+
+    def nearer(problem, *, tol, max_iter=1, warm_start=None):
+        return MethodOutput(solution * (1.0 + 1e-7), MAX_ITER, 1)   # FCLIB error 5e-8
+
+    def zero(problem, *, tol, max_iter=1, warm_start=None):
+        return MethodOutput(np.zeros(problem.n_rows), MAX_ITER, 1)
 
     def echo(problem, *, tol, max_iter=1, warm_start=None):
         return MethodOutput(np.array(warm_start, dtype=float), MAX_ITER, 1)
 
-    for name in ("echo-first-test", "echo-second-test"):
-        register(name, kind=FIRST_ORDER, cones=ALL_CONES, warm_start=True)(echo)
-    monkeypatch.setattr(newton, "FALLBACKS_2D", ("echo-first-test", "echo-second-test"))
+    def chain(first, gap):
+        monkeypatch.setattr(newton, "FALLBACKS_2D", (first, "echo-test"))
+        monkeypatch.setattr(newton, "FALLBACK_GAP", gap)
+        return solve_coulomb(problem, "newton-ac", tol=1e-8)
+
+    monkeypatch.setattr(newton, "POLISH_ITERATIONS", 0)   # each fallback's answer as it is
+    fakes = {"nearer-test": nearer, "zero-test": zero, "echo-test": echo}
     try:
-        monkeypatch.setattr(newton, "FALLBACK_GAP", 0.0)
-        both = solve_coulomb(problem, "newton-ac", tol=1e-8)
-        best = both.info["error"]
-        monkeypatch.setattr(newton, "FALLBACK_GAP", 0.5 * best / 1e-8)
-        above = solve_coulomb(problem, "newton-ac", tol=1e-8)
-        monkeypatch.setattr(newton, "FALLBACK_GAP", 2.0 * best / 1e-8)
-        within = solve_coulomb(problem, "newton-ac", tol=1e-8)
+        for name, fake in fakes.items():
+            register(name, kind=FIRST_ORDER, cones=ALL_CONES, warm_start=True)(fake)
+        within = chain("nearer-test", FALLBACK_GAP)
+        kept = within.info["error"]
+        above = chain("nearer-test", 0.5 * kept / 1e-8)
+        not_kept = chain("zero-test", np.inf)
     finally:
-        for name in ("echo-first-test", "echo-second-test"):
+        for name in fakes:
             unregister(name)
-    assert best > 1e-8 and both.status != CONVERGED
-    assert both.info["fallbacks"] == above.info["fallbacks"] == ["echo-first-test", "echo-second-test"]
-    assert within.info["fallbacks"] == ["echo-first-test"]
-    assert within.info["error"] == pytest.approx(best, rel=1e-12)
-
-
-def test_a_fallback_worse_than_newton_never_replaces_its_best_iterate(stalling):
-    """A fallback whose answer is worse than the best Newton iterate (here: zero forces said to be
-    converged) leaves that iterate as the answer; the status stays honest."""
-    problem, alone = stalling
-
-    @register("zero-forces-test", kind=FIRST_ORDER, cones=ALL_CONES)
-    def zero_forces(problem, *, tol, max_iter=1, warm_start=None):
-        return MethodOutput(np.zeros(problem.n_rows), CONVERGED, 1)
-
-    try:
-        result = solve_coulomb(problem, "newton-ac", tol=1e-8, fallback="zero-forces-test")
-    finally:
-        unregister("zero-forces-test")
-    assert result.info["fallback_iterations"] == 1    # it ran (its claim is rejected: inaccurate)
-    assert result.status == INACCURATE
-    error = scaled_coulomb_error(problem, result.forces)
-    assert error == pytest.approx(alone.info["error"], rel=1e-6)
-    assert error < scaled_coulomb_error(problem, np.zeros(problem.n_rows))
+    assert 1e-8 < kept <= FALLBACK_GAP * 1e-8 and kept < alone.info["error"]
+    assert within.info["fallbacks"] == ["nearer-test"]
+    assert above.info["fallbacks"] == ["nearer-test", "echo-test"]
+    assert not_kept.info["fallbacks"] == ["zero-test", "echo-test"]
+    assert not_kept.info["error"] == pytest.approx(alone.info["error"], rel=1e-12)
 
 
 def test_a_fallback_with_non_finite_forces_leaves_newtons_answer_and_status():
