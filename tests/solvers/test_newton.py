@@ -326,6 +326,26 @@ def test_a_fallback_answer_kept_within_the_gap_ends_the_chain(stalling, monkeypa
     assert not_kept.info["error"] == pytest.approx(alone.info["error"], rel=1e-12)
 
 
+def test_a_fallback_worse_than_newton_never_replaces_its_best_iterate(stalling):
+    """A fallback whose answer is worse than the best Newton iterate (here: zero forces said to be
+    converged) leaves that iterate as the answer; the status stays honest."""
+    problem, alone = stalling
+
+    @register("zero-forces-test", kind=FIRST_ORDER, cones=ALL_CONES)
+    def zero_forces(problem, *, tol, max_iter=1, warm_start=None):
+        return MethodOutput(np.zeros(problem.n_rows), CONVERGED, 1)
+
+    try:
+        result = solve_coulomb(problem, "newton-ac", tol=1e-8, fallback="zero-forces-test")
+    finally:
+        unregister("zero-forces-test")
+    assert result.info["fallback_iterations"] == 1    # it ran (its claim is rejected: inaccurate)
+    assert result.status == INACCURATE
+    error = scaled_coulomb_error(problem, result.forces)
+    assert error == pytest.approx(alone.info["error"], rel=1e-6)
+    assert error < scaled_coulomb_error(problem, np.zeros(problem.n_rows))
+
+
 def test_a_fallback_with_non_finite_forces_leaves_newtons_answer_and_status():
     """One Newton iteration, then a fallback that diverges (NaN forces, zeroed by the registry):
     the answer is the better of Newton's best iterate and the polished fallback, with status
