@@ -309,15 +309,17 @@ def test_a_fallback_answer_kept_within_the_gap_ends_the_chain(stalling, monkeypa
 
     monkeypatch.setattr(newton, "POLISH_ITERATIONS", 0)   # each fallback's answer as it is
     fakes = {"nearer-test": nearer, "zero-test": zero, "echo-test": echo}
+    registered = []
     try:
         for name, fake in fakes.items():
             register(name, kind=FIRST_ORDER, cones=ALL_CONES, warm_start=True)(fake)
+            registered.append(name)
         within = chain("nearer-test", FALLBACK_GAP)
         kept = within.info["error"]
         above = chain("nearer-test", 0.5 * kept / 1e-8)
         not_kept = chain("zero-test", np.inf)
     finally:
-        for name in fakes:
+        for name in registered:
             unregister(name)
     assert 1e-8 < kept <= FALLBACK_GAP * 1e-8 and kept < alone.info["error"]
     assert within.info["fallbacks"] == ["nearer-test"]
