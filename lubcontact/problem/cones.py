@@ -368,7 +368,8 @@ class ConeProjector:
 
     def __call__(self, forces: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
         """``P_K(forces)``; ``out`` may be given to avoid an allocation (not ``forces``)."""
-        out = np.clip(forces, self.lower, self.upper, out=out)
+        out = np.maximum(forces, self.lower, out=out)     # np.clip costs 4x more on small vectors
+        np.minimum(out, self.upper, out=out)
         (cone_n, cone_t, cone_mu), (union_n, union_t, union_mu) = self.pieces
         if cone_n.size:
             new_n, new_t = project_friction_cone(forces[cone_n], forces[cone_t], cone_mu)

@@ -136,5 +136,5 @@ class ConicProblemMixin:
         return other
 
 
-MATRICES = ("delassus", "delassus_factor", "jacobian_transpose", "dense_delassus")
+MATRICES = ("delassus", "delassus_factor", "jacobian_transpose", "dense_jacobian", "dense_delassus")
 """Cached matrices of a problem, independent of its shift and cones."""

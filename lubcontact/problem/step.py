@@ -109,15 +109,39 @@ class StepProblem(ConicProblemMixin):
         return sp.csr_matrix(left @ self.delassus_factor)
 
     @cached_property
+    def dense_jacobian(self) -> np.ndarray:
+        """``H`` as a dense array, shape (n_rows, n_dof), for small problems.
+
+        Once built (by :attr:`dense_delassus`, which the solvers' dense lane of small problems
+        asks for: ``DENSE_OPERATOR_LIMIT`` in :mod:`lubcontact.solvers.dual_data`), the
+        products with ``H`` (:attr:`offset`, :meth:`velocity`, :meth:`constraint_values`)
+        use it: on such sizes a sparse product or transpose costs more in fixed cost than
+        the dense one in arithmetic. A normalised problem scales its source's dense ``H``
+        without building its own sparse one (:meth:`normalized`).
+        """
+        if "_jacobian_source" in self.__dict__:
+            source, columns = self.__dict__["_jacobian_source"]
+            return source.dense_jacobian * columns
+        return self.jacobian.toarray()
+
+    @cached_property
     def dense_delassus(self) -> np.ndarray:
         """``W`` as a dense array, shape (n_rows, n_rows): one BLAS product of the dense,
-        weighted Jacobian, for small problems, where the sparse products' fixed cost is most of
-        a solve's set-up (``DENSE_OPERATOR_LIMIT`` in :mod:`lubcontact.solvers.dual_data`)."""
-        weighted = self.jacobian.toarray()
+        weighted Jacobian (:attr:`dense_jacobian`), for small problems, where the sparse
+        products' fixed cost is most of a solve's set-up."""
         weight = self._factor_weight
-        if weight is not None:
-            weighted *= weight
+        weighted = self.dense_jacobian if weight is None else self.dense_jacobian * weight
         return weighted @ weighted.T
+
+    def _jacobian_product(self, vector: np.ndarray) -> np.ndarray:
+        """``H x``, shape (n_rows,), from :attr:`dense_jacobian` once it is built."""
+        dense = self.__dict__.get("dense_jacobian")
+        return self.jacobian @ vector if dense is None else dense @ vector
+
+    def _transpose_product(self, forces: np.ndarray) -> np.ndarray:
+        """``H^T lam``, shape (n_dof,), from :attr:`dense_jacobian` once it is built."""
+        dense = self.__dict__.get("dense_jacobian")
+        return self.jacobian_transpose @ forces if dense is None else forces @ dense
 
     @property
     def _factor_weight(self) -> np.ndarray | None:
@@ -136,15 +160,15 @@ class StepProblem(ConicProblemMixin):
     @cached_property
     def offset(self) -> np.ndarray:
         """``b = [D + s, 0] + dt H U``."""
-        return self.constant_rows + self.dt * (self.jacobian @ self.free_velocity)
+        return self.constant_rows + self.dt * self._jacobian_product(self.free_velocity)
 
     def velocity(self, forces: np.ndarray) -> np.ndarray:
         """``v = U + dt M^-1 H^T lam``."""
-        return self.free_velocity + self.dt * (self.jacobian_transpose @ forces) / self.mass
+        return self.free_velocity + self.dt * self._transpose_product(forces) / self.mass
 
     def constraint_values(self, velocity: np.ndarray) -> np.ndarray:
         """``g = [D + s, 0] + dt H v``, laid out like a force vector."""
-        return self.constant_rows + self.dt * (self.jacobian @ velocity)
+        return self.constant_rows + self.dt * self._jacobian_product(velocity)
 
     def gradient(self, forces: np.ndarray) -> np.ndarray:
         """Gradient of the dual objective, ``W lam + b`` (equal to ``g(v(lam))``)."""
@@ -156,7 +180,7 @@ class StepProblem(ConicProblemMixin):
     def gaps_after(self, velocity: np.ndarray) -> np.ndarray:
         """Gaps after the step, ``D + dt u_n`` (without the shift; ``u_n`` relative to a moving
         obstacle), shape (nc,)."""
-        gaps = self.gaps + self.dt * (self.jacobian @ velocity)[: self.n_contacts]
+        gaps = self.gaps + self.dt * self._jacobian_product(velocity)[: self.n_contacts]
         if self.obstacle_offset is not None:
             gaps += self.obstacle_offset[: self.n_contacts]
         return gaps
@@ -167,7 +191,9 @@ class StepProblem(ConicProblemMixin):
         With a velocity scale ``V`` (the mass-weighted rms of ``U``), each
         velocity component is divided by ``S_i = V sqrt(m_ref / M_i)``, lengths
         by ``dt V`` and forces by ``m_ref V / dt`` (``m_ref`` = mean of ``M``).
-        The returned problem carries the :class:`Scaling` that maps back.
+        The returned problem carries the :class:`Scaling` that maps back. Its sparse
+        Jacobian is built on first use only (:meth:`__getattr__`): a small problem's solve
+        uses the dense one (:attr:`dense_jacobian`) and never asks for it.
         """
         m_ref = float(np.mean(self.mass)) if self.n_dof else 1.0
         speed = float(np.sqrt(np.mean(self.mass * self.free_velocity**2) / m_ref)) if self.n_dof else 0.0
@@ -177,10 +203,10 @@ class StepProblem(ConicProblemMixin):
         velocity_scale = speed * np.sqrt(m_ref / self.mass)
         length = self.dt * speed
         scaling = Scaling(velocity=velocity_scale, force=m_ref * speed / self.dt, length=length)
-        jacobian = diagonal_scaled(self.jacobian, columns=velocity_scale / speed)
         return StepProblem._derived(mass=np.ones(self.n_dof),
                                     free_velocity=self.free_velocity / velocity_scale,
-                                    jacobian=jacobian, gaps=self.gaps / length, cones=self.cones,
+                                    _jacobian_source=(self, velocity_scale / speed),
+                                    gaps=self.gaps / length, cones=self.cones,
                                     dt=1.0, shift=self.shift / length, keys=self.keys,
                                     scaling=scaling,
                                     obstacle_offset=None if self.obstacle_offset is None
@@ -194,6 +220,16 @@ class StepProblem(ConicProblemMixin):
         problem = object.__new__(cls)
         problem.__dict__.update(fields)
         return problem
+
+    def __getattr__(self, name: str) -> Any:
+        """The Jacobian of a normalised problem, built on first use: ``H`` of the source problem
+        with its columns scaled (:meth:`normalized` leaves it as ``_jacobian_source``)."""
+        source = self.__dict__.get("_jacobian_source")
+        if name != "jacobian" or source is None:
+            raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
+        problem, columns = source
+        self.jacobian = diagonal_scaled(problem.jacobian, columns=columns)
+        return self.jacobian
 
     def to_arrays(self) -> dict[str, np.ndarray]:
         """Plain arrays describing the problem (for ``np.savez``); see :meth:`from_arrays`."""

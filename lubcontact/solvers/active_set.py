@@ -33,6 +33,11 @@ a converged result, :func:`finish_exactly`, may add one more) cost 1.07x
 loop ran into ``max_iter``."""
 
 
+BOUND_SIGN = np.zeros(len(ConeKind))
+BOUND_SIGN[ConeKind.NONNEG], BOUND_SIGN[ConeKind.NONPOS] = 1.0, -1.0
+"""``sigma`` of a contact by its kind: +1 for NONNEG, -1 for NONPOS, 0 otherwise (FREE)."""
+
+
 class ActiveSetFinish:
     """Exact solve on an identified active set (frictionless problems).
 
@@ -76,8 +81,7 @@ class ActiveSetFinish:
 
     def __init__(self, data: DualData, cones: Cones, stable_iterations: int = 5,
                  max_rounds: int = 3, max_attempts: int = MAX_FINISH_ATTEMPTS) -> None:
-        kinds = cones.kinds
-        self.sign = np.where(kinds == ConeKind.NONNEG, 1.0, np.where(kinds == ConeKind.NONPOS, -1.0, 0.0))
+        self.sign = BOUND_SIGN[cones.kinds]
         self.data = data
         self.stable_iterations = stable_iterations
         self.max_rounds = max_rounds
@@ -191,13 +195,13 @@ class ActiveSetFinish:
             solution = np.zeros_like(rhs)
             if rows.size == 0:
                 return solution
-            factors = dense_lu(self._dense[np.ix_(rows, rows)])
+            factors = dense_lu(self._dense.take(rows, 0).take(rows, 1))   # a copy; np.ix_ costs 10 us more
             if factors is None:
                 return None
             solution[rows] = dense_lu_solve(factors, rhs[rows])
             product = self.data.product(solution)
             solution[rows] += dense_lu_solve(factors, rhs[rows] - product[rows])
-            return solution if np.all(np.isfinite(solution)) else None
+            return solution if np.isfinite(solution).all() else None
         import qdldl
 
         upper = self._upper
@@ -214,7 +218,7 @@ class ActiveSetFinish:
         solution = self._factor.solve(rhs)
         product = self.data.product(np.where(active, solution, 0.0))
         solution = solution + self._factor.solve(np.where(active, rhs - product, 0.0))
-        if not np.all(np.isfinite(solution)):
+        if not np.isfinite(solution).all():
             return None
         return np.where(active, solution, 0.0)
 

@@ -52,6 +52,7 @@ from ..problem.cones import ConeKind
 from ..problem.conic import ConicProblem
 from ..problem.metrics import coulomb_shift
 from .compiled_apgd import joint_applies, joint_coulomb_apgd
+from .dual_data import is_small
 from .registry import solve, solver_info
 from .result import CONVERGED, FAILED, MAX_ITER, CoulombResult
 
@@ -125,7 +126,10 @@ def solve_coulomb(problem: ConicProblem, method: str = "clarabel", *, tol: float
                        warm_start=warm_start, **options)
         return CoulombResult.single(result)
     normalized = problem.normalized()           # set up once: only the shift changes below
-    normalized.delassus  # noqa: B018  (assembled here once, used by every inner solve)
+    if is_small(normalized):                    # built here once, used by every inner solve
+        normalized.dense_delassus  # noqa: B018
+    else:
+        normalized.delassus  # noqa: B018
     length, force_unit = normalized.scaling.length, normalized.scaling.force
     accelerator = _Anderson(anderson)
     branches = _Branches(problem, warm_start, threshold=max(1e3 * tol, 1e-7))

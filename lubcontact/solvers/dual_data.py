@@ -214,19 +214,19 @@ def jacobi_scale(problem: ConicProblem, diagonal: np.ndarray | None = None) -> n
         factor = problem.delassus_factor
         diagonal = np.asarray(problem.delassus.diagonal()) if factor is None \
             else np.bincount(factor.indices, weights=factor.data**2, minlength=problem.n_rows)
+    if not cones.has_friction:                   # one row per contact
+        return 1.0 / np.sqrt(np.where(diagonal > 0, diagonal, 1.0))
     nc = cones.count
     total = diagonal[:nc].copy()
     count = np.ones(nc)
-    if cones.has_friction:
-        tangent = diagonal[nc:].reshape(-1, cones.tangent_dim)
-        total[cones.tangential] += tangent.sum(axis=1)     # each contact listed once
-        count[cones.tangential] += cones.tangent_dim
+    tangent = diagonal[nc:].reshape(-1, cones.tangent_dim)
+    total[cones.tangential] += tangent.sum(axis=1)     # each contact listed once
+    count[cones.tangential] += cones.tangent_dim
     mean = total / count
-    per_contact = np.where(mean > 0, 1.0 / np.sqrt(np.where(mean > 0, mean, 1.0)), 1.0)
+    per_contact = 1.0 / np.sqrt(np.where(mean > 0, mean, 1.0))
     scale = np.empty(problem.n_rows)
     scale[:nc] = per_contact
-    if cones.has_friction:
-        scale[nc:] = np.repeat(per_contact[cones.tangential], cones.tangent_dim)
+    scale[nc:] = np.repeat(per_contact[cones.tangential], cones.tangent_dim)
     return scale
 
 

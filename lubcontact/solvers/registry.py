@@ -232,7 +232,7 @@ def solve(problem: ConicProblem, method: str = "clarabel", *, tol: float = 1e-9,
         warm_start = np.asarray(warm_start, dtype=float) / scale.force
         if warm_start.shape != (problem.n_rows,):
             raise ValueError(f"warm_start: expected shape ({problem.n_rows},), got {warm_start.shape}")
-        if not np.all(np.isfinite(warm_start)):
+        if not np.isfinite(warm_start).all():
             raise ValueError("warm_start: non-finite value")
     kwargs = dict(tol=tol, warm_start=warm_start, **options)
     if max_iter is not None:
@@ -245,7 +245,7 @@ def solve(problem: ConicProblem, method: str = "clarabel", *, tol: float = 1e-9,
     call_time = time.perf_counter() - called
     status = out.status
     forces = out.forces
-    if not np.all(np.isfinite(forces)):
+    if not np.isfinite(forces).all():
         status = FAILED if status == FAILED else DIVERGED
         forces = np.zeros_like(forces)
     scaled_velocities = scaled.velocity(forces)      # the residual's and the result's
@@ -255,7 +255,7 @@ def solve(problem: ConicProblem, method: str = "clarabel", *, tol: float = 1e-9,
         status = INACCURATE          # the method's claim does not survive an independent check
         out.info["claimed_status"] = CONVERGED
     physical = forces * scale.force
-    if out.velocities is not None and status != DIVERGED and np.all(np.isfinite(out.velocities)):
+    if out.velocities is not None and status != DIVERGED and np.isfinite(out.velocities).all():
         scaled_velocities = out.velocities
     velocities = scaled_velocities * scale.velocity
     timed = out.setup_time is not None or out.solve_time is not None

@@ -54,3 +54,57 @@ def _with_duplicates(values, rows, cols, shape):
     indices = np.repeat(cols, 2)
     indptr = np.concatenate([[0], np.cumsum(2 * np.bincount(rows, minlength=shape[0]))])
     return data, indices, indptr
+
+
+def _frictional_problem(seed: int, n_contacts: int = 12, n_dof: int = 30) -> StepProblem:
+    """A random step problem with friction: ``n_contacts`` normal rows, one tangential row each."""
+    rng = np.random.default_rng(seed)
+    jacobian = sp.random(2 * n_contacts, n_dof, density=0.2, random_state=seed, format="csr")
+    cones = Cones(kinds=np.full(n_contacts, ConeKind.COULOMB, dtype=np.int8),
+                  mu=np.full(n_contacts, 0.3), tangential=np.arange(n_contacts), tangent_dim=1)
+    return StepProblem(mass=rng.uniform(1.0, 3.0, n_dof), free_velocity=rng.normal(size=n_dof),
+                       jacobian=jacobian, gaps=rng.uniform(0.0, 0.1, n_contacts), cones=cones,
+                       dt=0.05, shift=rng.uniform(0.0, 0.01, n_contacts))
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_a_normalised_problem_on_the_dense_lane_never_builds_its_sparse_jacobian(seed):
+    """The dense lane of a small problem (``dense_delassus`` first) computes ``b``, ``v(lam)`` and
+    ``g(v)`` from the dense Jacobian: the sparse one, built on first use only, is never asked
+    for; the values are those of the sparse products (to rounding), and the Jacobian built when
+    asked is the source's with its columns scaled, exactly."""
+    problem = _frictional_problem(seed)
+    dense = problem.normalized()
+    dense.dense_delassus       # noqa: B018  (the dense lane's first request)
+    forces = np.random.default_rng(seed).normal(size=problem.n_rows)
+    velocity = dense.velocity(forces)
+    values = (dense.offset, velocity, dense.constraint_values(velocity))
+    assert "jacobian" not in dense.__dict__
+    sparse = problem.normalized()
+    assert "jacobian" not in sparse.__dict__
+    expected = (sparse.offset, sparse.velocity(forces), sparse.constraint_values(velocity))
+    assert "jacobian" in sparse.__dict__                   # the sparse products built it
+    for got, want in zip(values, expected):
+        assert np.allclose(got, want, rtol=1e-13, atol=1e-13 * np.abs(want).max())
+    columns = dense.scaling.velocity / np.sqrt(np.mean(problem.mass * problem.free_velocity**2)
+                                                / np.mean(problem.mass))
+    assert np.array_equal(sparse.jacobian.toarray(), diagonal_scaled(problem.jacobian,
+                                                                      columns=columns).toarray())
+    assert np.array_equal(dense.dense_jacobian, sparse.jacobian.toarray())
+    assert np.array_equal(dense.dense_delassus, sparse.dense_delassus)
+
+
+def test_a_normalised_problem_survives_copies_and_names_a_missing_attribute():
+    """The lazily built Jacobian of a normalised problem: copies with another shift, pickling
+    and ``copy`` carry it, and any other missing attribute is an ``AttributeError`` naming it."""
+    import copy
+    import pickle
+
+    problem = _frictional_problem(7)
+    scaled = problem.normalized()
+    shifted = scaled.with_shift(np.zeros(problem.n_contacts))
+    assert np.array_equal(shifted.jacobian.toarray(), scaled.jacobian.toarray())
+    for clone in (pickle.loads(pickle.dumps(problem.normalized())), copy.copy(problem.normalized())):
+        assert np.array_equal(clone.jacobian.toarray(), scaled.jacobian.toarray())
+    with pytest.raises(AttributeError, match="no_such_field"):
+        problem.normalized().no_such_field    # noqa: B018

@@ -19,6 +19,7 @@ from lubcontact.solvers import (
     MethodOutput,
     SolveSettings,
     capable_methods,
+    dual_data,
     methods,
     register,
     solver_info,
@@ -117,16 +118,22 @@ def test_settings_solve_exact_coulomb_or_the_relaxation():
     assert velocity_error(problem, exact.velocities, relaxed.velocities) > 1e-3
 
 
-def test_outer_iterations_share_the_delassus_matrix():
-    """The fixed point normalises once: every inner solve sees the same W object."""
+@pytest.mark.parametrize("lane", ["dense", "sparse"])
+def test_outer_iterations_share_the_delassus_matrix(lane, monkeypatch):
+    """The fixed point normalises once: every inner solve sees the same W object, the dense one
+    on a small problem's lane (it was rebuilt by every outer iteration) and the sparse one
+    otherwise (forced by a zero limit)."""
     problem = _frictional_step()
+    assert dual_data.is_small(problem)
+    if lane == "sparse":
+        monkeypatch.setattr(dual_data, "DENSE_OPERATOR_LIMIT", 0)
     seen = []
 
     apgd = solver_info("apgd").function
 
     @register("test-spy", kind=FIRST_ORDER)
     def _spy(scaled, **kwargs):
-        seen.append(id(scaled.delassus))
+        seen.append(id(scaled.dense_delassus if lane == "dense" else scaled.delassus))
         return apgd(scaled, **kwargs)
 
     try:
