@@ -340,6 +340,15 @@ def _cone_constraints(cp: ModuleType, bound: Expression, tangential: Expression,
     return [cp.SOC(bound, cp.reshape(t_expr, (tangent_dim, -1), order="F"), axis=0)]
 
 
+_NORMAL_LOWER = np.full(len(ConeKind), -np.inf)
+_NORMAL_LOWER[ConeKind.NONNEG] = 0.0
+_NORMAL_UPPER = np.full(len(ConeKind), np.inf)
+_NORMAL_UPPER[ConeKind.NONPOS] = 0.0
+"""Bounds of a contact's normal row by its kind (the friction cones' rows are projected after)."""
+_NO_ROWS = np.zeros(0, dtype=int)
+_NO_ROWS.flags.writeable = False
+
+
 class ConeProjector:
     """Projection onto a product of force sets, index arrays prepared once.
 
@@ -352,16 +361,16 @@ class ConeProjector:
     def __init__(self, cones: Cones):
         nc, dim_t = cones.count, cones.tangent_dim
         kinds = cones.kinds
-        self.lower = np.full(cones.n_rows, -np.inf)
-        self.upper = np.full(cones.n_rows, np.inf)
-        self.lower[:nc][kinds == ConeKind.NONNEG] = 0.0
-        self.upper[:nc][kinds == ConeKind.NONPOS] = 0.0
-        self.lower[nc:] = 0.0
-        self.upper[nc:] = 0.0
+        tangent_rows = np.zeros(cones.n_rows - nc)
+        self.lower = np.concatenate([_NORMAL_LOWER[kinds], tangent_rows])
+        self.upper = np.concatenate([_NORMAL_UPPER[kinds], tangent_rows])
+        if not cones.has_friction:              # a box: both pieces empty
+            empty = (_NO_ROWS, np.zeros((0, dim_t), dtype=int), np.zeros(0))
+            self.pieces = [empty, empty]
+            return
         self.pieces = []
         for kind in (ConeKind.COULOMB, ConeKind.UNION):
-            positions = np.flatnonzero(kinds[cones.tangential] == kind) if cones.has_friction \
-                else np.zeros(0, dtype=int)
+            positions = np.flatnonzero(kinds[cones.tangential] == kind)
             normal_rows = cones.tangential[positions]
             tangent_rows = nc + positions[:, None] * dim_t + np.arange(dim_t)
             self.pieces.append((normal_rows, tangent_rows, cones.mu[normal_rows]))

@@ -195,8 +195,9 @@ class StepProblem(ConicProblemMixin):
         Jacobian is built on first use only (:meth:`__getattr__`): a small problem's solve
         uses the dense one (:attr:`dense_jacobian`) and never asks for it.
         """
-        m_ref = float(np.mean(self.mass)) if self.n_dof else 1.0
-        speed = float(np.sqrt(np.mean(self.mass * self.free_velocity**2) / m_ref)) if self.n_dof else 0.0
+        n_dof = self.n_dof                 # means as sum / n: np.mean's own overhead is 2 us each
+        m_ref = float(self.mass.sum() / n_dof) if n_dof else 1.0
+        speed = float(np.sqrt((self.mass * self.free_velocity**2).sum() / n_dof / m_ref)) if n_dof else 0.0
         if not speed > 0:
             positive = np.abs(self.gaps[self.gaps != 0])
             speed = float(np.median(positive)) / self.dt if positive.size else 1.0
