@@ -340,19 +340,23 @@ def _cone_constraints(cp: ModuleType, bound: Expression, tangential: Expression,
     return [cp.SOC(bound, cp.reshape(t_expr, (tangent_dim, -1), order="F"), axis=0)]
 
 
-_NORMAL_LOWER = np.full(len(ConeKind), -np.inf)
-_NORMAL_LOWER[ConeKind.NONNEG] = 0.0
-_NORMAL_UPPER = np.full(len(ConeKind), np.inf)
-_NORMAL_UPPER[ConeKind.NONPOS] = 0.0
-"""Bounds of a contact's normal row by its kind (the friction cones' rows are projected after)."""
-_NO_ROWS = np.zeros(0, dtype=int)
-_NO_ROWS.flags.writeable = False
+def _normal_bounds() -> tuple[np.ndarray, np.ndarray]:
+    """Lower and upper bound of a contact's normal row, indexed by its :class:`ConeKind`, shape
+    (5,) each: ``[0, inf)`` NONNEG, ``R`` FREE, ``(-inf, 0]`` NONPOS; ``R`` for the friction
+    cones, whose rows :class:`ConeProjector` projects after the box."""
+    lower, upper = np.full(len(ConeKind), -np.inf), np.full(len(ConeKind), np.inf)
+    lower[ConeKind.NONNEG] = upper[ConeKind.NONPOS] = 0.0
+    lower.flags.writeable = upper.flags.writeable = False
+    return lower, upper
+
+
+_NORMAL_LOWER, _NORMAL_UPPER = _normal_bounds()
 
 
 class ConeProjector:
     """Projection onto a product of force sets, index arrays prepared once.
 
-    Frictionless rows are a box (``np.clip`` with per-row bounds: ``[0, inf)``,
+    Frictionless rows are a box (per-row bounds ``lower``, ``upper``: ``[0, inf)``,
     ``R``, ``(-inf, 0]``; tangential rows of frictionless contacts ``{0}``);
     friction contacts go through :func:`project_friction_cone`. No Python loop
     over contacts.
@@ -361,11 +365,11 @@ class ConeProjector:
     def __init__(self, cones: Cones):
         nc, dim_t = cones.count, cones.tangent_dim
         kinds = cones.kinds
-        tangent_rows = np.zeros(cones.n_rows - nc)
-        self.lower = np.concatenate([_NORMAL_LOWER[kinds], tangent_rows])
-        self.upper = np.concatenate([_NORMAL_UPPER[kinds], tangent_rows])
+        tangent_bounds = np.zeros(cones.n_rows - nc)
+        self.lower = np.concatenate([_NORMAL_LOWER[kinds], tangent_bounds])
+        self.upper = np.concatenate([_NORMAL_UPPER[kinds], tangent_bounds])
         if not cones.has_friction:              # a box: both pieces empty
-            empty = (_NO_ROWS, np.zeros((0, dim_t), dtype=int), np.zeros(0))
+            empty = (np.zeros(0, dtype=int), np.zeros((0, dim_t), dtype=int), np.zeros(0))
             self.pieces = [empty, empty]
             return
         self.pieces = []

@@ -13,7 +13,7 @@ and :class:`~lubcontact.problem.LocalProblem` (from an FCLIB/Siconos file,
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING, Protocol, runtime_checkable
+from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 
 import numpy as np
 import scipy.sparse as sp
@@ -120,16 +120,18 @@ class ConicProblemMixin:
 
     def with_shift(self, shift: np.ndarray) -> Self:
         """A copy with another shift ``s``, sharing the matrices (``W`` is not rebuilt)."""
-        return self._sharing_matrices(replace(self, shift=np.asarray(shift, dtype=float).copy()))
+        return self._replaced(shift=np.asarray(shift, dtype=float).copy())
 
     def with_cones(self, cones: Cones) -> Self:
         """A copy with other force sets of the same layout, sharing the matrices."""
         checks.require(cones.n_rows == self.n_rows, "cones", "must keep the row layout",
                        cones.n_rows)
-        return self._sharing_matrices(replace(self, cones=cones))
+        return self._replaced(cones=cones)
 
-    def _sharing_matrices(self, other: Self) -> Self:
-        """``other`` with this problem's cached matrices (they depend on neither shift nor cones)."""
+    def _replaced(self, **changes: Any) -> Self:
+        """A copy with ``changes`` (checked by the constructor) and this problem's cached matrices
+        (they depend on neither shift nor cones)."""
+        other = replace(self, **changes)
         for name in MATRICES:
             if name in self.__dict__:
                 other.__dict__.setdefault(name, self.__dict__[name])

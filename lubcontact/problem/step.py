@@ -15,7 +15,7 @@ Dual, over contact forces ``lam`` (n_rows,)::
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from functools import cached_property
 from typing import Any
 
@@ -24,7 +24,7 @@ import scipy.sparse as sp
 
 from .. import checks
 from .cones import Cones
-from .conic import ConicProblemMixin, Scaling
+from .conic import MATRICES, ConicProblemMixin, Scaling
 
 
 @dataclass
@@ -109,39 +109,66 @@ class StepProblem(ConicProblemMixin):
         return sp.csr_matrix(left @ self.delassus_factor)
 
     @cached_property
-    def dense_jacobian(self) -> np.ndarray:
-        """``H`` as a dense array, shape (n_rows, n_dof), for small problems.
+    def dense_jacobian(self) -> tuple[np.ndarray, np.ndarray]:
+        """``H`` on the degrees of freedom its rows involve, as a dense block, for small problems.
 
-        Once built (by :attr:`dense_delassus`, which the solvers' dense lane of small problems
-        asks for: ``DENSE_OPERATOR_LIMIT`` in :mod:`lubcontact.solvers.dual_data`), the
-        products with ``H`` (:attr:`offset`, :meth:`velocity`, :meth:`constraint_values`)
-        use it: on such sizes a sparse product or transpose costs more in fixed cost than
-        the dense one in arithmetic. A normalised problem scales its source's dense ``H``
-        without building its own sparse one (:meth:`normalized`).
+        Only those columns: a scene of many grains with few contacts (a pile forming) has
+        ``n_dof`` far above ``n_rows``, and the whole ``H`` made dense made
+        :attr:`dense_delassus` 60x slower than the sparse ``W`` (31.6 against 0.5 ms at 100 rows
+        and 6 000 degrees of freedom). Once built (by :attr:`dense_delassus`, which the solvers'
+        dense lane of small problems asks for: ``DENSE_OPERATOR_LIMIT`` in
+        :mod:`lubcontact.solvers.dual_data`), the products with ``H`` (:attr:`offset`,
+        :meth:`velocity`, :meth:`constraint_values`, :meth:`gaps_after`) use it: on such sizes
+        a sparse product or transpose costs more in fixed cost than the dense one in arithmetic.
+        A normalised problem scales its source's block (which the source keeps) without
+        building its own sparse ``H`` (:meth:`normalized`).
+
+        Returns
+        -------
+        (ndarray of int, ndarray)
+            ``columns``, shape (k,), sorted, and ``block = H[:, columns]``, shape (n_rows, k)
+            (entries stored twice are summed).
         """
-        if "_jacobian_source" in self.__dict__:
-            source, columns = self.__dict__["_jacobian_source"]
-            return source.dense_jacobian * columns
-        return self.jacobian.toarray()
+        source = self.__dict__.get("_jacobian_source")
+        if source is not None:
+            problem, factors = source
+            columns, block = problem.dense_jacobian
+            return columns, block * factors[columns]
+        jacobian = self.jacobian
+        n_rows = jacobian.shape[0]
+        columns, position = np.unique(jacobian.indices, return_inverse=True)
+        rows = np.repeat(np.arange(n_rows), np.diff(jacobian.indptr))
+        block = np.bincount(rows * columns.size + position, weights=jacobian.data,
+                            minlength=n_rows * columns.size)
+        return columns, block.reshape(n_rows, columns.size)
 
     @cached_property
     def dense_delassus(self) -> np.ndarray:
         """``W`` as a dense array, shape (n_rows, n_rows): one BLAS product of the dense,
         weighted Jacobian (:attr:`dense_jacobian`), for small problems, where the sparse
         products' fixed cost is most of a solve's set-up."""
+        columns, block = self.dense_jacobian
         weight = self._factor_weight
-        weighted = self.dense_jacobian if weight is None else self.dense_jacobian * weight
+        weighted = block if weight is None else block * weight[columns]
         return weighted @ weighted.T
 
     def _jacobian_product(self, vector: np.ndarray) -> np.ndarray:
         """``H x``, shape (n_rows,), from :attr:`dense_jacobian` once it is built."""
         dense = self.__dict__.get("dense_jacobian")
-        return self.jacobian @ vector if dense is None else dense @ vector
+        if dense is None:
+            return self.jacobian @ vector
+        columns, block = dense
+        return block @ vector[columns]
 
     def _transpose_product(self, forces: np.ndarray) -> np.ndarray:
         """``H^T lam``, shape (n_dof,), from :attr:`dense_jacobian` once it is built."""
         dense = self.__dict__.get("dense_jacobian")
-        return self.jacobian_transpose @ forces if dense is None else forces @ dense
+        if dense is None:
+            return self.jacobian_transpose @ forces
+        columns, block = dense
+        out = np.zeros(self.n_dof)
+        out[columns] = forces @ block
+        return out
 
     @property
     def _factor_weight(self) -> np.ndarray | None:
@@ -192,8 +219,10 @@ class StepProblem(ConicProblemMixin):
         velocity component is divided by ``S_i = V sqrt(m_ref / M_i)``, lengths
         by ``dt V`` and forces by ``m_ref V / dt`` (``m_ref`` = mean of ``M``).
         The returned problem carries the :class:`Scaling` that maps back. Its sparse
-        Jacobian is built on first use only (:meth:`__getattr__`): a small problem's solve
-        uses the dense one (:attr:`dense_jacobian`) and never asks for it.
+        Jacobian is built on first use only (:meth:`__getattr__`): one convex solve of a small
+        problem by a method of the solvers' dense lane uses the dense one
+        (:attr:`dense_jacobian`) and never asks for it (the fixed point on s builds it once,
+        for the methods that use the sparse ``W``).
         """
         n_dof = self.n_dof                 # means as sum / n: np.mean's own overhead is 2 us each
         m_ref = float(self.mass.sum() / n_dof) if n_dof else 1.0
@@ -222,9 +251,26 @@ class StepProblem(ConicProblemMixin):
         problem.__dict__.update(fields)
         return problem
 
+    def _replaced(self, **changes: Any) -> StepProblem:
+        """The copy :meth:`with_shift` and :meth:`with_cones` make, without the constructor: this
+        checked problem's fields and cached matrices (``MATRICES``), the unbuilt Jacobian of a
+        normalised problem included, with ``changes`` (``shift`` or ``cones``) checked here."""
+        if "shift" in changes:
+            changes["shift"] = checks.as_array("shift", changes["shift"], shape=(self.n_contacts,))
+        if "cones" in changes:
+            checks.require(changes["cones"].count == self.n_contacts, "cones",
+                           "must keep the contacts", changes["cones"].count)
+        kept = {name: value for name, value in self.__dict__.items() if name in _SHARED_BY_COPIES}
+        return StepProblem._derived(**{**kept, **changes})
+
     def __getattr__(self, name: str) -> Any:
         """The Jacobian of a normalised problem, built on first use: ``H`` of the source problem
-        with its columns scaled (:meth:`normalized` leaves it as ``_jacobian_source``)."""
+        with its columns scaled (:meth:`normalized` leaves it as ``_jacobian_source``).
+
+        Any other missing attribute raises ``AttributeError`` naming it; as with every
+        ``__getattr__``, an ``AttributeError`` raised inside one of the class's properties
+        surfaces as that property missing.
+        """
         source = self.__dict__.get("_jacobian_source")
         if name != "jacobian" or source is None:
             raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
@@ -257,6 +303,13 @@ class StepProblem(ConicProblemMixin):
         return cls(mass=arrays["mass"], free_velocity=arrays["free_velocity"], jacobian=jacobian,
                    gaps=arrays["gaps"], cones=cones, dt=float(arrays["dt"]), shift=arrays["shift"],
                    **optional)
+
+
+_SHARED_BY_COPIES = frozenset({f.name for f in fields(StepProblem)} | set(MATRICES)
+                              | {"_jacobian_source"})
+"""What a copy with another shift or other cones keeps (:meth:`StepProblem._replaced`): the
+fields, the cached matrices, which depend on neither, and a normalised problem's unbuilt
+Jacobian; not ``offset``, which depends on the shift."""
 
 
 def diagonal_scaled(matrix: sp.csr_matrix, rows: np.ndarray | None = None,

@@ -20,7 +20,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from ..problem.cones import ConeKind, Cones
+from ..problem.cones import Cones
 from .dual_data import DENSE_LIMIT, DualData, ResidualTracker, dense_lu, dense_lu_solve
 from .result import CONVERGED
 
@@ -31,11 +31,6 @@ MAX_FINISH_ATTEMPTS = 4
 a converged result, :func:`finish_exactly`, may add one more) cost 1.07x
 ``apgd-jacobi``'s time on a settled 1000-grain pile, where unbounded attempts that restarted the
 loop ran into ``max_iter``."""
-
-
-BOUND_SIGN = np.zeros(len(ConeKind))
-BOUND_SIGN[ConeKind.NONNEG], BOUND_SIGN[ConeKind.NONPOS] = 1.0, -1.0
-"""``sigma`` of a contact by its kind: +1 for NONNEG, -1 for NONPOS, 0 otherwise (FREE)."""
 
 
 class ActiveSetFinish:
@@ -81,7 +76,8 @@ class ActiveSetFinish:
 
     def __init__(self, data: DualData, cones: Cones, stable_iterations: int = 5,
                  max_rounds: int = 3, max_attempts: int = MAX_FINISH_ATTEMPTS) -> None:
-        self.sign = BOUND_SIGN[cones.kinds]
+        projector = cones.projector               # sigma from the box: +1 [0, inf), -1 (-inf, 0]
+        self.sign = (projector.lower == 0.0) - (projector.upper == 0.0).astype(float)
         self.data = data
         self.stable_iterations = stable_iterations
         self.max_rounds = max_rounds

@@ -126,10 +126,9 @@ def solve_coulomb(problem: ConicProblem, method: str = "clarabel", *, tol: float
                        warm_start=warm_start, **options)
         return CoulombResult.single(result)
     normalized = problem.normalized()           # set up once: only the shift changes below
-    if is_small(normalized):                    # built here once, used by every inner solve
+    normalized.delassus  # noqa: B018  (built here once, shared by every inner solve's copy)
+    if is_small(normalized):                    # and the dense W of the solvers' dense lane
         normalized.dense_delassus  # noqa: B018
-    else:
-        normalized.delassus  # noqa: B018
     length, force_unit = normalized.scaling.length, normalized.scaling.force
     accelerator = _Anderson(anderson)
     branches = _Branches(problem, warm_start, threshold=max(1e3 * tol, 1e-7))

@@ -57,32 +57,39 @@ def _with_duplicates(values, rows, cols, shape):
 
 
 def _frictional_problem(seed: int, n_contacts: int = 12, n_dof: int = 30) -> StepProblem:
-    """A random step problem with friction: ``n_contacts`` normal rows, one tangential row each."""
+    """A random step problem with friction (one tangential row per contact) and moving obstacles."""
     rng = np.random.default_rng(seed)
-    jacobian = sp.random(2 * n_contacts, n_dof, density=0.2, random_state=seed, format="csr")
+    jacobian = sp.random(2 * n_contacts, n_dof, density=min(1.0, 6.0 / n_dof), random_state=seed,
+                         format="csr")
     cones = Cones(kinds=np.full(n_contacts, ConeKind.COULOMB, dtype=np.int8),
                   mu=np.full(n_contacts, 0.3), tangential=np.arange(n_contacts), tangent_dim=1)
     return StepProblem(mass=rng.uniform(1.0, 3.0, n_dof), free_velocity=rng.normal(size=n_dof),
                        jacobian=jacobian, gaps=rng.uniform(0.0, 0.1, n_contacts), cones=cones,
-                       dt=0.05, shift=rng.uniform(0.0, 0.01, n_contacts))
+                       dt=0.05, shift=rng.uniform(0.0, 0.01, n_contacts),
+                       obstacle_offset=rng.uniform(-0.01, 0.01, 2 * n_contacts))
 
 
-@pytest.mark.parametrize("seed", range(5))
-def test_a_normalised_problem_on_the_dense_lane_never_builds_its_sparse_jacobian(seed):
-    """The dense lane of a small problem (``dense_delassus`` first) computes ``b``, ``v(lam)`` and
-    ``g(v)`` from the dense Jacobian: the sparse one, built on first use only, is never asked
-    for; the values are those of the sparse products (to rounding), and the Jacobian built when
-    asked is the source's with its columns scaled, exactly."""
-    problem = _frictional_problem(seed)
+@pytest.mark.parametrize("seed, n_dof", [(0, 30), (1, 30), (2, 30), (3, 2000), (4, 2000)])
+def test_a_normalised_problem_on_the_dense_lane_never_builds_its_sparse_jacobian(seed, n_dof):
+    """The dense lane of a small problem (``dense_delassus`` first) computes ``b``, ``v(lam)``,
+    ``g(v)`` and the gaps after the step from the dense Jacobian, also on copies with another
+    shift: the sparse one, built on first use only, is never asked for. The values are those of
+    the sparse products (to rounding); the Jacobian built when asked is the source's with its
+    columns scaled, exactly; and the dense block holds only the columns that some row involves
+    (2000 degrees of freedom, a few dozen of them in contact)."""
+    problem = _frictional_problem(seed, n_dof=n_dof)
+    forces = np.random.default_rng(seed).normal(size=problem.n_rows)
     dense = problem.normalized()
     dense.dense_delassus       # noqa: B018  (the dense lane's first request)
-    forces = np.random.default_rng(seed).normal(size=problem.n_rows)
+    shifted = dense.with_shift(np.zeros(problem.n_contacts))
     velocity = dense.velocity(forces)
-    values = (dense.offset, velocity, dense.constraint_values(velocity))
-    assert "jacobian" not in dense.__dict__
+    values = (dense.offset, velocity, dense.constraint_values(velocity), dense.gaps_after(velocity),
+              shifted.offset, shifted.dense_delassus)
+    assert "jacobian" not in dense.__dict__ and "jacobian" not in shifted.__dict__
     sparse = problem.normalized()
-    assert "jacobian" not in sparse.__dict__
-    expected = (sparse.offset, sparse.velocity(forces), sparse.constraint_values(velocity))
+    unshifted = sparse.with_shift(np.zeros(problem.n_contacts))
+    expected = (sparse.offset, sparse.velocity(forces), sparse.constraint_values(velocity),
+                sparse.gaps_after(velocity), unshifted.offset, unshifted.delassus.toarray())
     assert "jacobian" in sparse.__dict__                   # the sparse products built it
     for got, want in zip(values, expected):
         assert np.allclose(got, want, rtol=1e-13, atol=1e-13 * np.abs(want).max())
@@ -90,21 +97,37 @@ def test_a_normalised_problem_on_the_dense_lane_never_builds_its_sparse_jacobian
                                                 / np.mean(problem.mass))
     assert np.array_equal(sparse.jacobian.toarray(), diagonal_scaled(problem.jacobian,
                                                                       columns=columns).toarray())
-    assert np.array_equal(dense.dense_jacobian, sparse.jacobian.toarray())
-    assert np.array_equal(dense.dense_delassus, sparse.dense_delassus)
+    touched, block = dense.dense_jacobian
+    assert np.array_equal(touched, np.unique(problem.jacobian.indices))
+    assert np.array_equal(block, sparse.jacobian.toarray()[:, touched])
+    assert touched.size <= problem.jacobian.nnz and (n_dof == 30 or 10 * touched.size < n_dof)
+
+
+def test_a_problem_without_rows_has_an_empty_dense_lane():
+    """No contact: an empty dense Jacobian and ``W``, and the free velocity back."""
+    problem = StepProblem(mass=np.ones(4), free_velocity=np.arange(4.0), jacobian=sp.csr_matrix((0, 4)),
+                          gaps=np.zeros(0), cones=Cones.frictionless(np.zeros(0), 1), dt=0.1)
+    scaled = problem.normalized()
+    assert scaled.dense_delassus.shape == (0, 0) and scaled.dense_jacobian[1].shape == (0, 0)
+    assert np.allclose(scaled.velocity(np.zeros(0)) * scaled.scaling.velocity, np.arange(4.0))
 
 
 def test_a_normalised_problem_survives_copies_and_names_a_missing_attribute():
-    """The lazily built Jacobian of a normalised problem: copies with another shift, pickling
-    and ``copy`` carry it, and any other missing attribute is an ``AttributeError`` naming it."""
+    """The lazily built Jacobian of a normalised problem: copies with another shift or other
+    cones, pickling and ``copy`` carry it, a copy checks its shift, and any other missing
+    attribute is an ``AttributeError`` naming it."""
     import copy
     import pickle
 
     problem = _frictional_problem(7)
     scaled = problem.normalized()
     shifted = scaled.with_shift(np.zeros(problem.n_contacts))
-    assert np.array_equal(shifted.jacobian.toarray(), scaled.jacobian.toarray())
-    for clone in (pickle.loads(pickle.dumps(problem.normalized())), copy.copy(problem.normalized())):
+    coned = scaled.with_cones(problem.cones.with_branches(np.zeros(problem.n_contacts, bool)))
+    for clone in (shifted, coned, pickle.loads(pickle.dumps(problem.normalized())),
+                  copy.copy(problem.normalized())):
         assert np.array_equal(clone.jacobian.toarray(), scaled.jacobian.toarray())
+    assert np.array_equal(shifted.shift, np.zeros(problem.n_contacts))
+    with pytest.raises(ValueError, match="shift"):
+        scaled.with_shift(np.zeros(problem.n_contacts + 1))
     with pytest.raises(AttributeError, match="no_such_field"):
         problem.normalized().no_such_field    # noqa: B018

@@ -118,22 +118,20 @@ def test_settings_solve_exact_coulomb_or_the_relaxation():
     assert velocity_error(problem, exact.velocities, relaxed.velocities) > 1e-3
 
 
-@pytest.mark.parametrize("lane", ["dense", "sparse"])
-def test_outer_iterations_share_the_delassus_matrix(lane, monkeypatch):
-    """The fixed point normalises once: every inner solve sees the same W object, the dense one
-    on a small problem's lane (it was rebuilt by every outer iteration) and the sparse one
-    otherwise (forced by a zero limit)."""
+@pytest.mark.parametrize("matrix", ["dense_delassus", "delassus"])
+def test_outer_iterations_share_the_delassus_matrix(matrix):
+    """The fixed point normalises once: on a small problem every inner solve sees the same W
+    object, the dense one of the solvers' dense lane (it was rebuilt by every outer iteration)
+    and the sparse one that the other methods use."""
     problem = _frictional_step()
     assert dual_data.is_small(problem)
-    if lane == "sparse":
-        monkeypatch.setattr(dual_data, "DENSE_OPERATOR_LIMIT", 0)
     seen = []
 
     apgd = solver_info("apgd").function
 
     @register("test-spy", kind=FIRST_ORDER)
     def _spy(scaled, **kwargs):
-        seen.append(id(scaled.dense_delassus if lane == "dense" else scaled.delassus))
+        seen.append(id(getattr(scaled, matrix)))
         return apgd(scaled, **kwargs)
 
     try:
