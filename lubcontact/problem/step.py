@@ -114,8 +114,9 @@ class StepProblem(ConicProblemMixin):
 
         Only those columns: a scene of many grains with few contacts (a pile forming) has
         ``n_dof`` far above ``n_rows``, and the whole ``H`` made dense made
-        :attr:`dense_delassus` 60x slower than the sparse ``W`` (31.6 against 0.5 ms at 100 rows
-        and 6 000 degrees of freedom). Once built (by :attr:`dense_delassus`, which the solvers'
+        :attr:`dense_delassus` 10-60x slower than the sparse ``W`` (100 rows, 6 000 degrees of
+        freedom: 1.9 ms, 31.6 on a first call, against 0.16 ms; 0.36 ms on the involved
+        columns). Once built (by :attr:`dense_delassus`, which the solvers'
         dense lane of small problems asks for: ``DENSE_OPERATOR_LIMIT`` in
         :mod:`lubcontact.solvers.dual_data`), the products with ``H`` (:attr:`offset`,
         :meth:`velocity`, :meth:`constraint_values`, :meth:`gaps_after`) use it: on such sizes
