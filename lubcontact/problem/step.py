@@ -113,7 +113,7 @@ class StepProblem(ConicProblemMixin):
         """``H`` on the degrees of freedom its rows involve, as a dense block, for small problems.
 
         Only those columns: a scene of many grains with few contacts (a pile forming) has
-        ``n_dof`` far above ``n_rows``, and the whole ``H`` made dense made
+        ``n_dof`` far above ``n_rows``, and making the whole ``H`` dense made
         :attr:`dense_delassus` 10-60x slower than the sparse ``W`` (100 rows, 6 000 degrees of
         freedom: 1.9 ms, 31.6 on a first call, against 0.16 ms; 0.36 ms on the involved
         columns). Once built (by :attr:`dense_delassus`, which the solvers'
