@@ -123,7 +123,7 @@ class Cones:
     def has_friction(self) -> bool:
         return self.tangential.shape[0] > 0
 
-    @property
+    @cached_property
     def is_convex(self) -> bool:
         return not np.any(self.kinds == ConeKind.UNION)
 

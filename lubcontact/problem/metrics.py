@@ -23,7 +23,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from .cones import ConeKind, Cones
+from .cones import Cones
 from .conic import ConicProblem
 from .step import StepProblem
 
@@ -55,16 +55,18 @@ def coulomb_shift(problem: ConicProblem, forces: np.ndarray,
     shift = np.zeros(cones.count)
     if not cones.has_friction:
         return shift
-    _, g_tangential = cones.split(problem.gradient(forces) if gradient is None else gradient)
-    idx = cones.tangential
-    slip = cones.mu[idx] * np.linalg.norm(g_tangential, axis=1)
-    kinds = cones.kinds[idx]
-    frictional = (kinds == ConeKind.COULOMB) | ((kinds == ConeKind.UNION) & (forces[idx] >= 0))
-    shift[idx] = np.where(frictional, slip, 0.0)
+    if gradient is None:
+        gradient = problem.gradient(forces)
+    (coulomb_n, coulomb_t, coulomb_mu), (union_n, union_t, union_mu) = cones.projector.pieces
+    shift[coulomb_n] = coulomb_mu * np.linalg.norm(gradient[coulomb_t], axis=1)
+    if union_n.size:
+        pushed = forces[union_n] >= 0
+        shift[union_n] = np.where(pushed, union_mu * np.linalg.norm(gradient[union_t], axis=1), 0.0)
     return shift
 
 
-def coulomb_error(problem: ConicProblem, forces: np.ndarray) -> float:
+def coulomb_error(problem: ConicProblem, forces: np.ndarray,
+                  gradient: np.ndarray | None = None) -> float:
     """The FCLIB/Siconos error of a Coulomb problem.
 
     ``sqrt(sum_c |lam_c - P_Kc(lam_c - (w_c + mu_c |w_T,c| e_n))|^2) / (1 + |q|)``
@@ -76,12 +78,14 @@ def coulomb_error(problem: ConicProblem, forces: np.ndarray) -> float:
     ----------
     problem : ConicProblem
     forces : ndarray, shape (n_rows,)
+    gradient : ndarray, shape (n_rows,), optional
+        ``problem.gradient(forces)`` when the caller has it.
     """
     nc = problem.cones.count
-    gradient = problem.gradient(forces)
+    if gradient is None:
+        gradient = problem.gradient(forces)
     corrected = gradient.copy()
-    corrected[:nc] -= problem.shift
-    corrected[:nc] += coulomb_shift(problem, forces, gradient)
+    corrected[:nc] += coulomb_shift(problem, forces, gradient) - problem.shift
     q = problem.offset.copy()
     q[:nc] -= problem.shift
     residual = problem.cones.natural_residual(forces, corrected)

@@ -72,6 +72,7 @@ from ..problem.metrics import coulomb_error
 from ..problem.step import diagonal_scaled
 from .coulomb import solve_coulomb
 from .dual_data import DENSE_LIMIT, dense_lu, dense_lu_solve, is_small
+from .newton_kernel import CONVERGED_CODE, FAILED_CODE, MAX_ITER_CODE, newton_phase_2d
 from .registry import ALL_CONES, NEWTON, register
 from .result import CONVERGED, FAILED, INACCURATE, MAX_ITER, MethodOutput
 
@@ -83,6 +84,7 @@ ARMIJO = 1e-4
 
 REGULARISATIONS = (0.0, 1e-10, 1e-8, 1e-6, 1e-4)
 """Diagonal shifts tried in turn when the active block of the Jacobian is singular."""
+_REGULARISATIONS = np.array(REGULARISATIONS)
 
 SPARSE_LU = dict(permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.1,
                  options=dict(SymmetricMode=True))
@@ -222,17 +224,24 @@ class AlartCurnier:
         self.sigma, self.center = 0.0, np.zeros(self.n_rows)
         # diag(rho) W, built once; sigma enters as a diagonal
         self.scaled_W = self.rho[:, None] * self.W if self.dense else sp.diags(self.rho) @ self.W
+        # a small 2D problem runs each Newton phase in one compiled call (newton_kernel)
+        self.compiled = self.dense and dim_t == 1
+        if self.compiled:
+            self.W = np.ascontiguousarray(self.W)
+            self.tangent_rows = np.ascontiguousarray(self.cone_t[:, 0])
+            self.q_scale = 1.0 + float(np.linalg.norm(self.q))
 
     def set_proximal(self, sigma: float, center: np.ndarray) -> None:
         """Solve the proximal problem ``W + sigma I``, ``q - sigma center`` from now on (0: the problem)."""
         self.sigma, self.center = float(sigma), np.array(center, dtype=float)
 
-    def residual(self, forces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """``phi(r)`` and ``y = r - rho (W r + q + sigma (r - center))``, both shape (n_rows,)."""
+    def residual(self, forces: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``phi(r)``, ``y = r - rho (W r + q + sigma (r - center))`` and the velocity
+        ``W r + q`` (the problem's, without the proximal term), each shape (n_rows,)."""
         velocity = self.W @ forces + self.q
-        if self.sigma:
-            velocity += self.sigma * (forces - self.center)
         y = forces - self.rho * velocity
+        if self.sigma:
+            y -= (self.rho * self.sigma) * (forces - self.center)
         projected = np.clip(y, self.lower, self.upper)
         if self.cone_n.size:
             y_n = y[self.cone_n]
@@ -242,7 +251,7 @@ class AlartCurnier:
             scale = np.minimum(1.0, np.divide(radius, norm_t, out=np.ones_like(norm_t), where=norm_t > 0))
             projected[self.cone_n] = np.where(self.unilateral, np.maximum(y_n, 0.0), y_n)
             projected[self.cone_t] = scale[:, None] * y_t
-        return forces - projected, y
+        return forces - projected, y, velocity
 
     def jacobian(self, y: np.ndarray) -> tuple[sp.csr_matrix | np.ndarray, np.ndarray]:
         """The rows of ``J = I - G + G diag(rho) (W + sigma I)`` at ``y`` where ``G`` is not zero.
@@ -603,11 +612,14 @@ class _Phase:
 def _newton_phase(function: AlartCurnier, unshifted: ConicProblem, forces: np.ndarray,
                   tol: float, max_iter: int, inner_tol: float = 0.0) -> _Phase:
     """Newton iterations on ``function`` from ``forces`` until the FCLIB error of ``unshifted``
-    is below ``tol``, ``|phi| <= inner_tol``, a failed line search or the cap."""
-    phi, y = function.residual(forces)
+    is below ``tol``, ``|phi| <= inner_tol``, a failed line search or the cap (in one compiled
+    call on a small 2D problem, :func:`~lubcontact.solvers.newton_kernel.newton_phase_2d`)."""
+    if function.compiled:
+        return _compiled_phase(function, forces, tol, max_iter, inner_tol)
+    phi, y, velocity = function.residual(forces)
     merit = 0.5 * float(phi @ phi)
     recent = [merit]
-    error = coulomb_error(unshifted, forces)
+    error = coulomb_error(unshifted, forces, velocity)
     history = [error]
     best = (error, forces)
     gradient_steps = iterations = 0
@@ -626,9 +638,9 @@ def _newton_phase(function: AlartCurnier, unshifted: ConicProblem, forces: np.nd
         if step is None:
             status = FAILED
             break
-        forces, phi, y, merit = step
+        forces, phi, y, velocity, merit = step
         recent = (recent + [merit])[-LINE_SEARCH_MEMORY:]
-        error = coulomb_error(unshifted, forces)
+        error = coulomb_error(unshifted, forces, velocity)
         history.append(error)
         best = min(best, (error, forces), key=lambda pair: pair[0])
     if best[0] <= tol:
@@ -636,6 +648,24 @@ def _newton_phase(function: AlartCurnier, unshifted: ConicProblem, forces: np.nd
     return _Phase(forces=best[1], status=status, iterations=iterations, error=best[0],
                   history=np.asarray(history), gradient_steps=gradient_steps,
                   solved=bool(np.sqrt(2.0 * merit) <= inner_tol), last=forces, last_error=error)
+
+
+_STATUS_CODES = {FAILED_CODE: FAILED, MAX_ITER_CODE: MAX_ITER, CONVERGED_CODE: CONVERGED}
+
+
+def _compiled_phase(function: AlartCurnier, forces: np.ndarray, tol: float, max_iter: int,
+                    inner_tol: float) -> _Phase:
+    """:func:`_newton_phase` by :func:`~lubcontact.solvers.newton_kernel.newton_phase_2d`."""
+    (best, best_error, last, last_error, iterations, gradient_steps, code, history,
+     solved) = newton_phase_2d(
+        function.W, function.q, function.rho, function.lower, function.upper, function.box,
+        function.cone_n, function.tangent_rows, function.cone_mu, function.unilateral,
+        function.sigma, function.center, function.q_scale, np.asarray(forces, dtype=float),
+        float(tol), int(max_iter), float(inner_tol), _REGULARISATIONS, LINE_SEARCH_MEMORY,
+        ARMIJO, MAX_HALVINGS)
+    return _Phase(forces=best, status=_STATUS_CODES[code], iterations=int(iterations),
+                  error=float(best_error), history=history, gradient_steps=int(gradient_steps),
+                  solved=bool(solved), last=last, last_error=float(last_error))
 
 
 def _line_search(function: AlartCurnier, forces: np.ndarray, direction: np.ndarray,
@@ -650,9 +680,9 @@ def _line_search(function: AlartCurnier, forces: np.ndarray, direction: np.ndarr
     alpha = 1.0
     for _ in range(MAX_HALVINGS):
         trial = forces + alpha * direction
-        phi, y = function.residual(trial)
+        phi, y, velocity = function.residual(trial)
         value = 0.5 * float(phi @ phi)
         if value <= reference - ARMIJO * alpha * slope:
-            return trial, phi, y, value
+            return trial, phi, y, velocity, value
         alpha *= 0.5
     return None

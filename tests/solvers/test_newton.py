@@ -223,7 +223,7 @@ def test_jacobian_matches_finite_differences_away_from_kinks():
     function = AlartCurnier(problem)
     rng = np.random.default_rng(0)
     forces = np.abs(rng.normal(size=problem.n_rows))
-    phi, y = function.residual(forces)
+    phi, y, _ = function.residual(forces)
     rows, active = function.jacobian(y)                # the rows of J where G is not zero
     assert rows.shape == (np.count_nonzero(active), problem.n_rows)
     direction = rng.normal(size=problem.n_rows)
@@ -390,3 +390,107 @@ def test_small_problems_take_the_dense_lane_with_the_same_newton_steps(name, mon
     assert dense.status == sparse.status == CONVERGED
     assert dense.info["newton_iterations"] == sparse.info["newton_iterations"]
     assert np.abs(dense.forces - sparse.forces).max() <= 1e-9 * np.abs(sparse.forces).max()
+
+
+COMPILED_CASES = ["gamma_states_gluey_coulomb", "mu_ten", "dt_large_friction", "mu_zero_friction",
+                  "cone_apex_2d"]
+
+
+@pytest.mark.parametrize("name", COMPILED_CASES)
+@pytest.mark.parametrize("sigma", [0.0, 1e-2])
+def test_the_compiled_residual_jacobian_and_error_are_their_numpy_twins(name, sigma):
+    """On a small 2D problem the Newton phase runs compiled (newton_kernel): at points with
+    every contact state (random signs and sizes), its residual, velocity, Jacobian rows and
+    FCLIB error are those of AlartCurnier and metrics.coulomb_error."""
+    from lubcontact.solvers import newton_kernel as kernel
+
+    problem = load_cases()[name].problem.normalized()
+    function = AlartCurnier(problem)
+    assert function.compiled
+    unshifted = problem.with_shift(np.zeros(problem.cones.count))
+    rng = np.random.default_rng(3)
+    function.set_proximal(sigma, rng.normal(size=problem.n_rows))
+    n = problem.n_rows
+    for _ in range(20):
+        forces = rng.normal(size=n) * rng.choice([1e-3, 1.0, 1e3], size=n)
+        phi, y, velocity = function.residual(forces)
+        compiled = np.empty(n), np.empty(n), np.empty(n)
+        merit = kernel.alart_curnier_2d(
+            function.W, function.q, function.rho, function.lower, function.upper,
+            function.cone_n, function.tangent_rows, function.cone_mu, function.unilateral,
+            function.sigma, function.center, forces, *compiled)
+        scale = np.abs(forces).max() + np.abs(velocity).max()
+        for mine, theirs in zip(compiled, (phi, y, velocity), strict=True):
+            assert np.abs(mine - theirs).max() <= 1e-13 * scale
+        assert merit == pytest.approx(0.5 * phi @ phi, rel=1e-12)
+        error = kernel.coulomb_error_2d(forces, velocity, function.lower, function.upper,
+                                        function.cone_n, function.tangent_rows, function.cone_mu,
+                                        function.unilateral, function.q_scale)
+        assert error == pytest.approx(coulomb_error(unshifted, forces), rel=1e-12)
+        rows, J = kernel.jacobian_rows_2d(function.W, function.rho, function.lower, function.upper,
+                                          function.box, function.cone_n, function.tangent_rows,
+                                          function.cone_mu, function.unilateral, function.sigma, y)
+        expected, active = function.jacobian(y)
+        assert np.array_equal(rows, np.flatnonzero(active))
+        assert np.abs(J - expected).max() <= 1e-13 * max(np.abs(expected).max(initial=0.0), 1.0)
+
+
+@pytest.mark.parametrize("name", COMPILED_CASES)
+@pytest.mark.parametrize("start", ["cold", "perturbed"])
+def test_the_compiled_newton_phase_takes_the_numpy_phase_steps(name, start):
+    """The compiled phase and the numpy one (``compiled`` off) from the same start: the same
+    iterations, steepest-descent steps, status and errors, and the same forces to round-off."""
+    problem = load_cases()[name].problem.normalized()
+    unshifted = problem.with_shift(np.zeros(problem.cones.count))
+    forces = np.zeros(problem.n_rows)
+    if start == "perturbed":
+        exact = solve_coulomb(problem, "newton-ac", tol=1e-12).forces / problem.scaling.force
+        forces = exact * (1 + 0.3 * np.random.default_rng(0).normal(size=exact.size))
+    phases = []
+    for compiled in (True, False):
+        function = AlartCurnier(problem)
+        function.compiled = compiled
+        phases.append(_proximal_newton(function, unshifted, forces, 1e-10, 200, 1e-3))
+    mine, theirs = phases
+    assert mine.status == theirs.status == CONVERGED
+    assert (mine.iterations, mine.gradient_steps, mine.proximal_steps) == \
+        (theirs.iterations, theirs.gradient_steps, theirs.proximal_steps)
+    assert np.allclose(mine.history, theirs.history, rtol=1e-6, atol=1e-14)
+    assert np.abs(mine.forces - theirs.forces).max() <= 1e-9 * max(np.abs(theirs.forces).max(), 1.0)
+
+
+@pytest.mark.parametrize("name", ["mu_ten", "gamma_states_gluey_coulomb"])
+def test_the_compiled_phase_takes_the_same_steepest_descent_steps(name, monkeypatch):
+    """Without regularisations to try, a singular or failed Newton system leaves the steepest
+    descent direction ``-J^T phi``: with none at all, every step of both phases is one, the same."""
+    problem = load_cases()[name].problem.normalized()
+    unshifted = problem.with_shift(np.zeros(problem.cones.count))
+    monkeypatch.setattr(newton, "REGULARISATIONS", ())
+    monkeypatch.setattr(newton, "_REGULARISATIONS", np.zeros(0))
+    phases = []
+    for compiled in (True, False):
+        function = AlartCurnier(problem)
+        function.compiled = compiled
+        phases.append(newton._newton_phase(function, unshifted, np.zeros(problem.n_rows), 1e-10, 30))
+    mine, theirs = phases
+    assert mine.gradient_steps == theirs.gradient_steps == mine.iterations == theirs.iterations > 0
+    assert mine.status == theirs.status
+    assert np.allclose(mine.history, theirs.history, rtol=1e-8, atol=1e-15)
+    assert np.abs(mine.last - theirs.last).max() <= 1e-9 * max(np.abs(theirs.last).max(), 1.0)
+
+
+def test_a_singular_active_block_is_regularised_alike_when_compiled():
+    """Two equal rows make the active block singular: the compiled direction takes the first
+    regularisation that factorises, as _newton_direction does, and finds the same direction."""
+    from lubcontact.solvers.newton_kernel import newton_direction_2d
+
+    rng = np.random.default_rng(2)
+    J = rng.normal(size=(3, 5))
+    J[1] = J[0]
+    active = np.array([True, True, False, True, False])
+    J[:, 1] = J[:, 0]                      # J_AA's first two rows and columns alike: singular
+    phi = rng.normal(size=5)
+    expected = newton._newton_direction(J, active, phi)
+    direction, ok = newton_direction_2d(np.flatnonzero(active), J, phi, newton._REGULARISATIONS)
+    assert ok and expected is not None
+    assert np.allclose(direction, expected, rtol=1e-6, atol=1e-9)
