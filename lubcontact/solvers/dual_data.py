@@ -60,16 +60,19 @@ DENSE_LIMIT = 300
 """Size up to which the direct solves of the fast methods are dense (LAPACK LU): the active
 block of a Newton system (its active rows), and the exact finish's ``W`` (all its rows, kept
 dense for the solve's attempts). A dense LU of 100-250 rows costs a fraction of a sparse
-factorisation's set-up (measured: 0.6 ms per SuperLU factorisation of 122 rows)."""
+factorisation's set-up (measured: 0.6 ms per SuperLU factorisation of 122 rows). It is also
+the size up to which ``newton-ac`` solves a 2D problem on the dense ``W``, each Newton phase in
+one compiled call (:mod:`.newton_kernel`): on settling piles 2-3x faster than the sparse lane
+at 190-300 rows, even at about 400, slower from about 490."""
 DENSE_OPERATOR_LIMIT = 128
 """Rows up to which :func:`prepare` builds ``W_it`` from the problem's dense ``W``
 (``dense_delassus``, one BLAS product) and applies it as a dense product, and ``nsgs`` and
-``newton-ac`` work on the dense ``W``: on such sizes the sparse set-up (transposes, products,
-scaled copies; about 10 us of fixed cost each) was most of a warm-started solve (a 59-row
-step: 230 of 675 us). The dense product costs ``n_rows^2 n_dof``: on settling piles (tol 1e-8,
-same problem, same process) ``apgd-jacobi`` gained 5-20 % up to 93 rows, was even at 128 and lost
-20-70 % from 136 rows on; ``newton-ac`` gained 1.5-1.7x up to 136 rows, 1.3x at 178 and lost
-at 238."""
+``newton-ac`` (in 2D up to :data:`DENSE_LIMIT`) work on the dense ``W``: on such sizes the
+sparse set-up (transposes, products, scaled copies; about 10 us of fixed cost each) was most
+of a warm-started solve (a 59-row step: 230 of 675 us). The dense product costs ``n_rows^2
+n_dof``: on settling piles (tol 1e-8, same problem, same process) ``apgd-jacobi`` gained 5-20 %
+up to 93 rows, was even at 128 and lost 20-70 % from 136 rows on; ``newton-ac`` (numpy, before
+its compiled lane) gained 1.5-1.7x up to 136 rows, 1.3x at 178 and lost at 238."""
 
 
 @dataclass
@@ -162,7 +165,8 @@ class DualData:
 
 def is_small(problem: ConicProblem) -> bool:
     """Whether ``problem`` takes the dense lane (at most :data:`DENSE_OPERATOR_LIMIT` rows): the
-    one rule :func:`prepare`, ``nsgs`` and ``newton-ac`` follow."""
+    rule :func:`prepare`, ``nsgs`` and ``newton-ac`` follow (``newton-ac`` takes 2D problems
+    of up to :data:`DENSE_LIMIT` rows to its compiled lane)."""
     return problem.n_rows <= DENSE_OPERATOR_LIMIT
 
 

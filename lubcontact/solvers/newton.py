@@ -203,8 +203,11 @@ class AlartCurnier:
         cones = problem.cones
         nc, dim_t = cones.count, cones.tangent_dim
         # a small problem is dense throughout (W, the Jacobian's rows, the LU): at <= 128 rows
-        # the sparse products' fixed cost was most of a Newton iteration (dual_data)
-        self.dense = is_small(problem)
+        # the sparse products' fixed cost was most of a Newton iteration (dual_data); a 2D one
+        # of up to DENSE_LIMIT rows runs each Newton phase in one compiled call (newton_kernel),
+        # 2-3x faster than the sparse lane at 190-300 rows (docs/records/benchmarks.md)
+        self.compiled = dim_t == 1 and problem.n_rows <= DENSE_LIMIT
+        self.dense = self.compiled or is_small(problem)
         self.W = problem.dense_delassus if self.dense else problem.delassus.tocsr()
         self.q = problem.offset.copy()
         self.q[:nc] -= problem.shift
@@ -233,8 +236,6 @@ class AlartCurnier:
         self.sigma, self.center = 0.0, np.zeros(self.n_rows)
         # diag(rho) W, built once; sigma enters as a diagonal
         self.scaled_W = self.rho[:, None] * self.W if self.dense else sp.diags(self.rho) @ self.W
-        # a small 2D problem runs each Newton phase in one compiled call (newton_kernel)
-        self.compiled = self.dense and dim_t == 1
         if self.compiled:
             self.W = np.ascontiguousarray(self.W)
             self.tangent_rows = np.ascontiguousarray(self.cone_t[:, 0])

@@ -367,11 +367,12 @@ def test_a_fallback_with_non_finite_forces_leaves_newtons_answer_and_status():
     assert result.status == MAX_ITER and np.all(np.isfinite(result.forces))
 
 
-@pytest.mark.parametrize("name", ["gamma_states_gluey_coulomb", "mu_ten", "dt_large_friction"])
+@pytest.mark.parametrize("name", ["gamma_states_gluey_coulomb", "mu_ten", "dt_large_friction",
+                                  "tetrahedron_3d_friction"])
 def test_small_problems_take_the_dense_lane_with_the_same_newton_steps(name, monkeypatch):
-    """At most DENSE_OPERATOR_LIMIT rows the Jacobian's rows are dense: the same values as the
-    sparse rows, and the same Newton iterations to the same forces (a zero limit forces the
-    sparse lane)."""
+    """At most DENSE_OPERATOR_LIMIT rows (2D: DENSE_LIMIT, compiled) the Jacobian's rows are
+    dense: the same values as the sparse rows, and the same Newton iterations to the same forces
+    (zero limits force the sparse lane)."""
     from lubcontact.solvers import dual_data
 
     problem = load_cases()[name].problem.normalized()
@@ -381,6 +382,7 @@ def test_small_problems_take_the_dense_lane_with_the_same_newton_steps(name, mon
     rows, active = function.jacobian(y)
     dense = solve_coulomb(problem, "newton-ac", tol=1e-10)
     monkeypatch.setattr(dual_data, "DENSE_OPERATOR_LIMIT", 0)
+    monkeypatch.setattr(newton, "DENSE_LIMIT", 0)
     sparse_function = AlartCurnier(problem)
     sparse_rows, sparse_active = sparse_function.jacobian(y)
     assert isinstance(rows, np.ndarray) and not isinstance(sparse_rows, np.ndarray)
@@ -393,7 +395,7 @@ def test_small_problems_take_the_dense_lane_with_the_same_newton_steps(name, mon
 
 
 COMPILED_CASES = ["gamma_states_gluey_coulomb", "mu_ten", "dt_large_friction", "mu_zero_friction",
-                  "cone_apex_2d"]
+                  "cone_apex_2d", "hex_box_lid_friction"]
 
 
 @pytest.mark.parametrize("name", COMPILED_CASES)
@@ -439,7 +441,10 @@ def test_the_compiled_residual_jacobian_and_error_are_their_numpy_twins(name, si
 @pytest.mark.parametrize("start", ["cold", "perturbed"])
 def test_the_compiled_newton_phase_takes_the_numpy_phase_steps(name, start):
     """The compiled phase and the numpy one (``compiled`` off) from the same start: the same
-    iterations, steepest-descent steps, status and errors, and the same forces to round-off."""
+    iterations, steepest-descent steps, status and errors, and the same velocities to round-off
+    (on the hyperstatic hexagonal packing, whose regularised Newton systems are ill-conditioned,
+    the two LUs' rounding moves the errors below 1e-6 of the start's by up to 1 %, and the
+    forces, which are not unique there, by 1e-8 of their size)."""
     problem = load_cases()[name].problem.normalized()
     unshifted = problem.with_shift(np.zeros(problem.cones.count))
     forces = np.zeros(problem.n_rows)
@@ -455,8 +460,9 @@ def test_the_compiled_newton_phase_takes_the_numpy_phase_steps(name, start):
     assert mine.status == theirs.status == CONVERGED
     assert (mine.iterations, mine.gradient_steps, mine.proximal_steps) == \
         (theirs.iterations, theirs.gradient_steps, theirs.proximal_steps)
-    assert np.allclose(mine.history, theirs.history, rtol=1e-6, atol=1e-14)
-    assert np.abs(mine.forces - theirs.forces).max() <= 1e-9 * max(np.abs(theirs.forces).max(), 1.0)
+    assert np.allclose(mine.history, theirs.history, rtol=1e-6, atol=1e-6 * theirs.history[0])
+    velocity, expected = unshifted.gradient(mine.forces), unshifted.gradient(theirs.forces)
+    assert np.abs(velocity - expected).max() <= 1e-9 * max(np.abs(expected).max(), 1.0)
 
 
 @pytest.mark.parametrize("name", ["mu_ten", "gamma_states_gluey_coulomb"])
