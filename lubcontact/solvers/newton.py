@@ -61,6 +61,7 @@ from __future__ import annotations
 import time
 import warnings
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 import scipy.sparse as sp
@@ -78,6 +79,7 @@ from .newton_kernel import (
     MAX_ITER_CODE,
     coulomb_error_2d,
     newton_phase_2d,
+    sparse_jacobian_rows_2d,
 )
 from .registry import ALL_CONES, NEWTON, register
 from .result import CONVERGED, FAILED, INACCURATE, MAX_ITER, MethodOutput
@@ -197,6 +199,10 @@ class AlartCurnier:
     unilateral : ndarray of bool, shape (nf,)
         True where the normal row is ``max(y_n, 0)`` (COULOMB), False where it
         is bilateral (UNION: a box row with no bounds).
+    planar, compiled, compiled_rows : bool
+        A 2D problem (its FCLIB error compiled); one whose Newton phases run compiled on the
+        dense ``W`` (at most ``DENSE_LIMIT`` rows); one on the sparse lane whose Jacobian rows
+        are assembled compiled (:mod:`~lubcontact.solvers.newton_kernel`).
     """
 
     def __init__(self, problem: ConicProblem):
@@ -206,7 +212,8 @@ class AlartCurnier:
         # the sparse products' fixed cost was most of a Newton iteration (dual_data); a 2D one
         # of up to DENSE_LIMIT rows runs each Newton phase in one compiled call (newton_kernel),
         # 2-3x faster than the sparse lane at 190-300 rows (docs/records/benchmarks.md)
-        self.compiled = dim_t == 1 and problem.n_rows <= DENSE_LIMIT
+        self.planar = dim_t == 1
+        self.compiled = self.planar and problem.n_rows <= DENSE_LIMIT
         self.dense = self.compiled or is_small(problem)
         self.W = problem.dense_delassus if self.dense else problem.delassus.tocsr()
         self.q = problem.offset.copy()
@@ -234,21 +241,32 @@ class AlartCurnier:
         self.typical = 1.0 if nc == 0 else float(ordered[middle]) if nc % 2 else \
             float(0.5 * (ordered[middle - 1] + ordered[middle]))
         self.sigma, self.center = 0.0, np.zeros(self.n_rows)
-        # diag(rho) W, built once; sigma enters as a diagonal
-        self.scaled_W = self.rho[:, None] * self.W if self.dense else sp.diags(self.rho) @ self.W
-        if self.compiled:
-            self.W = np.ascontiguousarray(self.W)
+        # on the sparse lane, a 2D problem's Jacobian rows are assembled compiled (a numpy
+        # sparse product G W and sum cost as much as the LU on developed 2000-grain flows)
+        self.compiled_rows = self.planar and not self.dense
+        if self.planar:             # one tangential row per contact; the FCLIB error compiled
             self.tangent_rows = np.ascontiguousarray(self.cone_t[:, 0])
             self.q_scale = 1.0 + float(np.linalg.norm(self.q))
+        if self.compiled:
+            self.W = np.ascontiguousarray(self.W)
+
+    @cached_property
+    def scaled_W(self) -> sp.csr_matrix | np.ndarray:
+        """``diag(rho) W``, built once, on first use (the numpy Jacobian rows; ``sigma`` enters as
+        a diagonal)."""
+        return self.rho[:, None] * self.W if self.dense else sp.diags(self.rho) @ self.W
 
     def set_proximal(self, sigma: float, center: np.ndarray) -> None:
         """Solve the proximal problem ``W + sigma I``, ``q - sigma center`` from now on (0: the problem)."""
         self.sigma, self.center = float(sigma), np.array(center, dtype=float)
 
-    def residual(self, forces: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def residual(self, forces: np.ndarray, velocity: np.ndarray | None = None
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``phi(r)``, ``y = r - rho (W r + q + sigma (r - center))`` and the velocity
-        ``W r + q`` (the problem's, without the proximal term), each shape (n_rows,)."""
-        velocity = self.W @ forces + self.q
+        ``W r + q`` (the problem's, without the proximal term; computed here when not given),
+        each shape (n_rows,)."""
+        if velocity is None:
+            velocity = self.W @ forces + self.q
         y = forces - self.rho * velocity
         if self.sigma:
             y -= (self.rho * self.sigma) * (forces - self.center)
@@ -267,10 +285,10 @@ class AlartCurnier:
                       velocity: np.ndarray | None = None) -> float:
         """The FCLIB error of ``forces``: :func:`~lubcontact.problem.metrics.coulomb_error` of
         ``unshifted`` (this function's problem without its shift), from the velocity ``W r + q``
-        (:meth:`residual`'s, computed here when not given); compiled on a small 2D problem."""
+        (:meth:`residual`'s, computed here when not given); compiled on a 2D problem."""
         if velocity is None:
             velocity = self.W @ forces + self.q
-        if self.compiled:
+        if self.planar:
             return float(coulomb_error_2d(forces, velocity, self.lower, self.upper, self.cone_n,
                                           self.tangent_rows, self.cone_mu, self.unilateral,
                                           self.q_scale))
@@ -285,8 +303,17 @@ class AlartCurnier:
             Those rows, shape (m, n_rows) (a dense array on a small problem), and the mask of
             the m rows (``active``); every other row of ``J`` is the identity's. Only they are
             assembled: ``G``'s product with ``W`` for all rows cost 30 % of a Newton step on a
-            developed 3200-grain flow.
+            developed 3200-grain flow. On the sparse lane a 2D problem's rows are assembled by
+            :func:`~lubcontact.solvers.newton_kernel.sparse_jacobian_rows_2d` (``compiled_rows``).
         """
+        if self.compiled_rows:
+            rows, indptr, indices, data = sparse_jacobian_rows_2d(
+                self.W.indptr, self.W.indices, self.W.data, self.rho, self.lower, self.upper,
+                self.box, self.cone_n, self.tangent_rows, self.cone_mu, self.unilateral,
+                self.sigma, y)
+            active = np.zeros(self.n_rows, dtype=bool)
+            active[rows] = True
+            return sp.csr_matrix((data, indices, indptr), shape=(rows.size, self.n_rows)), active
         rows, cols, vals = [], [], []
         box = np.flatnonzero(self.box & (y > self.lower) & (y < self.upper))
         rows.append(box)
@@ -653,15 +680,18 @@ def _newton_phase(function: AlartCurnier, unshifted: ConicProblem, forces: np.nd
         newton = _newton_direction(J, active, phi)
         step = None
         if newton is not None:
-            step = _line_search(function, forces, newton, 2.0 * merit, max(recent))
+            step = _line_search(function, forces, velocity, newton, 2.0 * merit, max(recent))
         if step is None:                   # J^T phi, J's inactive rows being the identity's
             gradient = np.where(active, 0.0, phi) + J.T @ phi[active]
-            step = _line_search(function, forces, -gradient, float(gradient @ gradient), max(recent))
+            step = _line_search(function, forces, velocity, -gradient, float(gradient @ gradient),
+                                max(recent))
             gradient_steps += 1
         if step is None:
             status = FAILED
             break
-        forces, phi, y, velocity, merit = step
+        forces = step
+        phi, y, velocity = function.residual(forces)        # W r afresh: no drift
+        merit = 0.5 * float(phi @ phi)
         recent = (recent + [merit])[-LINE_SEARCH_MEMORY:]
         error = function.coulomb_error(unshifted, forces, velocity)
         history.append(error)
@@ -691,21 +721,24 @@ def _compiled_phase(function: AlartCurnier, forces: np.ndarray, tol: float, max_
                   solved=bool(solved), last=last, last_error=float(last_error))
 
 
-def _line_search(function: AlartCurnier, forces: np.ndarray, direction: np.ndarray,
-                 slope: float, reference: float) -> tuple | None:
-    """Backtrack from the full step until ``psi`` falls below the non-monotone Armijo bound.
+def _line_search(function: AlartCurnier, forces: np.ndarray, velocity: np.ndarray,
+                 direction: np.ndarray, slope: float, reference: float) -> np.ndarray | None:
+    """Backtrack from the full step until ``psi`` falls below the non-monotone Armijo bound;
+    the accepted forces, or None.
 
-    ``slope`` is the decrease rate of ``psi`` along ``direction`` at ``forces``
-    (``2 psi`` for the Newton direction, ``|J^T phi|^2`` for steepest descent).
+    ``velocity`` is ``W r + q`` at ``forces``; ``slope`` is the decrease rate of ``psi`` along
+    ``direction`` at ``forces`` (``2 psi`` for the Newton direction, ``|J^T phi|^2`` for
+    steepest descent). A trial's velocity is ``velocity + alpha W d``: one product with ``W``
+    per direction, not one per trial (on developed 2000-grain flows the search took five to six
+    trials per Newton iteration).
     """
     if not slope > 0:
         return None
+    change = function.W @ direction
     alpha = 1.0
     for _ in range(MAX_HALVINGS):
-        trial = forces + alpha * direction
-        phi, y, velocity = function.residual(trial)
-        value = 0.5 * float(phi @ phi)
-        if value <= reference - ARMIJO * alpha * slope:
-            return trial, phi, y, velocity, value
+        phi, _, _ = function.residual(forces + alpha * direction, velocity + alpha * change)
+        if 0.5 * float(phi @ phi) <= reference - ARMIJO * alpha * slope:
+            return forces + alpha * direction
         alpha *= 0.5
     return None

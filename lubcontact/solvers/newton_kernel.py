@@ -23,17 +23,24 @@ FAILED_CODE, MAX_ITER_CODE, CONVERGED_CODE = 0, 1, 2
 
 
 @numba.njit(cache=True)
-def alart_curnier_2d(W, q, rho, lower, upper, cone_n, cone_t, cone_mu, unilateral, sigma, center,
-                     forces, phi, y, velocity):
-    """``phi``, ``y`` and the velocity ``W r + q`` of :meth:`AlartCurnier.residual`, in place;
-    returns the merit ``|phi|^2 / 2``."""
+def product_2d(W, x, offset, out):
+    """``out = W x + offset`` for a dense ``W`` (shape (n, n))."""
+    n = x.size
+    for i in range(n):
+        total = offset[i]
+        for j in range(n):
+            total += W[i, j] * x[j]
+        out[i] = total
+
+
+@numba.njit(cache=True)
+def alart_curnier_2d(rho, lower, upper, cone_n, cone_t, cone_mu, unilateral, sigma, center,
+                     forces, velocity, phi, y):
+    """``phi`` and ``y`` of :meth:`AlartCurnier.residual` at ``forces`` whose velocity ``W r + q``
+    is ``velocity``, in place; returns the merit ``|phi|^2 / 2``."""
     n = forces.size
     for i in range(n):
-        total = q[i]
-        for j in range(n):
-            total += W[i, j] * forces[j]
-        velocity[i] = total
-        y[i] = forces[i] - rho[i] * total
+        y[i] = forces[i] - rho[i] * velocity[i]
         if sigma != 0.0:
             y[i] -= (rho[i] * sigma) * (forces[i] - center[i])
         phi[i] = forces[i] - min(max(y[i], lower[i]), upper[i])
@@ -80,12 +87,19 @@ def coulomb_error_2d(forces, velocity, lower, upper, cone_n, cone_t, cone_mu, un
 
 
 @numba.njit(cache=True)
-def jacobian_rows_2d(W, rho, lower, upper, box, cone_n, cone_t, cone_mu, unilateral, sigma, y):
-    """The rows of ``J = I - G + G diag(rho) (W + sigma I)`` where ``G`` is not zero
-    (:meth:`AlartCurnier.jacobian`): ``(rows, J_A)``, the active rows' indices (m,) and their
-    rows of ``J``, shape (m, n)."""
+def generalised_jacobian_2d(lower, upper, box, cone_n, cone_t, cone_mu, unilateral, y):
+    """The nonzeros of ``G``, the generalised Jacobian of the projection at ``y``
+    (:meth:`AlartCurnier.jacobian`): in 2D at most two per row.
+
+    Returns
+    -------
+    tuple
+        ``(rows, first_col, first_val, second_col, second_val)``: the rows where ``G`` is not
+        zero (active), shape (m,), and per row of ``y`` (shape (n,) each) the columns and
+        values of its entries, column -1 where there is none.
+    """
     n = y.size
-    first_col = np.full(n, -1)          # G has at most two entries per row in 2D
+    first_col = np.full(n, -1)
     first_val = np.zeros(n)
     second_col = np.full(n, -1)
     second_val = np.zeros(n)
@@ -106,7 +120,17 @@ def jacobian_rows_2d(W, rho, lower, upper, box, cone_n, cone_t, cone_mu, unilate
             second_col[tangent], second_val[tangent] = normal, cone_mu[c] * t
         elif pushed and size <= radius:                      # sticking
             first_col[tangent], first_val[tangent] = tangent, 1.0
-    rows = np.flatnonzero(first_col >= 0)
+    return np.flatnonzero(first_col >= 0), first_col, first_val, second_col, second_val
+
+
+@numba.njit(cache=True)
+def jacobian_rows_2d(W, rho, lower, upper, box, cone_n, cone_t, cone_mu, unilateral, sigma, y):
+    """The rows of ``J = I - G + G diag(rho) (W + sigma I)`` where ``G`` is not zero, ``W``
+    dense: ``(rows, J_A)``, the active rows' indices (m,) and their rows of ``J``, shape
+    (m, n)."""
+    rows, first_col, first_val, second_col, second_val = generalised_jacobian_2d(
+        lower, upper, box, cone_n, cone_t, cone_mu, unilateral, y)
+    n = y.size
     J = np.zeros((rows.size, n))
     for a in range(rows.size):
         i = rows[a]
@@ -120,6 +144,59 @@ def jacobian_rows_2d(W, rho, lower, upper, box, cone_n, cone_t, cone_mu, unilate
                 J[a, j] += weight * W[column, j]
             J[a, column] += weight * sigma
     return rows, J
+
+
+@numba.njit(cache=True)
+def sparse_jacobian_rows_2d(indptr, indices, data, rho, lower, upper, box, cone_n, cone_t,
+                            cone_mu, unilateral, sigma, y):
+    """:func:`jacobian_rows_2d` with ``W`` in CSR form (``indptr``, ``indices``, ``data``):
+    ``(rows, J_indptr, J_indices, J_data)``, the active rows (m,) and the CSR arrays of their
+    rows of ``J`` (m x n), columns unsorted in each row. A row of ``J`` is ``e_i`` plus at most
+    two rows of ``W`` scaled, so it is accumulated in a dense scratch row over the union of
+    their patterns (an entry of ``G`` that is exactly 0, as on a sliding tangential row, adds
+    nothing)."""
+    rows, first_col, first_val, second_col, second_val = generalised_jacobian_2d(
+        lower, upper, box, cone_n, cone_t, cone_mu, unilateral, y)
+    n, m = y.size, rows.size
+    capacity = 0
+    for a in range(m):
+        i = rows[a]
+        capacity += 3                                        # e_i and G's own columns
+        for column in (first_col[i], second_col[i]):
+            if column >= 0:
+                capacity += indptr[column + 1] - indptr[column]
+    J_indptr = np.zeros(m + 1, dtype=np.int64)
+    J_indices = np.empty(capacity, dtype=np.int64)
+    J_data = np.empty(capacity)
+    scratch = np.zeros(n)
+    seen = np.full(n, -1)
+    pattern = np.empty(n, dtype=np.int64)
+    count = 0
+    for a in range(m):
+        i = rows[a]
+        seen[i], scratch[i], pattern[0] = a, 1.0, i          # the identity's entry
+        size = 1
+        for column, value in ((first_col[i], first_val[i]), (second_col[i], second_val[i])):
+            if column < 0 or value == 0.0:
+                continue
+            if seen[column] != a:
+                seen[column], scratch[column], pattern[size] = a, 0.0, column
+                size += 1
+            scratch[column] -= value
+            weight = value * rho[column]
+            for k in range(indptr[column], indptr[column + 1]):
+                j = indices[k]
+                if seen[j] != a:
+                    seen[j], scratch[j], pattern[size] = a, 0.0, j
+                    size += 1
+                scratch[j] += weight * data[k]
+            scratch[column] += weight * sigma
+        for k in range(size):
+            J_indices[count + k] = pattern[k]
+            J_data[count + k] = scratch[pattern[k]]
+        count += size
+        J_indptr[a + 1] = count
+    return rows, J_indptr, J_indices[:count], J_data[:count]
 
 
 @numba.njit(cache=True)
@@ -201,8 +278,9 @@ def newton_phase_2d(W, q, rho, lower, upper, box, cone_n, cone_t, cone_mu, unila
     n = forces.size
     forces = forces.copy()
     phi, y, velocity = np.empty(n), np.empty(n), np.empty(n)
-    merit = alart_curnier_2d(W, q, rho, lower, upper, cone_n, cone_t, cone_mu, unilateral, sigma,
-                             center, forces, phi, y, velocity)
+    product_2d(W, forces, q, velocity)
+    merit = alart_curnier_2d(rho, lower, upper, cone_n, cone_t, cone_mu, unilateral, sigma,
+                             center, forces, velocity, phi, y)
     recent = np.full(memory, -np.inf)
     recent[0] = merit
     count = 1
@@ -213,8 +291,8 @@ def newton_phase_2d(W, q, rho, lower, upper, box, cone_n, cone_t, cone_mu, unila
     best, best_error = forces.copy(), error
     iterations = gradient_steps = 0
     code = MAX_ITER_CODE
-    trial, trial_phi = np.empty(n), np.empty(n)
-    trial_y, trial_velocity = np.empty(n), np.empty(n)
+    trial, trial_phi, trial_y = np.empty(n), np.empty(n), np.empty(n)
+    change, trial_velocity, no_offset = np.empty(n), np.empty(n), np.zeros(n)
     while error > tol and iterations < max_iter and np.sqrt(2.0 * merit) > inner_tol:
         iterations += 1
         rows, J = jacobian_rows_2d(W, rho, lower, upper, box, cone_n, cone_t, cone_mu,
@@ -241,13 +319,14 @@ def newton_phase_2d(W, q, rho, lower, upper, box, cone_n, cone_t, cone_mu, unila
                 gradient_steps += 1
             if not slope > 0.0:
                 continue
+            product_2d(W, direction, no_offset, change)     # a trial's velocity: v + alpha W d
             alpha = 1.0
             for _ in range(max_halvings):
                 for j in range(n):
                     trial[j] = forces[j] + alpha * direction[j]
-                value = alart_curnier_2d(W, q, rho, lower, upper, cone_n, cone_t, cone_mu,
-                                         unilateral, sigma, center, trial, trial_phi, trial_y,
-                                         trial_velocity)
+                    trial_velocity[j] = velocity[j] + alpha * change[j]
+                value = alart_curnier_2d(rho, lower, upper, cone_n, cone_t, cone_mu, unilateral,
+                                         sigma, center, trial, trial_velocity, trial_phi, trial_y)
                 if value <= reference - armijo * alpha * slope:
                     accepted = True
                     break
@@ -258,10 +337,9 @@ def newton_phase_2d(W, q, rho, lower, upper, box, cone_n, cone_t, cone_mu, unila
             code = FAILED_CODE
             break
         forces[:] = trial
-        phi[:] = trial_phi
-        y[:] = trial_y
-        velocity[:] = trial_velocity
-        merit = value
+        product_2d(W, forces, q, velocity)                   # W r afresh: no drift
+        merit = alart_curnier_2d(rho, lower, upper, cone_n, cone_t, cone_mu, unilateral, sigma,
+                                 center, forces, velocity, phi, y)
         if count < memory:
             recent[count] = merit
             count += 1

@@ -417,10 +417,11 @@ def test_the_compiled_residual_jacobian_and_error_are_their_numpy_twins(name, si
         forces = rng.normal(size=n) * rng.choice([1e-3, 1.0, 1e3], size=n)
         phi, y, velocity = function.residual(forces)
         compiled = np.empty(n), np.empty(n), np.empty(n)
+        kernel.product_2d(function.W, forces, function.q, compiled[2])
         merit = kernel.alart_curnier_2d(
-            function.W, function.q, function.rho, function.lower, function.upper,
-            function.cone_n, function.tangent_rows, function.cone_mu, function.unilateral,
-            function.sigma, function.center, forces, *compiled)
+            function.rho, function.lower, function.upper, function.cone_n, function.tangent_rows,
+            function.cone_mu, function.unilateral, function.sigma, function.center, forces,
+            compiled[2], compiled[0], compiled[1])
         scale = np.abs(forces).max() + np.abs(velocity).max()
         for mine, theirs in zip(compiled, (phi, y, velocity), strict=True):
             assert np.abs(mine - theirs).max() <= 1e-13 * scale
@@ -435,6 +436,33 @@ def test_the_compiled_residual_jacobian_and_error_are_their_numpy_twins(name, si
         expected, active = function.jacobian(y)
         assert np.array_equal(rows, np.flatnonzero(active))
         assert np.abs(J - expected).max() <= 1e-13 * max(np.abs(expected).max(initial=0.0), 1.0)
+
+
+@pytest.mark.parametrize("name", COMPILED_CASES)
+@pytest.mark.parametrize("sigma", [0.0, 1e-2])
+def test_the_compiled_sparse_jacobian_rows_are_the_numpy_rows(name, sigma, monkeypatch):
+    """On the sparse lane (limits set to zero) a 2D problem's Jacobian rows are assembled by a
+    compiled kernel: the same active rows and values as the numpy sparse product, at points
+    with every contact state."""
+    from lubcontact.solvers import dual_data
+
+    monkeypatch.setattr(dual_data, "DENSE_OPERATOR_LIMIT", 0)
+    monkeypatch.setattr(newton, "DENSE_LIMIT", 0)
+    problem = load_cases()[name].problem.normalized()
+    function = AlartCurnier(problem)
+    assert function.compiled_rows and not function.dense
+    rng = np.random.default_rng(4)
+    function.set_proximal(sigma, rng.normal(size=problem.n_rows))
+    for _ in range(20):
+        forces = rng.normal(size=problem.n_rows) * rng.choice([1e-3, 1.0, 1e3], size=problem.n_rows)
+        y = function.residual(forces)[1]
+        rows, active = function.jacobian(y)
+        function.compiled_rows = False
+        expected, expected_active = function.jacobian(y)
+        function.compiled_rows = True
+        assert np.array_equal(active, expected_active)
+        difference = np.abs(rows.toarray() - expected.toarray()).max(initial=0.0)
+        assert difference <= 1e-13 * max(np.abs(expected.toarray()).max(initial=0.0), 1.0)
 
 
 @pytest.mark.parametrize("name", COMPILED_CASES)
