@@ -62,7 +62,7 @@ block of a Newton system (its active rows), and the exact finish's ``W`` (all it
 dense for the solve's attempts). A dense LU of 100-250 rows costs a fraction of a sparse
 factorisation's set-up (measured: 0.6 ms per SuperLU factorisation of 122 rows). It is also
 the size up to which ``newton-ac`` solves a 2D problem on the dense ``W``, each Newton phase in
-one compiled call (:mod:`.newton_kernel`): on settling piles 2-3x faster than the sparse lane
+one compiled call (:func:`.kernels.newton_phase_2d`): on settling piles 2-3x faster than the sparse lane
 at 190-300 rows, even at about 400, slower from about 490."""
 DENSE_OPERATOR_LIMIT = 128
 """Rows up to which :func:`prepare` builds ``W_it`` from the problem's dense ``W``

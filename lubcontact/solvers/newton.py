@@ -73,14 +73,6 @@ from ..problem.metrics import coulomb_error
 from ..problem.step import diagonal_scaled
 from .coulomb import solve_coulomb
 from .dual_data import DENSE_LIMIT, dense_lu, dense_lu_solve, is_small
-from .newton_kernel import (
-    CONVERGED_CODE,
-    FAILED_CODE,
-    MAX_ITER_CODE,
-    coulomb_error_2d,
-    newton_phase_2d,
-    sparse_jacobian_rows_2d,
-)
 from .registry import ALL_CONES, NEWTON, register
 from .result import CONVERGED, FAILED, INACCURATE, MAX_ITER, MethodOutput
 
@@ -92,7 +84,6 @@ ARMIJO = 1e-4
 
 REGULARISATIONS = (0.0, 1e-10, 1e-8, 1e-6, 1e-4)
 """Diagonal shifts tried in turn when the active block of the Jacobian is singular."""
-_REGULARISATIONS = np.array(REGULARISATIONS)
 
 SPARSE_LU = dict(permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.1,
                  options=dict(SymmetricMode=True))
@@ -202,7 +193,11 @@ class AlartCurnier:
     planar, compiled, compiled_rows : bool
         A 2D problem (its FCLIB error compiled); one whose Newton phases run compiled on the
         dense ``W`` (at most ``DENSE_LIMIT`` rows); one on the sparse lane whose Jacobian rows
-        are assembled compiled (:mod:`~lubcontact.solvers.newton_kernel`).
+        are assembled compiled (:mod:`~lubcontact.solvers.kernels`).
+    tangent_rows : ndarray of int, shape (nf,)
+        ``cone_t``'s one column (planar problems only).
+    q_scale : float
+        ``1 + |q|``, the FCLIB error's denominator (planar problems only).
     """
 
     def __init__(self, problem: ConicProblem):
@@ -210,7 +205,7 @@ class AlartCurnier:
         nc, dim_t = cones.count, cones.tangent_dim
         # a small problem is dense throughout (W, the Jacobian's rows, the LU): at <= 128 rows
         # the sparse products' fixed cost was most of a Newton iteration (dual_data); a 2D one
-        # of up to DENSE_LIMIT rows runs each Newton phase in one compiled call (newton_kernel),
+        # of up to DENSE_LIMIT rows runs each Newton phase in one compiled call (kernels),
         # 2-3x faster than the sparse lane at 190-300 rows (docs/records/benchmarks.md)
         self.planar = dim_t == 1
         self.compiled = self.planar and problem.n_rows <= DENSE_LIMIT
@@ -289,6 +284,8 @@ class AlartCurnier:
         if velocity is None:
             velocity = self.W @ forces + self.q
         if self.planar:
+            from .kernels import coulomb_error_2d  # numba, imported on first use
+
             return float(coulomb_error_2d(forces, velocity, self.lower, self.upper, self.cone_n,
                                           self.tangent_rows, self.cone_mu, self.unilateral,
                                           self.q_scale))
@@ -304,9 +301,11 @@ class AlartCurnier:
             the m rows (``active``); every other row of ``J`` is the identity's. Only they are
             assembled: ``G``'s product with ``W`` for all rows cost 30 % of a Newton step on a
             developed 3200-grain flow. On the sparse lane a 2D problem's rows are assembled by
-            :func:`~lubcontact.solvers.newton_kernel.sparse_jacobian_rows_2d` (``compiled_rows``).
+            :func:`~lubcontact.solvers.kernels.sparse_jacobian_rows_2d` (``compiled_rows``).
         """
         if self.compiled_rows:
+            from .kernels import sparse_jacobian_rows_2d  # numba, imported on first use
+
             rows, indptr, indices, data = sparse_jacobian_rows_2d(
                 self.W.indptr, self.W.indices, self.W.data, self.rho, self.lower, self.upper,
                 self.box, self.cone_n, self.tangent_rows, self.cone_mu, self.unilateral,
@@ -663,7 +662,7 @@ def _newton_phase(function: AlartCurnier, unshifted: ConicProblem, forces: np.nd
                   tol: float, max_iter: int, inner_tol: float = 0.0) -> _Phase:
     """Newton iterations on ``function`` from ``forces`` until the FCLIB error of ``unshifted``
     is below ``tol``, ``|phi| <= inner_tol``, a failed line search or the cap (in one compiled
-    call on a small 2D problem, :func:`~lubcontact.solvers.newton_kernel.newton_phase_2d`)."""
+    call on a small 2D problem, :func:`~lubcontact.solvers.kernels.newton_phase_2d`)."""
     if function.compiled:
         return _compiled_phase(function, forces, tol, max_iter, inner_tol)
     phi, y, velocity = function.residual(forces)
@@ -703,20 +702,20 @@ def _newton_phase(function: AlartCurnier, unshifted: ConicProblem, forces: np.nd
                   solved=bool(np.sqrt(2.0 * merit) <= inner_tol), last=forces, last_error=error)
 
 
-_STATUS_CODES = {FAILED_CODE: FAILED, MAX_ITER_CODE: MAX_ITER, CONVERGED_CODE: CONVERGED}
-
-
 def _compiled_phase(function: AlartCurnier, forces: np.ndarray, tol: float, max_iter: int,
                     inner_tol: float) -> _Phase:
-    """:func:`_newton_phase` by :func:`~lubcontact.solvers.newton_kernel.newton_phase_2d`."""
+    """:func:`_newton_phase` by :func:`~lubcontact.solvers.kernels.newton_phase_2d`."""
+    from .kernels import CONVERGED_CODE, FAILED_CODE, newton_phase_2d  # numba, on first use
+
     (best, best_error, last, last_error, iterations, gradient_steps, code, history,
      solved) = newton_phase_2d(
         function.W, function.q, function.rho, function.lower, function.upper, function.box,
         function.cone_n, function.tangent_rows, function.cone_mu, function.unilateral,
         function.sigma, function.center, function.q_scale, np.asarray(forces, dtype=float),
-        float(tol), int(max_iter), float(inner_tol), _REGULARISATIONS, LINE_SEARCH_MEMORY,
-        ARMIJO, MAX_HALVINGS)
-    return _Phase(forces=best, status=_STATUS_CODES[code], iterations=int(iterations),
+        float(tol), int(max_iter), float(inner_tol), np.array(REGULARISATIONS, dtype=float),
+        LINE_SEARCH_MEMORY, ARMIJO, MAX_HALVINGS)
+    status = FAILED if code == FAILED_CODE else CONVERGED if code == CONVERGED_CODE else MAX_ITER
+    return _Phase(forces=best, status=status, iterations=int(iterations),
                   error=float(best_error), history=history, gradient_steps=int(gradient_steps),
                   solved=bool(solved), last=last, last_error=float(last_error))
 

@@ -401,10 +401,10 @@ COMPILED_CASES = ["gamma_states_gluey_coulomb", "mu_ten", "dt_large_friction", "
 @pytest.mark.parametrize("name", COMPILED_CASES)
 @pytest.mark.parametrize("sigma", [0.0, 1e-2])
 def test_the_compiled_residual_jacobian_and_error_are_their_numpy_twins(name, sigma):
-    """On a small 2D problem the Newton phase runs compiled (newton_kernel): at points with
+    """On a small 2D problem the Newton phase runs compiled (kernels.newton_phase_2d): at points with
     every contact state (random signs and sizes), its residual, velocity, Jacobian rows and
     FCLIB error are those of AlartCurnier and metrics.coulomb_error."""
-    from lubcontact.solvers import newton_kernel as kernel
+    from lubcontact.solvers import kernels as kernel
 
     problem = load_cases()[name].problem.normalized()
     function = AlartCurnier(problem)
@@ -471,8 +471,8 @@ def test_the_compiled_newton_phase_takes_the_numpy_phase_steps(name, start):
     """The compiled phase and the numpy one (``compiled`` off) from the same start: the same
     iterations, steepest-descent steps, status and errors, and the same velocities to round-off
     (on the hyperstatic hexagonal packing, whose regularised Newton systems are ill-conditioned,
-    the two LUs' rounding moves the errors below 1e-6 of the start's by up to 1 %, and the
-    forces, which are not unique there, by 1e-8 of their size)."""
+    the two LUs' rounding moves the smallest errors by up to 1 % and the velocities by 5e-11;
+    the forces, which are not unique there, by 1e-8 of their size)."""
     problem = load_cases()[name].problem.normalized()
     unshifted = problem.with_shift(np.zeros(problem.cones.count))
     forces = np.zeros(problem.n_rows)
@@ -488,9 +488,10 @@ def test_the_compiled_newton_phase_takes_the_numpy_phase_steps(name, start):
     assert mine.status == theirs.status == CONVERGED
     assert (mine.iterations, mine.gradient_steps, mine.proximal_steps) == \
         (theirs.iterations, theirs.gradient_steps, theirs.proximal_steps)
-    assert np.allclose(mine.history, theirs.history, rtol=1e-6, atol=1e-6 * theirs.history[0])
+    rounding = 1e-9 if name == "hex_box_lid_friction" else 1e-12      # measured: 5e-11, 1e-14
+    assert np.allclose(mine.history, theirs.history, rtol=1e-6, atol=rounding * theirs.history[0])
     velocity, expected = unshifted.gradient(mine.forces), unshifted.gradient(theirs.forces)
-    assert np.abs(velocity - expected).max() <= 1e-9 * max(np.abs(expected).max(), 1.0)
+    assert np.abs(velocity - expected).max() <= rounding * max(np.abs(expected).max(), 1.0)
 
 
 @pytest.mark.parametrize("name", ["mu_ten", "gamma_states_gluey_coulomb"])
@@ -500,7 +501,6 @@ def test_the_compiled_phase_takes_the_same_steepest_descent_steps(name, monkeypa
     problem = load_cases()[name].problem.normalized()
     unshifted = problem.with_shift(np.zeros(problem.cones.count))
     monkeypatch.setattr(newton, "REGULARISATIONS", ())
-    monkeypatch.setattr(newton, "_REGULARISATIONS", np.zeros(0))
     phases = []
     for compiled in (True, False):
         function = AlartCurnier(problem)
@@ -513,10 +513,51 @@ def test_the_compiled_phase_takes_the_same_steepest_descent_steps(name, monkeypa
     assert np.abs(mine.last - theirs.last).max() <= 1e-9 * max(np.abs(theirs.last).max(), 1.0)
 
 
+def test_a_failed_compiled_phase_reports_the_errors_of_its_iterates_only(monkeypatch):
+    """Without halvings the first line search fails: both phases stop ``failed`` after one
+    iteration with the start's error alone in their history (the compiled one returned an
+    unwritten entry as well, which the stall rule then read as an error)."""
+    problem = load_cases()["mu_ten"].problem.normalized()
+    unshifted = problem.with_shift(np.zeros(problem.cones.count))
+    monkeypatch.setattr(newton, "MAX_HALVINGS", 0)
+    phases = []
+    for compiled in (True, False):
+        function = AlartCurnier(problem)
+        function.compiled = compiled
+        phases.append(newton._newton_phase(function, unshifted, np.zeros(problem.n_rows), 1e-10, 10))
+    mine, theirs = phases
+    assert mine.status == theirs.status == newton.FAILED
+    assert mine.iterations == theirs.iterations == 1
+    assert mine.history.size == theirs.history.size == 1
+    assert mine.history[0] == pytest.approx(theirs.history[0], rel=1e-12)
+
+
+def test_the_compiled_strategies_take_the_numpy_steps_where_newton_fails():
+    """An infeasible glued contact (a singular ``W``): Newton's line searches fail and
+    steepest-descent steps follow, strategy after strategy, every error near 0.995. The compiled
+    phases try the same strategies for as many iterations to the same best error, and never
+    report an error they did not compute. (Their failed and gradient steps agree for the first
+    73 iterates; after, rounding decides ties on this degenerate problem.)"""
+    problem = load_cases()["glued_infeasible"].problem.normalized()
+    unshifted = problem.with_shift(np.zeros(problem.cones.count))
+    phases = []
+    for compiled in (True, False):
+        function = AlartCurnier(problem)
+        function.compiled = compiled
+        phases.append(newton._strategies(function, unshifted, np.zeros(problem.n_rows), 1e-8, 200))
+    mine, theirs = phases
+    assert mine.gradient_steps > 0 and theirs.gradient_steps > 0
+    assert mine.status == theirs.status != CONVERGED
+    assert (mine.iterations, mine.strategies) == (theirs.iterations, theirs.strategies)
+    assert mine.error == pytest.approx(theirs.error, rel=1e-9)
+    assert mine.history.min() == pytest.approx(theirs.history.min(), rel=1e-9)
+    assert np.allclose(mine.history[:73], theirs.history[:73], rtol=1e-9, atol=0)
+
+
 def test_a_singular_active_block_is_regularised_alike_when_compiled():
     """Two equal rows make the active block singular: the compiled direction takes the first
     regularisation that factorises, as _newton_direction does, and finds the same direction."""
-    from lubcontact.solvers.newton_kernel import newton_direction_2d
+    from lubcontact.solvers.kernels import newton_direction_2d
 
     rng = np.random.default_rng(2)
     J = rng.normal(size=(3, 5))
@@ -525,6 +566,7 @@ def test_a_singular_active_block_is_regularised_alike_when_compiled():
     J[:, 1] = J[:, 0]                      # J_AA's first two rows and columns alike: singular
     phi = rng.normal(size=5)
     expected = newton._newton_direction(J, active, phi)
-    direction, ok = newton_direction_2d(np.flatnonzero(active), J, phi, newton._REGULARISATIONS)
+    direction, ok = newton_direction_2d(np.flatnonzero(active), J, phi,
+                                          np.array(newton.REGULARISATIONS))
     assert ok and expected is not None
     assert np.allclose(direction, expected, rtol=1e-6, atol=1e-9)
