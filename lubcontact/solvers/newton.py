@@ -38,7 +38,10 @@ generalised Jacobian at ``y`` (block diagonal per contact: 0 or 1 on box rows,
 y_T/|y_T|``), the Jacobian of ``phi`` is ``J = I - G + G diag(rho) W``. Rows
 where ``G`` vanishes (open contacts, zero-forced rows) are identity rows: their
 update is ``-phi`` and they are eliminated, so the sparse LU factorisation
-(SuperLU) is of the active rows only.
+(SuperLU) is of the active rows only. A 2D problem of up to ``DENSE_LIMIT`` rows runs
+each Newton phase in one compiled call on the dense ``W``
+(:func:`~lubcontact.solvers.kernels.newton_phase_2d`, the numpy phase's twin); on a larger 2D
+problem the Jacobian's rows are assembled compiled.
 
 Globalisation: a non-monotone Armijo line search on ``psi = |phi|^2 / 2``
 (the reference value is the largest of the last few); when the Newton
