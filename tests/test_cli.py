@@ -16,6 +16,16 @@ def test_help_imports_neither_cvxpy_nor_numba():
     assert out.strip().splitlines()[-1] == "False False"
 
 
+def test_the_solvers_import_numba_only_when_a_kernel_runs():
+    """The registry (``lubcontact.solvers``) loads the compiled kernels on first use: a script
+    that only solves with Clarabel never pays numba's import."""
+    script = ("import sys; import lubcontact.solvers; from lubcontact.solvers import newton; "
+              "print('numba' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                         check=True).stdout
+    assert out.strip().splitlines()[-1] == "False"
+
+
 def test_every_public_name_resolves():
     for name in lubcontact.__all__:
         assert getattr(lubcontact, name) is not None, name
