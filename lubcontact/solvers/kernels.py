@@ -744,12 +744,8 @@ def newton_phase_2d(W, q, rho, lower, upper, box, cone_n, cone_t, cone_mu, unila
         product_2d(W, forces, q, velocity)                   # W r afresh: no drift
         merit = alart_curnier_2d(rho, lower, upper, cone_n, cone_t, cone_mu, unilateral, sigma,
                                  center, forces, velocity, phi, y)
-        if count < memory:
-            recent[count] = merit
-            count += 1
-        else:
-            recent[:-1] = recent[1:]
-            recent[-1] = merit
+        recent[count % memory] = merit        # the last `memory` merits, in a ring
+        count += 1
         error = coulomb_error_2d(forces, velocity, lower, upper, cone_n, cone_t, cone_mu,
                                  unilateral, q_scale)
         history[iterations] = error

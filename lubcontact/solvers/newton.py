@@ -739,8 +739,9 @@ def _line_search(function: AlartCurnier, forces: np.ndarray, velocity: np.ndarra
     change = function.W @ direction
     alpha = 1.0
     for _ in range(MAX_HALVINGS):
-        phi, _, _ = function.residual(forces + alpha * direction, velocity + alpha * change)
+        trial = forces + alpha * direction
+        phi, _, _ = function.residual(trial, velocity + alpha * change)
         if 0.5 * float(phi @ phi) <= reference - ARMIJO * alpha * slope:
-            return forces + alpha * direction
+            return trial
         alpha *= 0.5
     return None

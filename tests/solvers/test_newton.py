@@ -398,6 +398,18 @@ COMPILED_CASES = ["gamma_states_gluey_coulomb", "mu_ten", "dt_large_friction", "
                   "cone_apex_2d", "hex_box_lid_friction"]
 
 
+def compiled_and_numpy(problem, run):
+    """``run(function, unshifted)`` on ``problem``'s Alart-Curnier function with its Newton
+    phases compiled, then with the numpy phases: the two outcomes."""
+    unshifted = problem.with_shift(np.zeros(problem.cones.count))
+    outcomes = []
+    for compiled in (True, False):
+        function = AlartCurnier(problem)
+        function.compiled = compiled
+        outcomes.append(run(function, unshifted))
+    return outcomes
+
+
 @pytest.mark.parametrize("name", COMPILED_CASES)
 @pytest.mark.parametrize("sigma", [0.0, 1e-2])
 def test_the_compiled_residual_jacobian_and_error_are_their_numpy_twins(name, sigma):
@@ -479,12 +491,9 @@ def test_the_compiled_newton_phase_takes_the_numpy_phase_steps(name, start):
     if start == "perturbed":
         exact = solve_coulomb(problem, "newton-ac", tol=1e-12).forces / problem.scaling.force
         forces = exact * (1 + 0.3 * np.random.default_rng(0).normal(size=exact.size))
-    phases = []
-    for compiled in (True, False):
-        function = AlartCurnier(problem)
-        function.compiled = compiled
-        phases.append(_proximal_newton(function, unshifted, forces, 1e-10, 200, 1e-3))
-    mine, theirs = phases
+    mine, theirs = compiled_and_numpy(
+        problem, lambda function, unshifted: _proximal_newton(function, unshifted, forces, 1e-10,
+                                                              200, 1e-3))
     assert mine.status == theirs.status == CONVERGED
     assert (mine.iterations, mine.gradient_steps, mine.proximal_steps) == \
         (theirs.iterations, theirs.gradient_steps, theirs.proximal_steps)
@@ -499,14 +508,10 @@ def test_the_compiled_phase_takes_the_same_steepest_descent_steps(name, monkeypa
     """Without regularisations to try, a singular or failed Newton system leaves the steepest
     descent direction ``-J^T phi``: with none at all, every step of both phases is one, the same."""
     problem = load_cases()[name].problem.normalized()
-    unshifted = problem.with_shift(np.zeros(problem.cones.count))
     monkeypatch.setattr(newton, "REGULARISATIONS", ())
-    phases = []
-    for compiled in (True, False):
-        function = AlartCurnier(problem)
-        function.compiled = compiled
-        phases.append(newton._newton_phase(function, unshifted, np.zeros(problem.n_rows), 1e-10, 30))
-    mine, theirs = phases
+    cold = np.zeros(problem.n_rows)
+    mine, theirs = compiled_and_numpy(
+        problem, lambda function, unshifted: newton._newton_phase(function, unshifted, cold, 1e-10, 30))
     assert mine.gradient_steps == theirs.gradient_steps == mine.iterations == theirs.iterations > 0
     assert mine.status == theirs.status
     assert np.allclose(mine.history, theirs.history, rtol=1e-8, atol=1e-15)
@@ -518,14 +523,10 @@ def test_a_failed_compiled_phase_reports_the_errors_of_its_iterates_only(monkeyp
     iteration with the start's error alone in their history (the compiled one returned an
     unwritten entry as well, which the stall rule then read as an error)."""
     problem = load_cases()["mu_ten"].problem.normalized()
-    unshifted = problem.with_shift(np.zeros(problem.cones.count))
     monkeypatch.setattr(newton, "MAX_HALVINGS", 0)
-    phases = []
-    for compiled in (True, False):
-        function = AlartCurnier(problem)
-        function.compiled = compiled
-        phases.append(newton._newton_phase(function, unshifted, np.zeros(problem.n_rows), 1e-10, 10))
-    mine, theirs = phases
+    cold = np.zeros(problem.n_rows)
+    mine, theirs = compiled_and_numpy(
+        problem, lambda function, unshifted: newton._newton_phase(function, unshifted, cold, 1e-10, 10))
     assert mine.status == theirs.status == newton.FAILED
     assert mine.iterations == theirs.iterations == 1
     assert mine.history.size == theirs.history.size == 1
@@ -539,13 +540,9 @@ def test_the_compiled_strategies_take_the_numpy_steps_where_newton_fails():
     report an error they did not compute. (Their failed and gradient steps agree for the first
     73 iterates; after, rounding decides ties on this degenerate problem.)"""
     problem = load_cases()["glued_infeasible"].problem.normalized()
-    unshifted = problem.with_shift(np.zeros(problem.cones.count))
-    phases = []
-    for compiled in (True, False):
-        function = AlartCurnier(problem)
-        function.compiled = compiled
-        phases.append(newton._strategies(function, unshifted, np.zeros(problem.n_rows), 1e-8, 200))
-    mine, theirs = phases
+    cold = np.zeros(problem.n_rows)
+    mine, theirs = compiled_and_numpy(
+        problem, lambda function, unshifted: newton._strategies(function, unshifted, cold, 1e-8, 200))
     assert mine.gradient_steps > 0 and theirs.gradient_steps > 0
     assert mine.status == theirs.status != CONVERGED
     assert (mine.iterations, mine.strategies) == (theirs.iterations, theirs.strategies)
