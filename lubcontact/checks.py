@@ -43,7 +43,7 @@ def as_array(field: str, value: ArrayLike, shape: tuple[int | None, ...] | None 
         if not ok:
             want = "(" + ", ".join("n" if s is None else str(s) for s in shape) + ")"
             raise ValueError(f"{field}: expected shape {want}, got {arr.shape}")
-    if arr.dtype.kind == "f" and not np.all(np.isfinite(arr)):
+    if arr.dtype.kind == "f" and not np.isfinite(arr).all():
         bad = np.flatnonzero(~np.isfinite(arr.ravel()))
         raise ValueError(f"{field}: non-finite value {arr.ravel()[bad[0]]} at flat index {bad[0]}")
     return arr
@@ -52,7 +52,7 @@ def as_array(field: str, value: ArrayLike, shape: tuple[int | None, ...] | None 
 def positive(field: str, value: ArrayLike, shape: tuple[int | None, ...] | None = None) -> np.ndarray:
     """Like :func:`as_array` and require every entry to be strictly positive."""
     arr = as_array(field, value, shape)
-    if np.any(arr <= 0):
+    if (arr <= 0).any():
         bad = np.flatnonzero(arr.ravel() <= 0)
         raise ValueError(f"{field}: must be > 0, got {arr.ravel()[bad[0]]} at index {bad[0]}")
     return arr
@@ -88,7 +88,7 @@ def positive_scalar(field: str, value: float) -> float:
 def nonnegative(field: str, value: ArrayLike, shape: tuple[int | None, ...] | None = None) -> np.ndarray:
     """Like :func:`as_array` and require every entry to be >= 0."""
     arr = as_array(field, value, shape)
-    if np.any(arr < 0):
+    if (arr < 0).any():
         bad = np.flatnonzero(arr.ravel() < 0)
         raise ValueError(f"{field}: must be >= 0, got {arr.ravel()[bad[0]]} at index {bad[0]}")
     return arr

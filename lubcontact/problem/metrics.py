@@ -23,7 +23,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from .cones import Cones
+from .cones import Cones, tangent_norms
 from .conic import ConicProblem
 from .step import StepProblem
 
@@ -58,10 +58,10 @@ def coulomb_shift(problem: ConicProblem, forces: np.ndarray,
     if gradient is None:
         gradient = problem.gradient(forces)
     (coulomb_n, coulomb_t, coulomb_mu), (union_n, union_t, union_mu) = cones.projector.pieces
-    shift[coulomb_n] = coulomb_mu * np.linalg.norm(gradient[coulomb_t], axis=1)
+    shift[coulomb_n] = coulomb_mu * tangent_norms(gradient[coulomb_t])
     if union_n.size:
         pushed = forces[union_n] >= 0
-        shift[union_n] = np.where(pushed, union_mu * np.linalg.norm(gradient[union_t], axis=1), 0.0)
+        shift[union_n] = np.where(pushed, union_mu * tangent_norms(gradient[union_t]), 0.0)
     return shift
 
 

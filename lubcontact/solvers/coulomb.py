@@ -208,7 +208,7 @@ def solve_native_coulomb(problem: ConicProblem, method: str, *, tol: float = 1e-
     if branches.union.any() and not native_union and not {ConeKind.COULOMB, ConeKind.NONPOS} <= info.cones:
         raise ValueError(f"method: {method!r} cannot solve this problem: UNION contacts need "
                          "both pieces (COULOMB and NONPOS contacts)")
-    unshifted = problem.with_shift(np.zeros(problem.cones.count))
+    unshifted = problem.with_shift(np.zeros(problem.cones.count)) if problem.shift.any() else problem
     scaled = unshifted.normalized()
     force, length = scaled.scaling.force, scaled.scaling.length
     start = None
@@ -222,7 +222,7 @@ def solve_native_coulomb(problem: ConicProblem, method: str, *, tol: float = 1e-
         out = info.function(scaled if native_union else branches.on(scaled), warm_start=start, **kwargs)
         iterations += out.iterations
         shift = np.zeros(problem.cones.count)
-        if out.status == FAILED or not np.all(np.isfinite(out.forces)):
+        if out.status == FAILED or not np.isfinite(out.forces).all():
             convex, settled = branches.on(unshifted), True
             break
         if native_union:                         # each contact's piece from its force's sign
@@ -301,7 +301,7 @@ class _Branches:
 
     def __init__(self, problem: ConicProblem, warm_start: np.ndarray | None, threshold: float):
         self.base = problem
-        self.union = problem.cones.kinds == ConeKind.UNION
+        self.union = problem.cones.mask(ConeKind.UNION)
         self.pulled = np.zeros(problem.cones.count, dtype=bool)
         if warm_start is not None:
             self.pulled = problem.cones.pulled(warm_start)

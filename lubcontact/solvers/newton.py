@@ -405,7 +405,7 @@ def _newton_direction(J: sp.csr_matrix | np.ndarray, active: np.ndarray,
                     solved = spla.splu(matrix, **SPARSE_LU).solve(rhs)
         except (RuntimeError, spla.MatrixRankWarning):
             continue
-        if np.all(np.isfinite(solved)):
+        if np.isfinite(solved).all():
             direction[rows] = solved
             return direction
     return None
@@ -460,7 +460,7 @@ def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = 5
         return replay
     start = time.perf_counter()
     function = AlartCurnier(problem)
-    unshifted = problem.with_shift(np.zeros(problem.cones.count)) if np.any(problem.shift) else problem
+    unshifted = problem.with_shift(np.zeros(problem.cones.count)) if problem.shift.any() else problem
     forces = np.zeros(problem.n_rows) if warm_start is None else np.array(warm_start, dtype=float)
     setup_time = time.perf_counter() - start
     phase = _strategies(function, unshifted, forces, tol, max_iter)
@@ -477,7 +477,7 @@ def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = 5
         info["fallback_iterations"] = info.get("fallback_iterations", 0) + rescue.iterations
         info["fallback_status"] = rescue.status
         info["fallbacks"] = [*info.get("fallbacks", []), name]
-        if not np.all(np.isfinite(rescue.forces)):
+        if not np.isfinite(rescue.forces).all():
             continue
         finish = _proximal_newton(function, unshifted, rescue.forces, tol, POLISH_ITERATIONS,
                                   STRATEGIES[0])
@@ -520,12 +520,12 @@ def _strategies(function: AlartCurnier, unshifted: ConicProblem, forces: np.ndar
     spent; the best phase is returned."""
     best, history, tried = None, [], []
     iterations = gradient_steps = proximal_steps = 0
-    cold = np.zeros_like(forces)
-    starts = [(STRATEGIES[0], forces)] + ([(STRATEGIES[0], cold)] if np.any(forces) else []) \
+    warm = bool(forces.any())
+    starts = [(STRATEGIES[0], forces)] + ([(STRATEGIES[0], np.zeros_like(forces))] if warm else []) \
         + [(sigma, forces) for sigma in STRATEGIES[1:]]
     for sigma, start in starts:
         phase = _proximal_newton(function, unshifted, start, tol, max_iter - iterations, sigma)
-        tried.append((sigma, "warm" if start is forces and np.any(forces) else "cold"))
+        tried.append((sigma, "warm" if start is forces and warm else "cold"))
         iterations += phase.iterations
         gradient_steps += phase.gradient_steps
         proximal_steps += phase.proximal_steps
