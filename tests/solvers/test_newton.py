@@ -551,6 +551,25 @@ def test_the_compiled_strategies_take_the_numpy_steps_where_newton_fails():
     assert np.allclose(mine.history[:73], theirs.history[:73], rtol=1e-9, atol=0)
 
 
+def test_the_compiled_lu_solves_like_numpy_and_reports_an_exactly_singular_block():
+    """``kernels.lu_solve`` (LAPACK's gesv through numba's bindings, given the transpose) solves
+    what ``np.linalg.solve`` solves, returns ok False on an exactly singular matrix instead of
+    raising, and accepts an empty block."""
+    from lubcontact.solvers.kernels import lu_solve
+
+    rng = np.random.default_rng(5)
+    for size in (1, 7, 60):
+        matrix = rng.normal(size=(size, size)) + size * np.eye(size)
+        rhs = rng.normal(size=size)
+        solved, ok = lu_solve(np.ascontiguousarray(matrix.T), rhs)
+        assert ok
+        assert np.allclose(solved, np.linalg.solve(matrix, rhs), rtol=1e-12, atol=1e-12)
+    singular = np.array([[1.0, 2.0], [2.0, 4.0]])
+    assert not lu_solve(np.ascontiguousarray(singular.T), np.ones(2))[1]
+    solved, ok = lu_solve(np.zeros((0, 0)), np.zeros(0))
+    assert ok and solved.shape == (0,)
+
+
 def test_a_singular_active_block_is_regularised_alike_when_compiled():
     """Two equal rows make the active block singular: the compiled direction takes the first
     regularisation that factorises, as _newton_direction does, and finds the same direction."""
