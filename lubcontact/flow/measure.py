@@ -443,3 +443,68 @@ def classify_flow(times: np.ndarray, energy: np.ndarray, rate: np.ndarray, *,
     else:
         label = "accelerating" if change > 0 else "transient"
     return FlowState(label=label, energy_ratio=ratio, relative_change=change)
+
+
+@dataclass
+class WindowStatistics:
+    """A sampled series over a window of steps (:func:`window_statistics`).
+
+    Attributes
+    ----------
+    mean : float
+        Mean of the samples in the window.
+    standard_error : float
+        Block standard error: the standard deviation of the block means over ``sqrt(blocks)``
+        (samples within a block are correlated, block means much less).
+    trend : float
+        Last block's mean minus the first's: the change over the window, in the series' unit.
+    blocks : ndarray, shape (blocks,)
+        The block means.
+    """
+
+    mean: float
+    standard_error: float
+    trend: float
+    blocks: np.ndarray
+
+
+def window_statistics(steps: np.ndarray, values: np.ndarray, end: int, length: int,
+                      blocks: int = 5) -> WindowStatistics:
+    """The mean, block standard error and trend of ``values`` over the steps ``(end - length,
+    end]``, cut into ``blocks`` equal blocks of steps.
+
+    Parameters
+    ----------
+    steps : ndarray of int, shape (n,)
+        The step of each sample (a run's ``series.step``).
+    values : ndarray, shape (n,)
+        The sampled quantity (e.g. ``series.flow_rate``).
+    end, length : int
+        Last step of the window and its length in steps; ``length`` a multiple of ``blocks``.
+    blocks : int
+        Number of blocks, >= 2.
+
+    Raises
+    ------
+    ValueError
+        For a window that is not a whole number of blocks or has a block without samples.
+    """
+    steps = checks.as_array("steps", steps, shape=(None,))
+    values = checks.as_array("values", values, shape=steps.shape)
+    blocks = checks.integer("blocks", blocks, minimum=2)
+    length = checks.integer("length", length, minimum=blocks)
+    end = checks.integer("end", end, minimum=length)
+    checks.require(length % blocks == 0, "length", f"must be a multiple of blocks = {blocks}", length)
+    size = length // blocks
+    starts = end - length + size * np.arange(blocks)
+    means = []
+    for start in starts:                      # a few blocks: not a loop over samples
+        inside = (steps > start) & (steps <= start + size)
+        checks.require(inside.any(), "end", f"no sample in the block of steps ({start}, "
+                                            f"{start + size}]", end)
+        means.append(values[inside].mean())
+    means = np.array(means)
+    window = (steps > end - length) & (steps <= end)
+    return WindowStatistics(mean=float(values[window].mean()),
+                            standard_error=float(means.std(ddof=1) / np.sqrt(blocks)),
+                            trend=float(means[-1] - means[0]), blocks=means)

@@ -175,6 +175,34 @@ def test_classify_flow():
     assert measure.classify_flow(t, (1 + t)**2, 1 + t).label == "accelerating"
 
 
+
+def test_window_statistics_of_a_line_and_of_alternating_blocks():
+    """A series sampled every 5 steps: on a line ``Q = 2 + 0.01 step`` the window's mean is the
+    line at the window's middle and the trend is the slope times the distance between the first
+    and last blocks' middles; the block s.e. of blocks alternating +/-1 is sd / sqrt(5)."""
+    steps = np.arange(5, 5001, 5)
+    line = measure.window_statistics(steps, 2.0 + 0.01 * steps, end=4000, length=1000)
+    assert line.mean == pytest.approx(2.0 + 0.01 * 3502.5)
+    assert line.trend == pytest.approx(0.01 * 800)
+    assert line.blocks == pytest.approx(2.0 + 0.01 * (3102.5 + 200 * np.arange(5)))
+    signs = np.where(((steps - 1) // 200) % 2 == 0, 1.0, -1.0)
+    alternating = measure.window_statistics(steps, signs, end=1000, length=1000)
+    assert alternating.blocks == pytest.approx([1, -1, 1, -1, 1])
+    assert alternating.standard_error == pytest.approx(np.std([1, -1, 1, -1, 1], ddof=1) / np.sqrt(5))
+    assert alternating.trend == 0.0
+
+
+@pytest.mark.parametrize("kwargs, field", [
+    (dict(end=4000, length=999), "length"),     # not a multiple of the 5 blocks
+    (dict(end=6000, length=1000), "end"),       # past the last sample: empty blocks
+    (dict(end=500, length=1000), "end"),        # starts before step 0
+    (dict(end=4000, length=1000, blocks=1), "blocks"),
+])
+def test_window_statistics_names_a_bad_window(kwargs, field):
+    steps = np.arange(5, 5001, 5)
+    with pytest.raises(ValueError, match=f"^{field}:"):
+        measure.window_statistics(steps, np.ones(steps.size), **kwargs)
+
 # -- checkpoint and resume ------------------------------------------------------------------------
 def small_config(**changes):
     values = dict(scene="inclined_flow", n_grains=24, width=12.0, model="dry", angle=25.0,
