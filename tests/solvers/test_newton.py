@@ -551,6 +551,34 @@ def test_the_compiled_strategies_take_the_numpy_steps_where_newton_fails():
     assert np.allclose(mine.history[:73], theirs.history[:73], rtol=1e-9, atol=0)
 
 
+def test_an_active_block_met_again_is_solved_with_its_kept_factors():
+    """The sparse lane keeps the factors of the last two active blocks: a block equal entry for
+    entry to one of them is not factorised again and gives the same direction, bit for bit; a
+    block that differs in one entry, or a third block, is factorised."""
+    import scipy.sparse as sp
+
+    rng = np.random.default_rng(3)
+    n = newton.DENSE_LIMIT + 50                    # above the dense limit: SuperLU
+    def rows_of_J(seed):
+        extra = sp.random(n, n, density=0.01, random_state=seed, format="csr")
+        return (sp.identity(n, format="csr") * 4.0 + extra).tocsr()
+    active, phi = np.ones(n, dtype=bool), rng.normal(size=n)
+    first, second = rows_of_J(1), rows_of_J(2)
+    kept = newton._Factorisations()
+    fresh = newton._newton_direction(first, active, phi)
+    assert np.array_equal(newton._newton_direction(first, active, phi, kept), fresh)
+    newton._newton_direction(second, active, phi, kept)
+    assert kept.reused == 0
+    again = newton._newton_direction(first.copy(), active, phi, kept)   # A, B, A: the cycle
+    assert kept.reused == 1 and np.array_equal(again, fresh)
+    changed = first.copy()
+    changed.data[0] += 1e-12
+    newton._newton_direction(changed, active, phi, kept)
+    assert kept.reused == 1
+    newton._newton_direction(second, active, phi, kept)    # pushed out by A, then the changed A
+    assert kept.reused == 1
+
+
 def test_the_compiled_lu_solves_like_numpy_and_reports_an_exactly_singular_block():
     """``kernels.lu_solve`` (LAPACK's gesv through numba's bindings, given the transpose) solves
     what ``np.linalg.solve`` solves, returns ok False on an exactly singular matrix instead of
