@@ -457,7 +457,8 @@ class WindowStatistics:
         Block standard error: the standard deviation of the block means over ``sqrt(blocks)``
         (samples within a block are correlated, block means much less).
     trend : float
-        Last block's mean minus the first's: the change over the window, in the series' unit.
+        Last block's mean minus the first's (their middles ``length - length / blocks`` steps
+        apart), in the series' unit.
     blocks : ndarray, shape (blocks,)
         The block means.
     """
@@ -487,7 +488,9 @@ def window_statistics(steps: np.ndarray, values: np.ndarray, end: int, length: i
     Raises
     ------
     ValueError
-        For a window that is not a whole number of blocks or has a block without samples.
+        For a window that is not a whole number of blocks or has a block without samples, or
+        a non-finite value anywhere in ``values`` (a series restored as NaN from an older
+        checkpoint: cut it to the window first).
     """
     steps = checks.as_array("steps", steps, shape=(None,))
     values = checks.as_array("values", values, shape=steps.shape)

@@ -67,7 +67,8 @@ def project_friction_cone(normal: np.ndarray, tangential: np.ndarray,
 
 def tangent_norms(tangential: np.ndarray) -> np.ndarray:
     """``|t|`` per row of ``tangential`` (m, k), shape (m,): ``np.linalg.norm(tangential,
-    axis=1)`` to the bit, 1.8x faster on 13 or 1 000 contacts."""
+    axis=1)``, to the bit for k = 1 and 2 (2D and 3D contacts), 1.8x faster on 13 or 1 000
+    contacts."""
     return np.sqrt(np.einsum("ij,ij->i", tangential, tangential))
 
 

@@ -624,6 +624,7 @@ def lu_solve(transposed, rhs):
     x = rhs.copy()
     if m == 0:
         return x, True
+    transposed = np.ascontiguousarray(transposed)   # LAPACK reads the memory: C order, no strides
     pivots = np.empty(m, dtype=_LAPACK_INT)
     info = _GESV(_DOUBLE, m, 1, transposed.ctypes, m, pivots.ctypes, x.ctypes, m)
     return x, info == 0

@@ -510,9 +510,7 @@ def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = 5
     phase = _strategies(function, unshifted, forces, tol, max_iter)
     forces, iterations = phase.forces, phase.iterations
     status = INACCURATE if phase.status == STALLED else phase.status
-    info = {"newton_iterations": phase.iterations,
-            "reused_factorisations": function.factorisations.reused,
-            "gradient_steps": phase.gradient_steps,
+    info = {"newton_iterations": phase.iterations, "gradient_steps": phase.gradient_steps,
             "proximal_steps": phase.proximal_steps, "strategies": phase.strategies,
             "newton_status": phase.status, "error": phase.error}
     chain = () if phase.status == CONVERGED else fallback_chain(problem.cones, fallback)
@@ -539,6 +537,7 @@ def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = 5
                 INACCURATE if rescue.status == CONVERGED else MAX_ITER
         if status == CONVERGED or kept and best_error <= FALLBACK_GAP * tol:
             break
+    info["reused_factorisations"] = function.factorisations.reused     # the polishes' too
     return MethodOutput(forces, status, iterations, setup_time=setup_time,
                         solve_time=time.perf_counter() - start - setup_time,
                         residual_history=phase.history, info=info)

@@ -614,3 +614,34 @@ def test_a_singular_active_block_is_regularised_alike_when_compiled():
                                           np.array(newton.REGULARISATIONS))
     assert ok and expected is not None
     assert np.allclose(direction, expected, rtol=1e-6, atol=1e-9)
+
+
+@pytest.mark.parametrize("name", COMPILED_CASES)
+def test_the_reused_factorisations_count_the_polish_after_a_fallback(name, monkeypatch):
+    """``info["reused_factorisations"]`` counts every reuse of the solve, the polishing Newton
+    iterations after a fallback included (``newton_iterations`` counts those iterations)."""
+    from lubcontact.solvers import dual_data
+
+    monkeypatch.setattr(dual_data, "DENSE_OPERATOR_LIMIT", 0)
+    monkeypatch.setattr(newton, "DENSE_LIMIT", 0)          # the sparse lane, with its kept LUs
+    made = []
+    init = newton._Factorisations.__init__
+    monkeypatch.setattr(newton._Factorisations, "__init__",
+                        lambda self: (init(self), made.append(self))[0])
+    problem = load_cases()[name].problem.normalized()
+    out = newton_alart_curnier(problem, tol=1e-12, max_iter=2)     # runs out: a fallback, a polish
+    assert out.info.get("fallbacks")
+    assert out.info["reused_factorisations"] == made[-1].reused
+
+
+@pytest.mark.parametrize("name", ["mu_ten", "dt_large_friction"])
+def test_an_exact_solve_by_newton_ac_leaves_the_callers_problem_as_it_was(name):
+    """newton-ac's exact-Coulomb solve of a problem without a shift caches nothing on the
+    caller's problem (its later products would take the dense path, with other rounding)."""
+    problem = StepProblem.from_arrays(load_cases()[name].problem.to_arrays())   # a fresh copy
+    assert not problem.shift.any()
+    forces = np.random.default_rng(0).normal(size=problem.n_rows)
+    before, cached = problem.velocity(forces), set(problem.__dict__)
+    solve_coulomb(problem, "newton-ac", tol=1e-10)
+    assert set(problem.__dict__) - cached == set()
+    assert np.array_equal(problem.velocity(forces), before)
