@@ -208,7 +208,7 @@ def solve_native_coulomb(problem: ConicProblem, method: str, *, tol: float = 1e-
     if branches.union.any() and not native_union and not {ConeKind.COULOMB, ConeKind.NONPOS} <= info.cones:
         raise ValueError(f"method: {method!r} cannot solve this problem: UNION contacts need "
                          "both pieces (COULOMB and NONPOS contacts)")
-    unshifted = problem.with_shift(np.zeros(problem.cones.count))   # a copy: no cache on the caller's
+    unshifted = problem.with_shift(np.zeros(problem.cones.count))   # a copy: no cache on the caller's problem
     scaled = unshifted.normalized()
     force, length = scaled.scaling.force, scaled.scaling.length
     start = None
