@@ -224,14 +224,15 @@ class Cones:
             ``g = D + s + dt H v`` laid out like a force vector.
         """
         g_n, g_t = self.split(constraint)
-        kinds = self.kinds
         violation = np.zeros(self.count)
-        violation[kinds == ConeKind.NONNEG] = np.maximum(-g_n[kinds == ConeKind.NONNEG], 0.0)
-        violation[kinds == ConeKind.NONPOS] = np.maximum(g_n[kinds == ConeKind.NONPOS], 0.0)
-        violation[kinds == ConeKind.FREE] = np.abs(g_n[kinds == ConeKind.FREE])
+        nonneg, nonpos, free = (self.mask(kind) for kind in (ConeKind.NONNEG, ConeKind.NONPOS,
+                                                                ConeKind.FREE))
+        violation[nonneg] = np.maximum(-g_n[nonneg], 0.0)
+        violation[nonpos] = np.maximum(g_n[nonpos], 0.0)
+        violation[free] = np.abs(g_n[free])
         if self.has_friction:
             idx = self.tangential
-            cone = (kinds[idx] == ConeKind.COULOMB) | (kinds[idx] == ConeKind.UNION)
+            cone = (self.mask(ConeKind.COULOMB) | self.mask(ConeKind.UNION))[idx]
             slip = self.mu[idx] * np.linalg.norm(g_t, axis=1)
             violation[idx[cone]] = np.maximum(slip[cone] - g_n[idx[cone]], 0.0)
         return violation
@@ -252,14 +253,13 @@ class Cones:
         import cvxpy as cp
 
         self._require_convex()
-        kinds = self.kinds
         constraints = []
         for kind, sense in ((ConeKind.NONNEG, 1.0), (ConeKind.NONPOS, -1.0)):
-            rows = np.flatnonzero(kinds == kind)
+            rows = np.flatnonzero(self.mask(kind))
             if rows.size:
                 constraints.append(sense * normal[rows] >= 0)
         if self.has_friction:
-            coulomb = kinds[self.tangential] == ConeKind.COULOMB
+            coulomb = self.mask(ConeKind.COULOMB)[self.tangential]
             cone_contacts = self.tangential[coulomb]
             if cone_contacts.size:
                 t_rows = self._tangent_rows(np.flatnonzero(coulomb))
@@ -330,7 +330,7 @@ class Cones:
     def _coulomb_positions(self) -> np.ndarray:
         if not self.has_friction:
             return np.zeros(0, dtype=int)
-        return np.flatnonzero(self.kinds[self.tangential] == ConeKind.COULOMB)
+        return np.flatnonzero(self.mask(ConeKind.COULOMB)[self.tangential])
 
     def _tangent_rows(self, positions: np.ndarray) -> np.ndarray:
         """Row indices into the tangential block, shape (len(positions), tangent_dim)."""

@@ -416,8 +416,8 @@ def _newton_direction(J: sp.csr_matrix | np.ndarray, active: np.ndarray,
     :meth:`AlartCurnier.jacobian` returns them).
 
     The active block is factorised by a dense LU (LAPACK) up to :data:`DENSE_LIMIT` rows,
-    by SuperLU above (:data:`SPARSE_LU`; through ``factorisations`` when given, which reuses
-    the factors of a block met again).
+    by SuperLU above (:data:`SPARSE_LU`; through ``factorisations``, which reuses the factors
+    of a block met again: a fresh one when not given).
 
     A singular active block (``W`` rank deficient: more sticking rows than
     degrees of freedom) is regularised, ``J_AA + delta I`` with ``delta`` from
@@ -428,6 +428,7 @@ def _newton_direction(J: sp.csr_matrix | np.ndarray, active: np.ndarray,
     rows = np.flatnonzero(active)
     if rows.size == 0:
         return direction
+    factorisations = _Factorisations() if factorisations is None else factorisations
     rhs = -phi[rows] - J @ np.where(active, 0.0, direction)
     dense = rows.size <= DENSE_LIMIT
     block = J[:, rows] if isinstance(J, np.ndarray) else \
@@ -444,8 +445,7 @@ def _newton_direction(J: sp.csr_matrix | np.ndarray, active: np.ndarray,
                 else:
                     matrix = block if delta == 0 else \
                         (block + delta * sp.identity(rows.size, format="csc")).tocsc()
-                    solved = spla.splu(matrix, **SPARSE_LU).solve(rhs) if factorisations is None \
-                        else factorisations.solve(matrix, rhs)
+                    solved = factorisations.solve(matrix, rhs)
         except (RuntimeError, spla.MatrixRankWarning):
             continue
         if np.isfinite(solved).all():

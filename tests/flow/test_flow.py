@@ -175,7 +175,6 @@ def test_classify_flow():
     assert measure.classify_flow(t, (1 + t)**2, 1 + t).label == "accelerating"
 
 
-
 def test_window_statistics_of_a_line_and_of_alternating_blocks():
     """A series sampled every 5 steps: on a line ``Q = 2 + 0.01 step`` the window's mean is the
     line at the window's middle and the trend is the slope times the distance between the first
@@ -202,6 +201,7 @@ def test_window_statistics_names_a_bad_window(kwargs, field):
     steps = np.arange(5, 5001, 5)
     with pytest.raises(ValueError, match=f"^{field}:"):
         measure.window_statistics(steps, np.ones(steps.size), **kwargs)
+
 
 # -- checkpoint and resume ------------------------------------------------------------------------
 def small_config(**changes):

@@ -367,6 +367,14 @@ def test_a_fallback_with_non_finite_forces_leaves_newtons_answer_and_status():
     assert result.status == MAX_ITER and np.all(np.isfinite(result.forces))
 
 
+def use_the_sparse_lane(monkeypatch):
+    """Zero dense limits: every problem takes newton-ac's sparse lane (SuperLU, kept LUs)."""
+    from lubcontact.solvers import dual_data
+
+    monkeypatch.setattr(dual_data, "DENSE_OPERATOR_LIMIT", 0)
+    monkeypatch.setattr(newton, "DENSE_LIMIT", 0)
+
+
 @pytest.mark.parametrize("name", ["gamma_states_gluey_coulomb", "mu_ten", "dt_large_friction",
                                   "tetrahedron_3d_friction"])
 def test_small_problems_take_the_dense_lane_with_the_same_newton_steps(name, monkeypatch):
@@ -381,8 +389,7 @@ def test_small_problems_take_the_dense_lane_with_the_same_newton_steps(name, mon
     y = function.residual(np.abs(np.random.default_rng(1).normal(size=problem.n_rows)))[1]
     rows, active = function.jacobian(y)
     dense = solve_coulomb(problem, "newton-ac", tol=1e-10)
-    monkeypatch.setattr(dual_data, "DENSE_OPERATOR_LIMIT", 0)
-    monkeypatch.setattr(newton, "DENSE_LIMIT", 0)
+    use_the_sparse_lane(monkeypatch)
     sparse_function = AlartCurnier(problem)
     sparse_rows, sparse_active = sparse_function.jacobian(y)
     assert isinstance(rows, np.ndarray) and not isinstance(sparse_rows, np.ndarray)
@@ -456,10 +463,7 @@ def test_the_compiled_sparse_jacobian_rows_are_the_numpy_rows(name, sigma, monke
     """On the sparse lane (limits set to zero) a 2D problem's Jacobian rows are assembled by a
     compiled kernel: the same active rows and values as the numpy sparse product, at points
     with every contact state."""
-    from lubcontact.solvers import dual_data
-
-    monkeypatch.setattr(dual_data, "DENSE_OPERATOR_LIMIT", 0)
-    monkeypatch.setattr(newton, "DENSE_LIMIT", 0)
+    use_the_sparse_lane(monkeypatch)
     problem = load_cases()[name].problem.normalized()
     function = AlartCurnier(problem)
     assert function.compiled_rows and not function.dense
@@ -620,10 +624,7 @@ def test_a_singular_active_block_is_regularised_alike_when_compiled():
 def test_the_reused_factorisations_count_the_polish_after_a_fallback(name, monkeypatch):
     """``info["reused_factorisations"]`` counts every reuse of the solve, the polishing Newton
     iterations after a fallback included (``newton_iterations`` counts those iterations)."""
-    from lubcontact.solvers import dual_data
-
-    monkeypatch.setattr(dual_data, "DENSE_OPERATOR_LIMIT", 0)
-    monkeypatch.setattr(newton, "DENSE_LIMIT", 0)          # the sparse lane, with its kept LUs
+    use_the_sparse_lane(monkeypatch)                       # with its kept LUs
     made = []
     init = newton._Factorisations.__init__
     monkeypatch.setattr(newton._Factorisations, "__init__",
