@@ -156,6 +156,30 @@ def test_a_creeping_bed_converges_by_the_proximal_loop_without_fallback():
     assert scaled_coulomb_error(problem, result.forces) <= 1e-6
 
 
+def test_a_stuck_proximal_step_raises_the_weight_a_hundredfold(monkeypatch):
+    """The weight after a subproblem not solved: 10 times where the step lowered the FCLIB error
+    by more than STUCK, STUCK_RISE times where it did not (a stuck iterate; before, 10 times
+    always, and the hard flow steps failed at every weight up to 1e-2 in turn)."""
+    problem = siconos_test_problem("FrictionContactProblem00237.dat").normalized()
+    function = AlartCurnier(problem)
+    start = np.zeros(problem.n_rows)
+    centre = function.coulomb_error(problem, start)
+    outcomes = iter([(False, centre), (False, 0.5 * centre), (True, 1e-12), (False, 1e-12)])
+    weights = []
+
+    def scripted_phase(function, unshifted, forces, tol, max_iter, inner_tol=0.0):
+        weights.append(function.sigma / function.typical)
+        solved, error = next(outcomes)
+        return newton._Phase(forces=forces, status=MAX_ITER, iterations=1, error=error,
+                             history=np.array([error]), gradient_steps=0, solved=solved,
+                             last=forces, last_error=error)
+
+    monkeypatch.setattr(newton, "_newton_phase", scripted_phase)
+    phase = _proximal_newton(function, problem, start, 1e-10, 50, sigma=1e-3)
+    # stuck: x100; progress, not solved: x10; solved; then the plain-Newton finish (weight 0)
+    assert np.allclose(weights, [1e-3, 1e-1, 1.0, 0.0]) and phase.status == CONVERGED
+
+
 def _errors(start: float, rate_per_window: float, windows: int) -> list[float]:
     """FCLIB errors of a phase falling steadily by ``rate_per_window`` every STALL_WINDOW
     iterations, ``windows`` windows long (the start first)."""
