@@ -9,7 +9,8 @@ reads it).
 With ``--layer`` (a checkpoint of ``lubcontact run``, e.g. a steady flow of
 the poster's preset) each size is that developed layer widened instead
 (:func:`~lubcontact.scenes.inclined.widen`: copies side by side, no onset to
-wait for), its velocities jittered by :data:`JITTER` of their rms (seed 0) so
+wait for), its velocities jittered by
+:data:`~lubcontact.scenes.inclined.PARTING_JITTER` of their rms (seed 0) so
 that the copies part, and run :data:`MIX_STEPS` steps with the layer run's
 solver; cached as ``CACHE/widened-<layer digest>-<copies>x.npz``. Every size
 must then be a multiple of the layer's grains.
@@ -74,8 +75,6 @@ DEVELOP_SOLVER = "newton-ac"
 """Solver of the flow steps before the timed ones (exact Coulomb): on a dense 1000-grain bed,
 apgd-jacobi's fixed point spent 20 000 to 370 000 iterations on each of them."""
 
-JITTER = 1e-3
-"""Relative velocity jitter (of the rms grain speed, seed 0) that parts a widened layer's copies."""
 MIX_STEPS = 50
 """Steps run after widening a layer, before any timed step."""
 FRICTIONS = ("exact", "relaxation")
@@ -130,8 +129,9 @@ def widened_flow(layer: pathlib.Path, n_grains: int, cache: pathlib.Path) -> tup
     -------
     (str, Simulation)
         The layer run's model, and a simulation of the widened layer after
-        :data:`MIX_STEPS` steps (jitter :data:`JITTER`), with the layer run's
-        law, time step, search distance and solver settings; cached in ``cache``.
+        :data:`MIX_STEPS` steps (jitter :data:`~lubcontact.scenes.inclined.PARTING_JITTER`,
+        seed 0), with the layer run's law, time step, search distance and solver settings;
+        cached in ``cache``.
 
     Raises
     ------
@@ -158,10 +158,7 @@ def widened_flow(layer: pathlib.Path, n_grains: int, cache: pathlib.Path) -> tup
         sim = simulation(state.scene)
         sim.restore(state)
         return model, sim
-    scene = inclined.widen(base.sim.scene, copies)
-    velocities = scene.grains.velocities
-    rms = float(np.sqrt(np.mean(np.sum(velocities**2, axis=1))))
-    velocities += JITTER * rms * np.random.default_rng(0).standard_normal(velocities.shape)
+    scene = inclined.widen(base.sim.scene, copies, jitter=inclined.PARTING_JITTER, seed=0)
     sim = simulation(scene)
     sim.run(MIX_STEPS)
     save_npz(path, **sim.state.to_arrays())

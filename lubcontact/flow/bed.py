@@ -31,7 +31,7 @@ def initial_scene(config: RunConfig, out_dir: pathlib.Path | None = None,
     ``config.bed``, else ``out_dir/bed.npz`` when it exists, else one settled
     here by :func:`settle` (and saved to that path when there is one); with
     ``config.start_from``, the grains of that run's checkpoint instead,
-    velocities kept (:func:`started_scene`).
+    velocities kept, widened ``config.widen`` times (:func:`started_scene`).
 
     Parameters
     ----------
@@ -67,7 +67,9 @@ def initial_scene(config: RunConfig, out_dir: pathlib.Path | None = None,
 
 
 def started_scene(config: RunConfig) -> Scene:
-    """The grains of the run at ``config.start_from``, tilted to ``config.angle``, still moving.
+    """The grains of the run at ``config.start_from``, widened ``config.widen`` times (the
+    copies parted by a jitter seeded by ``config.seed``), tilted to ``config.angle``, still
+    moving.
 
     Parameters
     ----------
@@ -77,14 +79,14 @@ def started_scene(config: RunConfig) -> Scene:
     Returns
     -------
     Scene
-        The checkpoint's scene (positions, velocities, spins, rough bed, time), its gravity
-        turned to ``config.angle``.
+        The checkpoint's scene (positions, velocities, spins, rough bed, time), widened, its
+        gravity turned to ``config.angle``.
 
     Raises
     ------
     ValueError
         Naming ``start_from`` when the file is missing, is not a run's checkpoint, or holds
-        another number of grains or another period than ``config``.
+        another number of grains or another period than ``config`` (once widened).
     """
     path = pathlib.Path(config.start_from)
     checks.require(path.is_file(), "start_from", f"no such file: {path}")
@@ -98,10 +100,14 @@ def started_scene(config: RunConfig) -> Scene:
         checks.require("steps_done" in data, "start_from", not_a_checkpoint)
         scene = SimulationState.from_arrays(data).scene
     period = config.width * config.params.radius
-    checks.require(scene.grains.count == config.n_grains and scene.period is not None
-                   and np.isclose(scene.period, period), "start_from",
-                   f"{path} holds {scene.grains.count} grains over a period {scene.period}, the "
-                   f"run {config.n_grains} grains over {period:g} (n_grains, width)")
+    copies = int(config.widen)
+    times = f" times {copies} copies" if copies > 1 else ""
+    checks.require(scene.grains.count * copies == config.n_grains and scene.period is not None
+                   and np.isclose(scene.period * copies, period), "start_from",
+                   f"{path} holds {scene.grains.count} grains over a period {scene.period}{times}, "
+                   f"the run {config.n_grains} grains over {period:g} (n_grains, width)")
+    if copies > 1:
+        scene = inclined.widen(scene, copies, jitter=inclined.PARTING_JITTER, seed=config.seed)
     return inclined.inclined_flow(scene, config.angle, keep_velocities=True)
 
 

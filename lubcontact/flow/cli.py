@@ -41,7 +41,7 @@ FLAGS = {"scene": "SCENE", "n_grains": "--n", "preset": "--preset", "model": "--
          "checkpoint_every": "--checkpoint-every", "sample_every": "--sample-every",
          "frame_every": "--frame-every", "cross_check_every": "--cross-check-every",
          "settle_steps": "--settle-steps", "settle_model": "--settle-model", "bed": "--bed",
-         "start_from": "--start-from", "average_from": "--average-from",
+         "start_from": "--start-from", "widen": "--widen", "average_from": "--average-from",
          "width": "--width", "seed": "--seed", "viscosity": "--viscosity",
          "roughness": "--roughness"}
 """The option of each :class:`RunConfig` field (the name used in error messages)."""
@@ -187,6 +187,10 @@ def _add_common(parser: argparse.ArgumentParser, resume: bool, steps: bool = Tru
                  "is settled; the contacts' glue states and the solver's warm start begin "
                  "afresh); in a sweep, {model} and {seed} in the path are each run's, a "
                  "literal brace is written twice (default: none, the bed at rest)")
+        add("--widen", type=_number(int, 1), default=None, metavar="COPIES",
+            help="with --start-from: that state's layer COPIES times side by side, the copies "
+                 "parted by a velocity jitter of 1e-3 of the rms seeded by --seed; --n and "
+                 f"--width are the wide layer's {_default('widen')}")
         add("--average-from", type=_number(float, 0, high=1), default=None,
             metavar="FRACTION",
             help="time averages (Q, fractions, profiles) over the steps after this fraction "

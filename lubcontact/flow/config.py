@@ -32,7 +32,7 @@ REFERENCE_SOLVER = "clarabel"
 """The default otherwise (always registered)."""
 
 DEFINING_FIELDS = ("scene", "n_grains", "preset", "model", "angle", "dt_fraction", "width", "seed",
-                   "bed", "start_from", "settle_steps", "settle_model", "bins_per_radius",
+                   "bed", "start_from", "widen", "settle_steps", "settle_model", "bins_per_radius",
                    "viscosity", "roughness", "ramp_step", "ramp_stages", "hold_steps")
 """Fields that define a run's scene or physics: a resumed run keeps its checkpoint's.
 
@@ -153,6 +153,13 @@ class RunConfig:
         afresh (a descent of :mod:`~lubcontact.flow.hysteresis` keeps them). A
         sweep replaces ``{model}`` and ``{seed}`` in it by each run's
         (:func:`~lubcontact.flow.sweep.start_path`). Empty: the bed.
+    widen : int
+        Copies of the ``start_from`` state laid side by side
+        (:func:`~lubcontact.scenes.inclined.widen`), their velocities jittered by
+        :data:`~lubcontact.scenes.inclined.PARTING_JITTER` of their rms with ``seed`` so
+        that they part: a developed layer made ``widen`` times wider, with ``n_grains`` and
+        ``width`` the wide layer's; each seed parts the copies its own way. 1: the state
+        as it is.
     average_from : float
         Profiles and means are time-averaged over steps after this fraction
         of the run.
@@ -196,6 +203,7 @@ class RunConfig:
     settle_model: str = "frictionless"
     bed: str = ""
     start_from: str = ""
+    widen: int = 1
     average_from: float = 0.5
     width: float = 40.0
     seed: int = 0
@@ -234,6 +242,11 @@ class RunConfig:
         if self.start_from and self.bed:
             raise ValueError(f"start_from: a run starts from a bed or from a run's state, not "
                              f"both, got {self.start_from!r} and the bed {self.bed!r}")
+        if int(self.widen) < 1:
+            raise ValueError(f"widen: must be >= 1, got {self.widen}")
+        if int(self.widen) > 1 and not self.start_from:
+            raise ValueError(f"widen: only a run's state (start_from) is widened, got "
+                             f"{self.widen} copies and no start_from")
         if self.start_from and self.ramp_stages:
             raise ValueError(f"start_from: an angle ramp starts from a bed at rest, got "
                              f"{self.start_from!r}")

@@ -27,6 +27,11 @@ from ..model.scene import Grains, Scene
 
 MODELS = ("dry", "gluey", "frictionless")
 
+PARTING_JITTER = 1e-3
+"""Velocity jitter, relative to the rms grain speed, that parts the copies of a widened layer
+(:func:`widen`): the benchmarks' widened flows and the widened runs of ``lubcontact run
+--widen`` use it."""
+
 
 @dataclass(frozen=True)
 class FlowParameters:
@@ -228,14 +233,15 @@ def inclined_flow(settled: Scene, angle_deg: float, *, keep_velocities: bool = F
     return scene
 
 
-def widen(layer: Scene, copies: int) -> Scene:
+def widen(layer: Scene, copies: int, *, jitter: float = 0.0, seed: int = 0) -> Scene:
     """``copies`` copies of a periodic layer side by side: the same layer, ``copies`` times wider.
 
     Each copy keeps the grains' state (positions shifted by a multiple of the
     period, velocities, spins, angles) and its part of the rough bed, so a
-    developed flow stays a developed flow: the benchmarks build large flows
-    this way instead of waiting for each size's onset. The copies are
-    identical until the dynamics separate them.
+    developed flow stays a developed flow: the benchmarks and the 2000-grain
+    runs build large flows this way instead of waiting for each size's onset.
+    The copies are identical until the dynamics separate them, which ``jitter``
+    starts.
 
     Parameters
     ----------
@@ -243,6 +249,11 @@ def widen(layer: Scene, copies: int) -> Scene:
         A periodic scene (``period`` set), e.g. a flow of :func:`inclined_flow`.
     copies : int
         Number of copies, >= 1.
+    jitter : float
+        Each velocity component of the wide layer gets a normal deviate of this many times
+        the velocities' rms (dimensionless, >= 0; 0: none), so that the copies part.
+    seed : int
+        Seed of that jitter (``np.random.default_rng``).
 
     Returns
     -------
@@ -250,6 +261,7 @@ def widen(layer: Scene, copies: int) -> Scene:
         Period ``copies x period``; ``metadata["width"]`` updated, ``metadata["copies"]`` set.
     """
     copies = int(checks.positive("copies", copies, shape=()))
+    jitter = float(checks.nonnegative("jitter", jitter, shape=()))
     checks.require(layer.period is not None, "layer", "needs a periodic scene", None)
     period = float(layer.period)
     grains = layer.grains
@@ -267,6 +279,9 @@ def widen(layer: Scene, copies: int) -> Scene:
                          velocities=repeated(grains.velocities), spins=repeated(grains.spins),
                          inertias=repeated(grains.inertias))
     wide.angles[:] = repeated(grains.angles)
+    if jitter:
+        rms = float(np.sqrt(np.mean(np.sum(wide.velocities**2, axis=1))))
+        wide.velocities += jitter * rms * np.random.default_rng(seed).standard_normal(wide.velocities.shape)
     metadata = dict(layer.metadata, width=copies * period,
                     copies=copies * int(layer.metadata.get("copies", 1)))
     return Scene.create(wide, plane_points=layer.planes.points, plane_normals=layer.planes.normals,

@@ -514,6 +514,61 @@ def test_a_sweep_starts_each_run_from_its_model_and_seeds_developed_state(tmp_pa
     assert exit_.value.code == 2 and "--average-from 0.25 (here: --average-from 0.5)" in err
 
 
+def test_a_widened_start_lays_the_state_side_by_side_and_each_seed_parts_the_copies(tmp_path):
+    """``--widen 3`` with ``--start-from``: three copies of the layer side by side (positions
+    shifted by the period, the bed tiled), their velocities jittered by 1e-3 of the rms with the
+    run's seed (the records' 2000-grain protocol, by hand before), the same for the same seed,
+    not for another; the run then flows on the wide layer."""
+    layer, checkpoint = flowing_layer(tmp_path)
+    small = dict(n_grains=48, width=30.0, model="gluey", dt_fraction=0.05, solver="newton-ac",
+                 fixed_point=True, checkpoint_every=2, sample_every=1, angle=20.0, steps=2,
+                 start_from=str(checkpoint), widen=3)
+    scenes = {seed: initial_scene(RunConfig(**small, seed=seed)) for seed in (1, 2)}
+    again = initial_scene(RunConfig(**small, seed=1))
+    source = layer.sim.scene
+    period = source.period
+    wide = scenes[1]
+    assert wide.grains.count == 48 and np.isclose(wide.period, 3 * period)
+    for copy in range(3):
+        part = slice(16 * copy, 16 * (copy + 1))
+        np.testing.assert_allclose(wide.grains.positions[part, 0],
+                                   source.grains.positions[:, 0] + copy * period, rtol=0, atol=1e-12)
+        np.testing.assert_array_equal(wide.grains.radii[part], source.grains.radii)
+    assert wide.fixed_radii.size == 3 * source.fixed_radii.size
+    rms = np.sqrt(np.mean(np.sum(source.grains.velocities**2, axis=1)))
+    kick = wide.grains.velocities - np.tile(source.grains.velocities, (3, 1))
+    assert 0 < np.abs(kick).max() < 5e-3 * rms and 0.5e-3 < np.std(kick) / rms < 2e-3
+    np.testing.assert_array_equal(again.grains.velocities, wide.grains.velocities)
+    assert not np.array_equal(scenes[2].grains.velocities, wide.grains.velocities)
+    assert np.allclose(wide.gravity, inclined.tilted_gravity(np.linalg.norm(wide.gravity), 20.0))
+    run = FlowRun(RunConfig(**small, seed=1), wide, tmp_path / "wide")
+    run.advance(2)
+    assert run.steps_done == 2 and run.series["mean_velocity"][-1] > 0
+
+
+def test_widen_errors_name_the_field_or_the_flag(tmp_path, capsys):
+    """``widen`` without a state to widen, below 1, or copies that do not make the run's grains
+    and width: a ValueError naming the field, one line naming the flag on the command line."""
+    _, checkpoint = flowing_layer(tmp_path)
+    with pytest.raises(ValueError, match="widen: only a run's state"):
+        RunConfig(widen=2)
+    with pytest.raises(ValueError, match="widen: must be >= 1, got 0"):
+        RunConfig(widen=0, start_from=str(checkpoint))
+    common = ["inclined_flow", "--start-from", str(checkpoint), "--steps", "2", "--dt", "0.05",
+              "--no-progress", "--out", str(tmp_path / "run")]
+    cases = {"argument --start-from: ": [*common, "--n", "32", "--width", "30", "--widen", "2"],
+             "argument --widen: must be >= 1": [*common, "--widen", "0"],
+             "argument --widen: only a run's state": ["inclined_flow", "--widen", "2", "--out",
+                                                     str(tmp_path / "run2"), "--no-progress"]}
+    for said, argv in cases.items():
+        with pytest.raises(SystemExit) as exit_:
+            flow_cli.run_main(argv)
+        err = capsys.readouterr().err.strip()
+        assert exit_.value.code == 2 and len(err.splitlines()) == 1 and said in err, err
+    assert "times 2 copies" in str(pytest.raises(ValueError, initial_scene, RunConfig(
+        n_grains=32, width=30.0, start_from=str(checkpoint), widen=2)).value)
+
+
 def test_start_from_errors_are_one_line_naming_the_flag(tmp_path, capsys):
     """A missing state, a bed instead of a run's checkpoint, another number of grains, an
     unknown placeholder and a sedimentation from a state: each one line naming --start-from."""
