@@ -105,7 +105,7 @@ def started_scene(config: RunConfig) -> Scene:
     checks.require(scene.grains.count * copies == config.n_grains and scene.period is not None
                    and np.isclose(scene.period * copies, period), "start_from",
                    f"{path} holds {scene.grains.count} grains over a period {scene.period}{times}, "
-                   f"the run {config.n_grains} grains over {period:g} (n_grains, width)")
+                   f"the run {config.n_grains} grains over {period:g} (n_grains, width, widen)")
     if copies > 1:
         scene = inclined.widen(scene, copies, jitter=inclined.PARTING_JITTER, seed=config.seed)
     return inclined.inclined_flow(scene, config.angle, keep_velocities=True)

@@ -198,7 +198,8 @@ def _add_common(parser: argparse.ArgumentParser, resume: bool, steps: bool = Tru
     add("--width", type=_number(float, 0, above=True), default=None, metavar="RADII",
         help=f"period along x in mean grain radii {_default('width')}")
     add("--seed", type=_number(int, 0), default=None,
-        help=f"seed of the grain sizes, the bed and the initial jitter {_default('seed')}")
+        help="seed of the grain sizes, the bed and the initial jitter, and of the jitter that "
+             f"parts the copies of --widen {_default('seed')}")
     add("--viscosity", type=_number(float, 0, above=True), default=None, metavar="ETA",
         help="fluid viscosity eta (Pa s) of the poster preset: sets gamma_min (default: the "
              "preset's, 1e-3)")

@@ -166,7 +166,8 @@ class RunConfig:
     width : float
         Period along x in mean radii.
     seed : int
-        Seed of the random grain sizes and initial lattice jitter.
+        Seed of the random grain sizes and initial lattice jitter, and with ``widen`` > 1 of
+        the velocity jitter that parts the copies.
     bins_per_radius : int
         Profile slabs per mean radius.
 

@@ -29,8 +29,8 @@ MODELS = ("dry", "gluey", "frictionless")
 
 PARTING_JITTER = 1e-3
 """Velocity jitter, relative to the rms grain speed, that parts the copies of a widened layer
-(:func:`widen`): the benchmarks' widened flows and the widened runs of ``lubcontact run
---widen`` use it."""
+(:func:`widen`): the benchmarks' widened flows and the widened runs of ``lubcontact run`` and
+``sweep`` with ``--widen`` use it."""
 
 
 @dataclass(frozen=True)
@@ -251,7 +251,8 @@ def widen(layer: Scene, copies: int, *, jitter: float = 0.0, seed: int = 0) -> S
         Number of copies, >= 1.
     jitter : float
         Each velocity component of the wide layer gets a normal deviate of this many times
-        the velocities' rms (dimensionless, >= 0; 0: none), so that the copies part.
+        the velocities' rms (dimensionless, >= 0; 0: none), so that the copies part (a layer
+        at rest, rms 0, is not jittered: its copies stay identical).
     seed : int
         Seed of that jitter (``np.random.default_rng``).
 

@@ -534,7 +534,9 @@ def test_a_widened_start_lays_the_state_side_by_side_and_each_seed_parts_the_cop
         np.testing.assert_allclose(wide.grains.positions[part, 0],
                                    source.grains.positions[:, 0] + copy * period, rtol=0, atol=1e-12)
         np.testing.assert_array_equal(wide.grains.radii[part], source.grains.radii)
-    assert wide.fixed_radii.size == 3 * source.fixed_radii.size
+    bed = source.fixed_positions
+    np.testing.assert_allclose(wide.fixed_positions, np.concatenate(
+        [bed + [copy * period, 0.0] for copy in range(3)]), rtol=0, atol=1e-12)
     rms = np.sqrt(np.mean(np.sum(source.grains.velocities**2, axis=1)))
     kick = wide.grains.velocities - np.tile(source.grains.velocities, (3, 1))
     assert 0 < np.abs(kick).max() < 5e-3 * rms and 0.5e-3 < np.std(kick) / rms < 2e-3
@@ -565,8 +567,12 @@ def test_widen_errors_name_the_field_or_the_flag(tmp_path, capsys):
             flow_cli.run_main(argv)
         err = capsys.readouterr().err.strip()
         assert exit_.value.code == 2 and len(err.splitlines()) == 1 and said in err, err
-    assert "times 2 copies" in str(pytest.raises(ValueError, initial_scene, RunConfig(
+    message = str(pytest.raises(ValueError, initial_scene, RunConfig(
         n_grains=32, width=30.0, start_from=str(checkpoint), widen=2)).value)
+    assert "times 2 copies" in message and "(n_grains, width, widen)" in message
+    with pytest.raises(SystemExit):                  # the help's jitter is the one applied
+        flow_cli.run_main(["--help"])
+    assert f"jitter of {inclined.PARTING_JITTER:g} of the rms" in " ".join(capsys.readouterr().out.split())
 
 
 def test_start_from_errors_are_one_line_naming_the_flag(tmp_path, capsys):

@@ -158,8 +158,8 @@ def test_a_creeping_bed_converges_by_the_proximal_loop_without_fallback():
 
 def test_a_stuck_proximal_step_raises_the_weight_a_hundredfold(monkeypatch):
     """The weight after a subproblem not solved: 10 times where the step lowered the FCLIB error
-    by more than STUCK, STUCK_RISE times where it did not (a stuck iterate; before, 10 times
-    always, and the hard flow steps failed at every weight up to 1e-2 in turn)."""
+    below STUCK times the centre's, STUCK_RISE times where it did not (a stuck iterate; before,
+    10 times always, and a hard flow step failed at every weight from 1e-7 to 1e-3 in turn)."""
     problem = siconos_test_problem("FrictionContactProblem00237.dat").normalized()
     function = AlartCurnier(problem)
     start = np.zeros(problem.n_rows)
