@@ -206,15 +206,14 @@ def _step_expansion(step: StepProblem) -> tuple[sp.csr_matrix, np.ndarray]:
     nc, tangent_dim = cones.count, cones.tangent_dim
     checks.require(tangent_dim in (1, 2), "cones.tangent_dim",
                    "must be 1 or 2 (FCLIB problems are 2D or 3D)", tangent_dim)
-    kinds = np.asarray(cones.kinds)
     for kind in (ConeKind.FREE, ConeKind.NONPOS, ConeKind.UNION):
-        bad = np.flatnonzero(kinds == kind)
+        bad = np.flatnonzero(cones.mask(kind))
         if bad.size:
             raise ValueError(f"cones: contact {bad[0]} is {kind.name} ({bad.size} such contacts); "
                              "FCLIB/Siconos problems have Coulomb cones only (COULOMB or NONNEG "
                              "contacts can be written)")
     dim = tangent_dim + 1
-    coulomb = kinds == ConeKind.COULOMB
+    coulomb = cones.mask(ConeKind.COULOMB)
     rows = [np.arange(nc) * dim]
     cols = [np.arange(nc)]
     tangential = np.asarray(cones.tangential, dtype=int)

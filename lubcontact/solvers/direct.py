@@ -91,8 +91,7 @@ def conic_form(problem: ConicProblem, polyhedral: bool | None = None) -> ConicFo
         polyhedral = dim_t == 1
     if polyhedral and dim_t != 1 and cones.has_friction:
         raise ValueError(f"polyhedral: friction cones are polyhedral only in 2D, tangent_dim={dim_t}")
-    kinds = cones.kinds
-    coulomb = np.flatnonzero(kinds[cones.tangential] == ConeKind.COULOMB) if cones.has_friction \
+    coulomb = np.flatnonzero(cones.mask(ConeKind.COULOMB)[cones.tangential]) if cones.has_friction \
         else np.zeros(0, dtype=int)
     cone_contacts = cones.tangential[coulomb]
     mu = cones.mu[cone_contacts]
@@ -100,8 +99,8 @@ def conic_form(problem: ConicProblem, polyhedral: bool | None = None) -> ConicFo
     free_t = np.ones(n - nc, dtype=bool)
     free_t[(t_rows - nc).ravel()] = False
     blocks_zero = [_rows(np.flatnonzero(free_t) + nc, 1.0, n)]
-    blocks_nonneg = [_rows(np.flatnonzero(kinds == ConeKind.NONNEG), -1.0, n),
-                     _rows(np.flatnonzero(kinds == ConeKind.NONPOS), 1.0, n),
+    blocks_nonneg = [_rows(np.flatnonzero(cones.mask(ConeKind.NONNEG)), -1.0, n),
+                     _rows(np.flatnonzero(cones.mask(ConeKind.NONPOS)), 1.0, n),
                      _rows(cone_contacts[mu == 0], -1.0, n)]
     soc_count = 0
     if polyhedral:

@@ -74,12 +74,12 @@ class _Layout:
     @classmethod
     def of(cls, cones: Cones) -> _Layout:
         nc, dim = cones.count, cones.tangent_dim
-        kinds = cones.kinds
-        sign = np.where(kinds == ConeKind.NONPOS, -1.0, np.where(kinds == ConeKind.FREE, 0.0, 1.0))
+        sign = np.where(cones.mask(ConeKind.NONPOS), -1.0,
+                        np.where(cones.mask(ConeKind.FREE), 0.0, 1.0))
         t_rows = np.full((nc, dim), -1, dtype=int)
         friction = np.zeros(nc, dtype=bool)
         if cones.has_friction:
-            coulomb = np.flatnonzero(kinds[cones.tangential] == ConeKind.COULOMB)
+            coulomb = np.flatnonzero(cones.mask(ConeKind.COULOMB)[cones.tangential])
             contacts = cones.tangential[coulomb]
             t_rows[contacts] = nc + coulomb[:, None] * dim + np.arange(dim)
             friction[contacts] = cones.mu[contacts] > 0

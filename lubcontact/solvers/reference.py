@@ -115,7 +115,7 @@ def solve_branches(step: StepProblem, form: str, tol: float, max_iter: int, poly
     the flips per round and the pulled branches; the status is
     ``inaccurate`` if contacts were still inconsistent after the last round.
     """
-    union = step.cones.kinds == ConeKind.UNION
+    union = step.cones.mask(ConeKind.UNION)
     pulled = np.zeros(step.n_contacts, dtype=bool)
     if warm_start is not None:
         pulled = step.cones.pulled(warm_start)

@@ -407,7 +407,7 @@ class SiconosLayout:
         free_velocity = np.zeros(nc * dim)
         free_velocity[rows] = q
         frictional = np.zeros(nc, dtype=bool)
-        frictional[tangential] = cones.kinds[tangential] == ConeKind.COULOMB
+        frictional[tangential] = cones.mask(ConeKind.COULOMB)[tangential]
         mu = np.where(frictional, cones.mu, 0.0)
         W = sp.coo_matrix(problem.delassus)
         diagonal = W.diagonal()

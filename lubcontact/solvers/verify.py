@@ -288,7 +288,7 @@ def _velocity_violation(problem: ConicProblem, scaled: ConicProblem, velocities:
     if pieces.has_friction:
         _, g_t = pieces.split(g)
         idx = pieces.tangential
-        frictional = pieces.kinds[idx] == ConeKind.COULOMB
+        frictional = pieces.mask(ConeKind.COULOMB)[idx]
         g[idx[frictional]] += pieces.mu[idx[frictional]] * np.linalg.norm(g_t[frictional], axis=1)
     return pieces.velocity_violation(g)
 
@@ -303,7 +303,7 @@ def _per_contact(cones: Cones, forces: np.ndarray, corrected: np.ndarray) -> dic
     dot = normal_f * normal_w
     if pieces.has_friction:
         dot[pieces.tangential] += np.sum(tangential_f * tangential_w, axis=1)
-    dot[pieces.kinds == ConeKind.FREE] = 0.0        # bilateral: its gap condition is the test
+    dot[pieces.mask(ConeKind.FREE)] = 0.0           # bilateral: its gap condition is the test
     residual = _contact_norms(pieces, forces - pieces.project(forces - corrected))
     return dict(penetration=gap, cone=cone, complementarity=np.abs(dot), residual=residual)
 
