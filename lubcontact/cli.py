@@ -17,6 +17,8 @@ COMMANDS = {
     "sweep": ("lubcontact.flow.cli", "sweep_main", "inclined-flow sweep over angles"),
     "hysteresis": ("lubcontact.flow.cli", "hysteresis_main",
                    "theta_start / theta_stop: angle ramps up and down"),
+    "window": ("lubcontact.flow.cli", "window_main",
+               "a run's series over a window of steps: mean, block error, trend"),
     "compare": ("lubcontact.bench.compare", "main", "solver-comparison report"),
     "check-hard": ("lubcontact.bench.hard", "main", "run every solver on the hard-case suite"),
     "verify": ("lubcontact.bench.verify", "main",

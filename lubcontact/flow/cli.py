@@ -1,4 +1,6 @@
-"""The commands ``lubcontact run`` (:func:`run_main`) and ``lubcontact sweep`` (:func:`sweep_main`).
+"""The commands ``lubcontact run`` (:func:`run_main`), ``lubcontact sweep`` (:func:`sweep_main`),
+``lubcontact hysteresis`` (:func:`hysteresis_main`) and ``lubcontact window``
+(:func:`window_main`: a run's series over a window of steps, from its checkpoint).
 
 ``lubcontact run SCENE`` steps one scene (``sedimentation`` or
 ``inclined_flow``) with a progress bar (on a terminal), writes the files of
@@ -733,4 +735,83 @@ def hysteresis_main(argv: list[str] | None = None) -> int:
               f"({entry['theta_stop_n']})  width {entry['width']:.3g} +/- "
               f"{entry['width_sd']:.2g} deg")
     print(f"wrote {args.out / 'hysteresis.csv'}")
+    return 0
+
+
+WINDOW_SERIES = ("flow_rate", "mean_velocity", "kinetic_energy", "contacts", "glued",
+                 "frictional", "coordination_frictional", "coordination_glued",
+                 "coordination_unglued", "residual", "iterations")
+"""The sampled series ``lubcontact window`` reads (``series.<name>`` of a run's checkpoint)."""
+
+
+def window_parser() -> argparse.ArgumentParser:
+    """The parser of ``lubcontact window``."""
+    parser = _Parser(
+        prog="lubcontact window",
+        description="A run's sampled series over a window of steps (the last --length steps "
+                    "up to --end): its mean, the block standard error (the spread of the "
+                    "means of --blocks equal blocks of steps) and the trend (last block's mean "
+                    "minus the first's), for each run given; Q in d sqrt(g' d). Reads each "
+                    "run's checkpoint.npz, so a run still going can be read.")
+    parser.add_argument("runs", nargs="+", type=pathlib.Path, metavar="RUN",
+                        help="run folders (holding checkpoint.npz) or checkpoint files")
+    parser.add_argument("--length", type=_number(int, 2), required=True, metavar="STEPS",
+                        help="window length in steps, a multiple of --blocks")
+    parser.add_argument("--end", type=_number(int, 2), default=None, metavar="STEP",
+                        help="last step of the window (default: each run's last step)")
+    parser.add_argument("--blocks", type=_number(int, 2), default=5, metavar="N",
+                        help="blocks of steps the window is cut into (default: 5)")
+    parser.add_argument("--series", choices=WINDOW_SERIES, default="flow_rate",
+                        help="the sampled quantity (default: flow_rate)")
+    return parser
+
+
+def window_main(argv: list[str] | None = None) -> int:
+    """``lubcontact window RUN ... --length 3000``: each run's series over a window of steps.
+
+    Parameters
+    ----------
+    argv : list of str, optional
+        The arguments after ``window`` (default: the command line's).
+
+    Returns
+    -------
+    int
+        Exit status: 0, or 2 for a usage error (a missing checkpoint, a window the run has
+        not reached or that is not a whole number of blocks: one line naming the argument).
+    """
+    argv = sys.argv[2:] if argv is None else list(argv)
+    parser = window_parser()
+    args = parser.parse_args(argv)
+    import numpy as np
+
+    from .measure import window_statistics
+
+    flags = {"end": "--end", "length": "--length", "blocks": "--blocks"}
+    rows = []
+    for run in args.runs:                     # every run read before anything is printed
+        path = run / "checkpoint.npz" if run.is_dir() else run
+        if not path.is_file():
+            parser.error(f"argument RUN: no checkpoint.npz in {run}")
+        with np.load(path) as data:
+            key = f"series.{args.series}"
+            if "steps_done" not in data or key not in data:
+                parser.error(f"argument RUN: {path} is not a run's checkpoint with {key}")
+            steps, values, done = data["series.step"], data[key], int(data["steps_done"])
+        end = done if args.end is None else args.end
+        if end > done:
+            parser.error(f"argument --end: {run} has reached step {done}, not {end}")
+        try:
+            window = window_statistics(steps, values, end, args.length, args.blocks)
+        except ValueError as exc:
+            field, _, message = str(exc).partition(": ")
+            parser.error(f"argument {flags.get(field, field)}: {run}: {message}")
+        rows.append((str(run), done, f"({end - args.length}, {end}]", window))
+    width = max(len(name) for name, *_ in rows)
+    print(f"{'run':{width}s} {'steps':>7s} {'window':>15s} {'mean':>10s} {'block s.e.':>10s} "
+          f"{'trend':>9s}  block means ({args.series})")
+    for name, done, span, window in rows:
+        blocks = " ".join(f"{mean:.4g}" for mean in window.blocks)
+        print(f"{name:{width}s} {done:7d} {span:>15s} {window.mean:10.4g} "
+              f"{window.standard_error:10.2g} {window.trend:+9.3g}  {blocks}")
     return 0

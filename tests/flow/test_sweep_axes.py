@@ -576,6 +576,36 @@ def test_widen_errors_name_the_field_or_the_flag(tmp_path, capsys):
     assert float(said.split()[0]) == inclined.PARTING_JITTER and said.split()[1:3] == ["of", "the"]
 
 
+def test_the_window_command_prints_each_runs_window_statistics(tmp_path, capsys):
+    """``lubcontact window RUN --length L``: each run's mean, block error, trend and block means
+    over its last L steps, as ``measure.window_statistics`` gives them from the checkpoint's
+    series; a run that has not reached ``--end``, a window not a whole number of blocks and a
+    folder without a checkpoint are one line naming the argument, before anything is printed."""
+    layer, checkpoint = flowing_layer(tmp_path)
+    with np.load(checkpoint) as data:
+        expected = measure.window_statistics(data["series.step"], data["series.flow_rate"], 8, 8,
+                                             blocks=4)
+    assert flow_cli.window_main([str(tmp_path / "layer"), "--length", "8", "--blocks", "4"]) == 0
+    row = capsys.readouterr().out.splitlines()[1].split()
+    assert row[:4] == [str(tmp_path / "layer"), "8", "(0,", "8]"]
+    assert float(row[4]) == pytest.approx(expected.mean, rel=1e-3)
+    assert float(row[5]) == pytest.approx(expected.standard_error, rel=1e-1)
+    assert float(row[6]) == pytest.approx(expected.trend, rel=1e-2, abs=1e-12)
+    np.testing.assert_allclose([float(v) for v in row[7:]], expected.blocks, rtol=1e-3)
+    cases = {"argument --end: ": ["--length", "4", "--end", "12"],
+             "argument --length: ": ["--length", "6", "--blocks", "4"]}
+    for said, options in cases.items():
+        with pytest.raises(SystemExit) as exit_:
+            flow_cli.window_main([str(checkpoint), *options])
+        out, err = capsys.readouterr()
+        assert exit_.value.code == 2 and out == "" and said in err and len(err.splitlines()) == 1
+    with pytest.raises(SystemExit):
+        flow_cli.window_main([str(checkpoint), str(tmp_path / "none"), "--length", "4",
+                              "--blocks", "2"])
+    out, err = capsys.readouterr()
+    assert out == "" and "argument RUN: no checkpoint.npz in" in err
+
+
 def test_start_from_errors_are_one_line_naming_the_flag(tmp_path, capsys):
     """A missing state, a bed instead of a run's checkpoint, another number of grains, an
     unknown placeholder and a sedimentation from a state: each one line naming --start-from."""
