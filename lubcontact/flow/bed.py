@@ -7,7 +7,6 @@ sweep, and a run started again, all tilt the same bed.
 from __future__ import annotations
 
 import pathlib
-import zipfile
 from dataclasses import replace
 
 import numpy as np
@@ -19,7 +18,7 @@ from ..model.scene import Scene
 from ..scenes import inclined
 from ..sim.state import SimulationState
 from .config import RunConfig
-from .run import FlowRun
+from .run import FlowRun, read_checkpoint
 
 
 def initial_scene(config: RunConfig, out_dir: pathlib.Path | None = None,
@@ -89,16 +88,8 @@ def started_scene(config: RunConfig) -> Scene:
         another number of grains or another period than ``config`` (once widened).
     """
     path = pathlib.Path(config.start_from)
-    checks.require(path.is_file(), "start_from", f"no such file: {path}")
-    not_a_checkpoint = f"{path} is not a run's checkpoint.npz (a settled bed goes to bed)"
-    try:
-        data = np.load(path)
-    except (OSError, ValueError, zipfile.BadZipFile):
-        raise ValueError(f"start_from: {not_a_checkpoint}") from None
-    checks.require(isinstance(data, np.lib.npyio.NpzFile), "start_from", not_a_checkpoint)
-    with data:
-        checks.require("steps_done" in data, "start_from", not_a_checkpoint)
-        scene = SimulationState.from_arrays(data).scene
+    data = read_checkpoint(path, "start_from", "(a settled bed goes to bed)")
+    scene = SimulationState.from_arrays(data).scene
     period = config.width * config.params.radius
     copies = int(config.widen)
     times = f" times {copies} copies" if copies > 1 else ""

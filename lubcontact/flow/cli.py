@@ -13,6 +13,10 @@ define the scene or the physics cannot change on resume.
 model and angle (:mod:`lubcontact.flow.sweep`, each run resumable), and writes
 ``sweep.csv`` with Q(theta) and the contact-state fractions, plus plots.
 
+``lubcontact window RUN ...`` reads runs' checkpoints (finished or not) and prints a
+sampled series over a window of steps: mean, block standard error, trend and block means
+(:func:`~lubcontact.flow.measure.window_statistics`).
+
 Parsing imports neither the solvers nor the scenes nor matplotlib, so that
 ``--help`` is instant: the options' defaults are ``None`` (that is how an option
 given explicitly is told from a default) and :func:`_fill_defaults` puts the
@@ -738,10 +742,12 @@ def hysteresis_main(argv: list[str] | None = None) -> int:
     return 0
 
 
-WINDOW_SERIES = ("flow_rate", "mean_velocity", "kinetic_energy", "contacts", "glued",
-                 "frictional", "coordination_frictional", "coordination_glued",
-                 "coordination_unglued", "residual", "iterations")
-"""The sampled series ``lubcontact window`` reads (``series.<name>`` of a run's checkpoint)."""
+WINDOW_SERIES = ("flow_rate", "mean_velocity", "kinetic_energy", "contacts", "unglued", "glued",
+                 "frictional", "coordination_unglued", "coordination_glued",
+                 "coordination_frictional", "residual", "iterations", "converged", "time", "angle")
+"""The sampled series ``lubcontact window`` reads (``series.<name>`` of a run's checkpoint): every
+one of :data:`lubcontact.flow.run.SERIES` but ``step`` (written out here: parsing imports no run
+code; a test holds the two equal)."""
 
 
 def window_parser() -> argparse.ArgumentParser:
@@ -751,8 +757,8 @@ def window_parser() -> argparse.ArgumentParser:
         description="A run's sampled series over a window of steps (the last --length steps "
                     "up to --end): its mean, the block standard error (the spread of the "
                     "means of --blocks equal blocks of steps) and the trend (last block's mean "
-                    "minus the first's), for each run given; Q in d sqrt(g' d). Reads each "
-                    "run's checkpoint.npz, so a run still going can be read.")
+                    f"minus the first's), for each run given; the flow rate in {Q_UNIT}. Reads "
+                    "each run's checkpoint.npz, so a run still going can be read.")
     parser.add_argument("runs", nargs="+", type=pathlib.Path, metavar="RUN",
                         help="run folders (holding checkpoint.npz) or checkpoint files")
     parser.add_argument("--length", type=_number(int, 2), required=True, metavar="STEPS",
@@ -777,8 +783,9 @@ def window_main(argv: list[str] | None = None) -> int:
     Returns
     -------
     int
-        Exit status: 0, or 2 for a usage error (a missing checkpoint, a window the run has
-        not reached or that is not a whole number of blocks: one line naming the argument).
+        Exit status: 0, or 2 for a usage error (no checkpoint, a window the run has not
+        reached or that is not a whole number of blocks, a series without samples there: one
+        line naming the argument, before anything is printed).
     """
     argv = sys.argv[2:] if argv is None else list(argv)
     parser = window_parser()
@@ -786,32 +793,59 @@ def window_main(argv: list[str] | None = None) -> int:
     import numpy as np
 
     from .measure import window_statistics
+    from .run import read_checkpoint
 
-    flags = {"end": "--end", "length": "--length", "blocks": "--blocks"}
+    key = f"series.{args.series}"
     rows = []
     for run in args.runs:                     # every run read before anything is printed
-        path = run / "checkpoint.npz" if run.is_dir() else run
-        if not path.is_file():
-            parser.error(f"argument RUN: no checkpoint.npz in {run}")
-        with np.load(path) as data:
-            key = f"series.{args.series}"
-            if "steps_done" not in data or key not in data:
-                parser.error(f"argument RUN: {path} is not a run's checkpoint with {key}")
-            steps, values, done = data["series.step"], data[key], int(data["steps_done"])
+        if not run.exists():
+            parser.error(f"argument RUN: no such file or folder: {run}")
+        try:
+            data = read_checkpoint(run / "checkpoint.npz" if run.is_dir() else run, "RUN")
+        except ValueError as exc:
+            parser.error(f"argument {exc}")
+        done = int(data["steps_done"])
+        if key not in data or (args.series == "flow_rate" and "units" not in data):
+            parser.error(f"argument --series: {run} predates the series {args.series} (or its "
+                         "unit): resume it once with lubcontact run --resume to convert it")
         end = done if args.end is None else args.end
         if end > done:
             parser.error(f"argument --end: {run} has reached step {done}, not {end}")
+        if end < args.length:
+            flag = "--length" if args.end is None else "--end"
+            parser.error(f"argument {flag}: the window of {args.length} steps up to step {end} "
+                         f"starts before {run}'s first step")
+        steps = data["series.step"]
+        inside = (steps > end - args.length) & (steps <= end)
+        values = data[key][inside]
+        if not np.isfinite(values).all():
+            parser.error(f"argument --series: {run} has no {args.series} samples in the window "
+                         "(a checkpoint older than the series)")
         try:
-            window = window_statistics(steps, values, end, args.length, args.blocks)
+            window = window_statistics(steps[inside], values, end, args.length, args.blocks)
         except ValueError as exc:
             field, _, message = str(exc).partition(": ")
-            parser.error(f"argument {flags.get(field, field)}: {run}: {message}")
+            flag = {"end": "--end", "length": "--length", "blocks": "--blocks"}.get(field, field)
+            parser.error(f"argument {flag}: {run}: {message}")
         rows.append((str(run), done, f"({end - args.length}, {end}]", window))
     width = max(len(name) for name, *_ in rows)
+    unit = f" in {Q_UNIT}" if args.series == "flow_rate" else ""
     print(f"{'run':{width}s} {'steps':>7s} {'window':>15s} {'mean':>10s} {'block s.e.':>10s} "
-          f"{'trend':>9s}  block means ({args.series})")
+          f"{'trend':>10s}  block means ({args.series}{unit})")
     for name, done, span, window in rows:
-        blocks = " ".join(f"{mean:.4g}" for mean in window.blocks)
-        print(f"{name:{width}s} {done:7d} {span:>15s} {window.mean:10.4g} "
-              f"{window.standard_error:10.2g} {window.trend:+9.3g}  {blocks}")
+        blocks = " ".join(_significant(mean, 4) for mean in window.blocks)
+        trend = ("+" if window.trend >= 0 else "") + _significant(window.trend, 3)
+        print(f"{name:{width}s} {done:7d} {span:>15s} {_significant(window.mean, 4):>10s} "
+              f"{_significant(window.standard_error, 2):>10s} {trend:>10s}  {blocks}")
     return 0
+
+
+def _significant(value: float, digits: int) -> str:
+    """``value`` with ``digits`` significant digits, in fixed notation from 1e-3 to 1e6 (so that
+    146.0 prints next to 144.7, not as 146), else in exponent notation."""
+    import math
+
+    if value == 0 or not 1e-3 <= abs(value) < 1e6:
+        return f"{value:.{digits}g}"
+    decimals = max(0, digits - 1 - math.floor(math.log10(abs(value))))
+    return f"{value:.{decimals}f}"

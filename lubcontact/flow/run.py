@@ -32,6 +32,7 @@ import json
 import math
 import pathlib
 import time
+import zipfile
 from dataclasses import replace
 from typing import TYPE_CHECKING, Any
 
@@ -558,6 +559,39 @@ class FlowRun:
                 "warm_up_time": self.warm_up_time,
                 "solver": self.config.solver, "tol": self.config.tol,
                 "units": units(self.params)}
+
+
+def read_checkpoint(path: pathlib.Path, field: str, hint: str = "") -> dict[str, np.ndarray]:
+    """The arrays of a run's ``checkpoint.npz``, read whole.
+
+    Parameters
+    ----------
+    path : pathlib.Path
+    field : str
+        The name the errors give (an option or a config field, e.g. ``start_from``).
+    hint : str
+        Said after "is not a run's checkpoint.npz" (e.g. what to use instead).
+
+    Raises
+    ------
+    ValueError
+        ``"<field>: no such file: ..."``, or ``"<field>: ... is not a run's checkpoint.npz"``
+        for a file numpy cannot read as an archive or one without ``steps_done``.
+    """
+    path = pathlib.Path(path)
+    if not path.is_file():
+        raise ValueError(f"{field}: no such file: {path}")
+    not_a_checkpoint = f"{field}: {path} is not a run's checkpoint.npz" + (f" {hint}" if hint else "")
+    try:
+        data = np.load(path)
+    except (OSError, ValueError, zipfile.BadZipFile):
+        raise ValueError(not_a_checkpoint) from None
+    if not isinstance(data, np.lib.npyio.NpzFile):
+        raise ValueError(not_a_checkpoint)
+    with data:
+        if "steps_done" not in data:
+            raise ValueError(not_a_checkpoint)
+        return {name: data[name] for name in data.files}
 
 
 def _window_mean(values: np.ndarray, window: np.ndarray) -> float:

@@ -599,11 +599,32 @@ def test_the_window_command_prints_each_runs_window_statistics(tmp_path, capsys)
             flow_cli.window_main([str(checkpoint), *options])
         out, err = capsys.readouterr()
         assert exit_.value.code == 2 and out == "" and said in err and len(err.splitlines()) == 1
-    with pytest.raises(SystemExit):
-        flow_cli.window_main([str(checkpoint), str(tmp_path / "none"), "--length", "4",
-                              "--blocks", "2"])
-    out, err = capsys.readouterr()
-    assert out == "" and "argument RUN: no checkpoint.npz in" in err
+    (tmp_path / "notes.npz").write_text("not an archive")
+    data = dict(np.load(checkpoint))
+    data["series.mean_velocity"][-2:] = np.nan            # a series newer than the checkpoint
+    np.savez(tmp_path / "older.npz", **data)
+    bad = {"argument RUN: no such file or folder": [str(tmp_path / "none")],
+           "argument RUN: ": [str(tmp_path / "notes.npz")],
+           "argument --series: ": [str(tmp_path / "older.npz"), "--series", "mean_velocity"],
+           "starts before": ["--length", "10", "--blocks", "2"]}
+    for said, arguments in bad.items():
+        with pytest.raises(SystemExit) as exit_:          # the first run is fine: nothing printed
+            flow_cli.window_main([str(checkpoint), *arguments, "--length", "4", "--blocks", "2"]
+                                 if "--length" not in arguments else [str(checkpoint), *arguments])
+        out, err = capsys.readouterr()
+        assert exit_.value.code == 2 and out == "" and said in err and len(err.splitlines()) == 1
+    data["series.mean_velocity"][:] = 1.0
+    data["series.mean_velocity"][:2] = np.nan             # NaN before the window only: read
+    np.savez(tmp_path / "older.npz", **data)
+    assert flow_cli.window_main([str(tmp_path / "older.npz"), "--length", "4", "--blocks", "2",
+                                 "--series", "mean_velocity"]) == 0
+    assert capsys.readouterr().out.splitlines()[1].split()[4:7] == ["1.000", "0", "+0"]
+
+
+def test_the_window_command_offers_every_series_a_run_samples():
+    from lubcontact.flow.run import SERIES
+
+    assert sorted(flow_cli.WINDOW_SERIES) == sorted(set(SERIES) - {"step"})
 
 
 def test_start_from_errors_are_one_line_naming_the_flag(tmp_path, capsys):
