@@ -27,6 +27,7 @@ between two steps with a checkpoint, one line on stderr, exit status 130.
 from __future__ import annotations
 
 import argparse
+import math
 import pathlib
 import shlex
 import sys
@@ -843,8 +844,6 @@ def window_main(argv: list[str] | None = None) -> int:
 def _significant(value: float, digits: int) -> str:
     """``value`` with ``digits`` significant digits, in fixed notation from 1e-3 to 1e6 (so that
     146.0 prints next to 144.7, not as 146), else in exponent notation."""
-    import math
-
     if value == 0 or not 1e-3 <= abs(value) < 1e6:
         return f"{value:.{digits}g}"
     decimals = max(0, digits - 1 - math.floor(math.log10(abs(value))))

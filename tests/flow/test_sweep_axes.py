@@ -603,14 +603,14 @@ def test_the_window_command_prints_each_runs_window_statistics(tmp_path, capsys)
     data = dict(np.load(checkpoint))
     data["series.mean_velocity"][-2:] = np.nan            # a series newer than the checkpoint
     np.savez(tmp_path / "older.npz", **data)
-    bad = {"argument RUN: no such file or folder": [str(tmp_path / "none")],
-           "argument RUN: ": [str(tmp_path / "notes.npz")],
-           "argument --series: ": [str(tmp_path / "older.npz"), "--series", "mean_velocity"],
+    window = ["--length", "4", "--blocks", "2"]
+    bad = {"argument RUN: no such file or folder": [str(tmp_path / "none"), *window],
+           "argument RUN: ": [str(tmp_path / "notes.npz"), *window],
+           "argument --series: ": [str(tmp_path / "older.npz"), *window, "--series", "mean_velocity"],
            "starts before": ["--length", "10", "--blocks", "2"]}
     for said, arguments in bad.items():
         with pytest.raises(SystemExit) as exit_:          # the first run is fine: nothing printed
-            flow_cli.window_main([str(checkpoint), *arguments, "--length", "4", "--blocks", "2"]
-                                 if "--length" not in arguments else [str(checkpoint), *arguments])
+            flow_cli.window_main([str(checkpoint), *arguments])
         out, err = capsys.readouterr()
         assert exit_.value.code == 2 and out == "" and said in err and len(err.splitlines()) == 1
     data["series.mean_velocity"][:] = 1.0
