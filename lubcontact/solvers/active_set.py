@@ -225,7 +225,7 @@ def finish_exactly(data: DualData, cones: Cones, tracker: ResidualTracker, statu
     """Replace a converged best iterate by the exact solution on its active set.
 
     The residual test does not bound the velocity error when ``W`` is badly
-    conditioned (docs/hard_cases.md, finding 5): at ``r <= 1e-9`` the
+    conditioned (docs/records/hard_cases.md, finding 5): at ``r <= 1e-9`` the
     velocities were still 2e-6 off at a mass ratio of 1e6 and 6e-6 off on the
     settled 1000-grain pile. On frictionless problems the active set of a
     converged iterate is (almost always) the optimal one, so one

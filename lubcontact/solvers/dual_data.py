@@ -29,7 +29,7 @@ Operator
 --------
 ``W x`` is applied either from the assembled sparse W (``operator="matrix"``)
 or matrix-free as ``L^T (L x)`` (``operator="factor"``). Measured on the
-10^4-grain frictionless pile (docs/benchmarks.md) both cost about the same per
+10^4-grain frictionless pile (docs/records/benchmarks.md) both cost about the same per
 product (0.25 ms vs 0.22 ms with a CSR copy of ``L^T``); on a developed
 frictional flow, where each contact shares a grain with many others, the
 matrix-free product costs half (3200 grains: 104 against 230 us in the

@@ -19,7 +19,7 @@ Iteration counts follow the condition number of ``W`` on the loaded rows
 1.6e4, 2.0e6 and 9.4e7 at 10^2, 10^3 and 10^4 grains, ``pgd`` needed 1.6e5
 and 1.2e7 iterations (about 6-10 x cond; 10^4 would take days), ``bb`` 1.7e3,
 7.9e4 and 8.3e5, ``apgd`` 1.4e3, 8.9e3 and 2.2e4, ``apgd-as`` 1 to 3
-(docs/benchmarks.md). The default cap of 20 000 therefore stops ``pgd`` and
+(docs/records/benchmarks.md). The default cap of 20 000 therefore stops ``pgd`` and
 ``bb`` with status ``max_iter`` on large jammed piles.
 
 Every method only uses the problem protocol: ``delassus`` (sparse W),

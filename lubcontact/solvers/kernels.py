@@ -5,7 +5,7 @@ projection, the residual, the restart test and the extrapolation: the box case
 (frictionless problems: every row in ``[lower, upper]``, with the active-set
 bookkeeping, and resumable: it stops for the active-set finish and carries on
 with its momentum), about twice as fast as the numpy loop on the 10^4-grain pile
-(docs/benchmarks.md); and 2D friction cones (optionally with the Coulomb shift
+(docs/records/benchmarks.md); and 2D friction cones (optionally with the Coulomb shift
 updated inside, :func:`apgd_cone2d`), about 3x faster than the numpy loop on
 the 1000-grain frictional settling pile; its projection also covers the 2D
 UNION contacts of gluey + friction steps. The numpy loop remains the general

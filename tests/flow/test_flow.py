@@ -324,7 +324,7 @@ def test_small_demo_writes_its_figures_and_report(tmp_path):
     assert "cross-check" in (tmp_path / "flow_report.md").read_text()
 
 
-# -- long validations (pytest -m slow; results recorded in docs/validation.md) ---------------------
+# -- long validations (pytest -m slow; results recorded in docs/records/validation.md) ---------------------
 def thick_dry_run(angle, steps):
     """400 grains on a 40-radius period: a dry layer about 20 diameters thick."""
     config = RunConfig(scene="inclined_flow", n_grains=400, width=40.0, model="dry",

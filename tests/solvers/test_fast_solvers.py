@@ -33,7 +33,7 @@ def piles():
 
 
 # Iterations the plain projected gradient needs on the 200-grain gluey reference pile at tol 1e-9:
-# 1 195 415 (measured; its rate is 1 - 1/cond(W_AA), docs/benchmarks.md), above the default cap.
+# 1 195 415 (measured; its rate is 1 - 1/cond(W_AA), docs/records/benchmarks.md), above the default cap.
 # (199 180 before the stored pile was rebuilt with each step's search distance covering the step:
 # the settling grains then met their contacts earlier, and the pile is another pile.)
 PGD_REFERENCE_CAP = 1_300_000
@@ -293,7 +293,7 @@ def test_active_condition_matches_dense_eigenvalues(settled):
     assert value > 1e4          # 2.0e4, jammed: PGD needs 204 333 iterations to tol 1e-8 here
 
 
-# -- "converged" means accurate (docs/hard_cases.md finding 5) -------------------------------------
+# -- "converged" means accurate (docs/records/hard_cases.md finding 5) -------------------------------------
 @pytest.mark.parametrize("method", ["apgd", "apgd-jacobi", "bb"])
 def test_converged_means_accurate_on_a_settled_pile(settled, method):
     """On the settled pile the residual test alone stopped 2.5e-6 to 7.7e-6 away from the
