@@ -758,8 +758,11 @@ def window_parser() -> argparse.ArgumentParser:
         description="A run's sampled series over a window of steps (the last --length steps "
                     "up to --end): its mean, the block standard error (the spread of the "
                     "means of --blocks equal blocks of steps) and the trend (last block's mean "
-                    f"minus the first's), for each run given; the flow rate in {Q_UNIT}. Reads "
-                    "each run's checkpoint.npz, so a run still going can be read.")
+                    "minus the first's), for each run given; the flow rate in "
+                    f"{Q_UNIT}. Also the flow's verdict over the window, from its two halves' "
+                    "flow rates: steady (within 5 %), accelerating, transient (slowing) or "
+                    "no_flow, with the relative change. Reads each run's checkpoint.npz, so a "
+                    "run still going can be read.")
     parser.add_argument("runs", nargs="+", type=pathlib.Path, metavar="RUN",
                         help="run folders (holding checkpoint.npz) or checkpoint files")
     parser.add_argument("--length", type=_number(int, 2), required=True, metavar="STEPS",
@@ -793,7 +796,7 @@ def window_main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     import numpy as np
 
-    from .measure import window_statistics
+    from .measure import classify_flow, window_statistics
     from .run import read_checkpoint
 
     key = f"series.{args.series}"
@@ -828,16 +831,22 @@ def window_main(argv: list[str] | None = None) -> int:
             field, _, message = str(exc).partition(": ")
             flag = {"end": "--end", "length": "--length", "blocks": "--blocks"}.get(field, field)
             parser.error(f"argument {flag}: {run}: {message}")
-        rows.append((str(run), done, f"({end - args.length}, {end}]", window))
+        flow = [data[f"series.{name}"][inside] for name in ("time", "kinetic_energy", "flow_rate")]
+        verdict = ("-", "-")
+        if all(np.isfinite(series).all() for series in flow):
+            state = classify_flow(*flow, window=1.0)
+            verdict = (state.label, f"{100 * state.relative_change:+.1f}%")
+        rows.append((str(run), done, f"({end - args.length}, {end}]", window, verdict))
     width = max(len(name) for name, *_ in rows)
     unit = f" in {Q_UNIT}" if args.series == "flow_rate" else ""
     print(f"{'run':{width}s} {'steps':>7s} {'window':>15s} {'mean':>10s} {'block s.e.':>10s} "
-          f"{'trend':>10s}  block means ({args.series}{unit})")
-    for name, done, span, window in rows:
+          f"{'trend':>10s}  {'flow (halves)':>20s}  block means ({args.series}{unit})")
+    for name, done, span, window, (label, change) in rows:
         blocks = " ".join(_significant(mean, 4) for mean in window.blocks)
         trend = ("+" if window.trend >= 0 else "") + _significant(window.trend, 3)
         print(f"{name:{width}s} {done:7d} {span:>15s} {_significant(window.mean, 4):>10s} "
-              f"{_significant(window.standard_error, 2):>10s} {trend:>10s}  {blocks}")
+              f"{_significant(window.standard_error, 2):>10s} {trend:>10s}  {label:>12s} "
+              f"{change:>7s}  {blocks}")
     return 0
 
 

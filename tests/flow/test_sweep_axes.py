@@ -579,19 +579,26 @@ def test_widen_errors_name_the_field_or_the_flag(tmp_path, capsys):
 def test_the_window_command_prints_each_runs_window_statistics(tmp_path, capsys):
     """``lubcontact window RUN --length L``: each run's mean, block error, trend and block means
     over its last L steps, as ``measure.window_statistics`` gives them from the checkpoint's
-    series; a run that has not reached ``--end``, a window not a whole number of blocks and a
-    folder without a checkpoint are one line naming the argument, before anything is printed."""
+    series, and the flow's verdict over the window (``measure.classify_flow``); a run that has
+    not reached ``--end``, a window not a whole number of blocks and a folder without a
+    checkpoint are one line naming the argument, before anything is printed."""
     layer, checkpoint = flowing_layer(tmp_path)
     with np.load(checkpoint) as data:
         expected = measure.window_statistics(data["series.step"], data["series.flow_rate"], 8, 8,
                                              blocks=4)
+        inside = (data["series.step"] > 0) & (data["series.step"] <= 8)
+        state = measure.classify_flow(data["series.time"][inside],
+                                      data["series.kinetic_energy"][inside],
+                                      data["series.flow_rate"][inside], window=1.0)
     assert flow_cli.window_main([str(tmp_path / "layer"), "--length", "8", "--blocks", "4"]) == 0
     row = capsys.readouterr().out.splitlines()[1].split()
     assert row[:4] == [str(tmp_path / "layer"), "8", "(0,", "8]"]
     assert float(row[4]) == pytest.approx(expected.mean, rel=1e-3)
     assert float(row[5]) == pytest.approx(expected.standard_error, rel=1e-1)
     assert float(row[6]) == pytest.approx(expected.trend, rel=1e-2, abs=1e-12)
-    np.testing.assert_allclose([float(v) for v in row[7:]], expected.blocks, rtol=1e-3)
+    assert row[7] == state.label and row[8].endswith("%")
+    assert float(row[8][:-1]) == pytest.approx(100 * state.relative_change, abs=0.051)
+    np.testing.assert_allclose([float(v) for v in row[9:]], expected.blocks, rtol=1e-3)
     cases = {"argument --end: ": ["--length", "4", "--end", "12"],
              "argument --length: ": ["--length", "6", "--blocks", "4"]}
     for said, options in cases.items():
