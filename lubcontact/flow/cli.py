@@ -833,7 +833,7 @@ def window_main(argv: list[str] | None = None) -> int:
             parser.error(f"argument {flag}: {run}: {message}")
         flow = [data[f"series.{name}"][inside] for name in ("time", "kinetic_energy", "flow_rate")]
         verdict = ("-", "-")
-        if all(np.isfinite(series).all() for series in flow):
+        if flow[0].size >= 4 and all(np.isfinite(series).all() for series in flow):
             state = classify_flow(*flow, window=1.0)
             verdict = (state.label, f"{100 * state.relative_change:+.1f}%")
         rows.append((str(run), done, f"({end - args.length}, {end}]", window, verdict))

@@ -599,6 +599,8 @@ def test_the_window_command_prints_each_runs_window_statistics(tmp_path, capsys)
     assert row[7] == state.label and row[8].endswith("%")
     assert float(row[8][:-1]) == pytest.approx(100 * state.relative_change, abs=0.051)
     np.testing.assert_allclose([float(v) for v in row[9:]], expected.blocks, rtol=1e-3)
+    assert flow_cli.window_main([str(checkpoint), "--length", "2", "--blocks", "2"]) == 0
+    assert capsys.readouterr().out.splitlines()[1].split()[7:9] == ["-", "-"]   # too few samples
     cases = {"argument --end: ": ["--length", "4", "--end", "12"],
              "argument --length: ": ["--length", "6", "--blocks", "4"]}
     for said, options in cases.items():
