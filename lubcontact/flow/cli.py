@@ -761,8 +761,9 @@ def window_parser() -> argparse.ArgumentParser:
                     "minus the first's), for each run given; the flow rate in "
                     f"{Q_UNIT}. Also the flow's verdict over the window, from its two halves' "
                     "flow rates: steady (within 5 %), accelerating, transient (slowing) or "
-                    "no_flow, with the relative change. Reads each run's checkpoint.npz, so a "
-                    "run still going can be read.")
+                    "no_flow, with the relative change; with --approach, the value the block "
+                    "means approach (an exponential fitted to them). Reads each run's "
+                    "checkpoint.npz, so a run still going can be read.")
     parser.add_argument("runs", nargs="+", type=pathlib.Path, metavar="RUN",
                         help="run folders (holding checkpoint.npz) or checkpoint files")
     parser.add_argument("--length", type=_number(int, 2), required=True, metavar="STEPS",
@@ -773,6 +774,11 @@ def window_parser() -> argparse.ArgumentParser:
                         help="blocks of steps the window is cut into (default: 5)")
     parser.add_argument("--series", choices=WINDOW_SERIES, default="flow_rate",
                         help="the sampled quantity (default: flow_rate)")
+    parser.add_argument("--approach", action="store_true",
+                        help="also fit m(t) = limit - A exp(-t / tau) to the block means (at "
+                             "least 4 blocks) and print the limit, its standard error and tau "
+                             "in steps: the steady value of a run still approaching it ('-' "
+                             "where the means show no approach)")
     return parser
 
 
@@ -796,9 +802,12 @@ def window_main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     import numpy as np
 
-    from .measure import classify_flow, window_statistics
+    from .measure import classify_flow, fit_approach, window_statistics
     from .run import read_checkpoint
 
+    if args.approach and args.blocks < 4:
+        parser.error(f"argument --blocks: --approach fits 3 parameters to the block means: "
+                     f"needs at least 4 blocks, got {args.blocks}")
     key = f"series.{args.series}"
     rows = []
     for run in args.runs:                     # every run read before anything is printed
@@ -836,17 +845,26 @@ def window_main(argv: list[str] | None = None) -> int:
         if flow[0].size >= 4 and all(np.isfinite(series).all() for series in flow):
             state = classify_flow(*flow, window=1.0)
             verdict = (state.label, f"{100 * state.relative_change:+.1f}%")
-        rows.append((str(run), done, f"({end - args.length}, {end}]", window, verdict))
+        approach = ()
+        if args.approach:
+            fit = fit_approach(window.centres, window.blocks)
+            approach = tuple(_significant(value, digits) if fit.found else "-" for value, digits
+                             in ((fit.limit, 4), (fit.limit_error, 2), (fit.tau, 3)))
+        rows.append((str(run), done, f"({end - args.length}, {end}]", window, verdict, approach))
     width = max(len(name) for name, *_ in rows)
     unit = f" in {Q_UNIT}" if args.series == "flow_rate" else ""
     print(f"{'run':{width}s} {'steps':>7s} {'window':>15s} {'mean':>10s} {'block s.e.':>10s} "
-          f"{'trend':>10s}  {'flow (halves)':>20s}  block means ({args.series}{unit})")
-    for name, done, span, window, (label, change) in rows:
+          f"{'trend':>10s}  {'flow (halves)':>20s}  "
+          + (f"{'limit':>10s} {'s.e.':>8s} {'tau':>8s}  " if args.approach else "")
+          + f"block means ({args.series}{unit})")
+    for name, done, span, window, (label, change), approach in rows:
+        fitted = "".join(f"{value:>{size}s} " for value, size in zip(approach, (10, 8, 8),
+                                                                     strict=True)) if approach else ""
         blocks = " ".join(_significant(mean, 4) for mean in window.blocks)
         trend = ("+" if window.trend >= 0 else "") + _significant(window.trend, 3)
         print(f"{name:{width}s} {done:7d} {span:>15s} {_significant(window.mean, 4):>10s} "
               f"{_significant(window.standard_error, 2):>10s} {trend:>10s}  {label:>12s} "
-              f"{change:>7s}  {blocks}")
+              f"{change:>7s}  {fitted + ' ' if fitted else ''}{blocks}")
     return 0
 
 

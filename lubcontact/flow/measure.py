@@ -16,6 +16,7 @@ gap does not).
 """
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -461,12 +462,15 @@ class WindowStatistics:
         apart), in the series' unit.
     blocks : ndarray, shape (blocks,)
         The block means.
+    centres : ndarray, shape (blocks,)
+        The blocks' middle steps.
     """
 
     mean: float
     standard_error: float
     trend: float
     blocks: np.ndarray
+    centres: np.ndarray
 
 
 def window_statistics(steps: np.ndarray, values: np.ndarray, end: int, length: int,
@@ -510,4 +514,87 @@ def window_statistics(steps: np.ndarray, values: np.ndarray, end: int, length: i
     window = (steps > end - length) & (steps <= end)
     return WindowStatistics(mean=float(values[window].mean()),
                             standard_error=float(means.std(ddof=1) / np.sqrt(blocks)),
-                            trend=float(means[-1] - means[0]), blocks=means)
+                            trend=float(means[-1] - means[0]), blocks=means,
+                            centres=starts + 0.5 * size)
+
+
+@dataclass
+class ApproachFit:
+    """An exponential approach fitted to block means (:func:`fit_approach`).
+
+    Attributes
+    ----------
+    limit, limit_error : float
+        The value the series approaches and its standard error (the series' unit); NaN when
+        the series shows no approach (``found`` False).
+    tau, tau_error : float
+        The time constant and its standard error, in steps; NaN as ``limit``.
+    found : bool
+        Whether an approach was found (:func:`fit_approach`).
+    """
+
+    limit: float
+    limit_error: float
+    tau: float
+    tau_error: float
+    found: bool
+
+
+APPROACH_SPAN = 10.0
+"""Longest time constant :func:`fit_approach` accepts, in spans of the fitted blocks' centres:
+beyond, the blocks lie on a straight line and the limit is not determined by them."""
+
+
+def fit_approach(centres: np.ndarray, means: np.ndarray) -> ApproachFit:
+    """Fit ``m(t) = limit - amplitude exp(-(t - t_0) / tau)`` to block means (least squares).
+
+    The limit is the steady value of a flow still accelerating or slowing, extrapolated from
+    how its approach slows down; its error is the fit's (the covariance of the least-squares
+    fit scaled by the residuals), so it does not include how far the exponential form is from
+    the flow's own approach. No approach is found (``found`` False, NaN values) when the fit
+    does not converge, when ``tau`` is not positive or longer than :data:`APPROACH_SPAN` times
+    the span of the centres (a straight line), or when the means do not vary (a level series:
+    its mean is its steady value).
+
+    Parameters
+    ----------
+    centres : ndarray, shape (k,)
+        The blocks' middle steps (``WindowStatistics.centres``), increasing, k >= 4.
+    means : ndarray, shape (k,)
+        The block means (``WindowStatistics.blocks``).
+
+    Raises
+    ------
+    ValueError
+        Naming ``means`` for fewer than four blocks (three parameters), or ``centres`` when
+        they do not increase.
+    """
+    centres = checks.as_array("centres", centres, shape=(None,))
+    means = checks.as_array("means", means, shape=centres.shape)
+    checks.require(means.size >= 4, "means", "need at least 4 blocks to fit 3 parameters",
+                   means.size)
+    checks.require(bool(np.all(np.diff(centres) > 0)), "centres", "must increase", centres)
+    none = ApproachFit(limit=np.nan, limit_error=np.nan, tau=np.nan, tau_error=np.nan,
+                       found=False)
+    span = float(centres[-1] - centres[0])
+    if np.ptp(means) == 0:
+        return none
+    elapsed = centres - centres[0]
+
+    def model(t: np.ndarray, limit: float, amplitude: float, tau: float) -> np.ndarray:
+        return limit - amplitude * np.exp(-t / tau)
+
+    try:
+        with warnings.catch_warnings(), np.errstate(over="ignore", divide="ignore"):
+            warnings.simplefilter("error", optimize.OptimizeWarning)    # no covariance: none
+            parameters, covariance = optimize.curve_fit(
+                model, elapsed, means, p0=(means[-1], means[-1] - means[0], span / 2),
+                maxfev=20000)
+    except (RuntimeError, optimize.OptimizeWarning):
+        return none
+    limit, _, tau = (float(value) for value in parameters)
+    errors = np.sqrt(np.diag(covariance))
+    if not (0 < tau <= APPROACH_SPAN * span and np.isfinite(errors).all()):
+        return none
+    return ApproachFit(limit=limit, limit_error=float(errors[0]), tau=tau,
+                       tau_error=float(errors[2]), found=True)

@@ -189,6 +189,28 @@ def test_window_statistics_of_a_line_and_of_alternating_blocks():
     assert alternating.blocks == pytest.approx([1, -1, 1, -1, 1])
     assert alternating.standard_error == pytest.approx(np.std([1, -1, 1, -1, 1], ddof=1) / np.sqrt(5))
     assert alternating.trend == 0.0
+    assert line.centres == pytest.approx(3100 + 200 * np.arange(5))
+
+
+def test_an_exponential_approach_is_fitted_from_its_block_means():
+    """Block means of ``Q = 100 - 40 exp(-step / 1500)`` sampled every 5 steps give back the
+    limit and the time constant (to the blocks' averaging: a block mean of an exponential is
+    the exponential at a point inside the block, scaled alike for every block); a straight
+    line, pure noise and a level series show no approach; fewer than four blocks are refused."""
+    steps = np.arange(5, 6001, 5)
+    window = measure.window_statistics(steps, 100.0 - 40.0 * np.exp(-steps / 1500.0), end=6000,
+                                       length=5000, blocks=10)
+    fit = measure.fit_approach(window.centres, window.blocks)
+    assert fit.found and fit.limit == pytest.approx(100.0, abs=1e-6)
+    assert fit.tau == pytest.approx(1500.0, rel=1e-6) and fit.limit_error < 1e-6
+    noise = np.random.default_rng(0).normal(size=10)
+    for means in (5.0 + 0.01 * window.centres, 50.0 + noise, np.full(10, 3.0)):
+        none = measure.fit_approach(window.centres, means)
+        assert not none.found and np.isnan(none.limit) and np.isnan(none.tau)
+    with pytest.raises(ValueError, match="^means:"):
+        measure.fit_approach(window.centres[:3], window.blocks[:3])
+    with pytest.raises(ValueError, match="^centres:"):
+        measure.fit_approach(window.centres[::-1], window.blocks)
 
 
 @pytest.mark.parametrize("kwargs, field", [

@@ -630,6 +630,33 @@ def test_the_window_command_prints_each_runs_window_statistics(tmp_path, capsys)
     assert capsys.readouterr().out.splitlines()[1].split()[4:7] == ["1.000", "0", "+0"]
 
 
+def test_the_window_command_fits_the_approach_of_the_block_means(tmp_path, capsys):
+    """``--approach``: the limit and time constant of ``measure.fit_approach`` on the window's
+    block means ('-' where there is no approach), after the verdict; fewer than 4 blocks name
+    ``--blocks``."""
+    _, checkpoint = flowing_layer(tmp_path)
+    data = dict(np.load(checkpoint))
+    steps = np.arange(5, 6001, 5)
+    data.update({"series.step": steps, "series.time": 0.01 * steps,
+                 "series.kinetic_energy": np.ones(steps.size), "steps_done": np.array(6000),
+                 "series.flow_rate": 100.0 - 40.0 * np.exp(-steps / 1500.0),
+                 "series.mean_velocity": np.full(steps.size, 2.0)})
+    np.savez(tmp_path / "approach.npz", **data)
+    arguments = [str(tmp_path / "approach.npz"), "--length", "5000", "--blocks", "10",
+                 "--approach"]
+    assert flow_cli.window_main(arguments) == 0
+    header, row = capsys.readouterr().out.splitlines()
+    assert header.split()[9:12] == ["limit", "s.e.", "tau"]
+    assert row.split()[7] == "accelerating" and float(row.split()[9]) == pytest.approx(100.0)
+    assert float(row.split()[11]) == pytest.approx(1500.0)
+    assert flow_cli.window_main([*arguments, "--series", "mean_velocity"]) == 0
+    assert capsys.readouterr().out.splitlines()[1].split()[9:12] == ["-", "-", "-"]
+    with pytest.raises(SystemExit) as exit_:
+        flow_cli.window_main([*arguments[:3], "--blocks", "2", "--approach"])
+    out, err = capsys.readouterr()
+    assert exit_.value.code == 2 and out == "" and "argument --blocks: " in err
+
+
 def test_the_window_command_offers_every_series_a_run_samples():
     from lubcontact.flow.run import SERIES
 
