@@ -36,7 +36,17 @@ from dataclasses import fields
 from typing import TYPE_CHECKING, Any, NoReturn
 
 from . import interrupt
-from .config import DEFINING_FIELDS, DT_UNIT, MODEL_NAMES, PRESET_NAMES, Q_UNIT, SCENES, RunConfig
+from .config import (
+    DEFINING_FIELDS,
+    DT_UNIT,
+    MODEL_NAMES,
+    PRESET_NAMES,
+    Q_UNIT,
+    SCENES,
+    STEADY_TOL,
+    STOP_RATIO,
+    RunConfig,
+)
 
 if TYPE_CHECKING:
     from .run import FlowRun
@@ -759,11 +769,14 @@ def window_parser() -> argparse.ArgumentParser:
                     "up to --end): its mean, the block standard error (the spread of the "
                     "means of --blocks equal blocks of steps) and the trend (last block's mean "
                     "minus the first's), for each run given; the flow rate in "
-                    f"{Q_UNIT}. Also the flow's verdict over the window, from its two halves' "
-                    "flow rates: steady (within 5 %), accelerating, transient (slowing) or "
-                    "no_flow, with the relative change; with --approach, the value the block "
-                    "means approach (an exponential fitted to them). Reads each run's "
-                    "checkpoint.npz, so a run still going can be read.")
+                    f"{Q_UNIT}. Also the flow's verdict over the window: no_flow where the "
+                    f"kinetic energy at its end is below {STOP_RATIO:g} of the run's largest so "
+                    "far, else "
+                    "from the mean flow rates of its two halves: steady (within "
+                    f"{100 * STEADY_TOL:g} %), accelerating or transient (slowing), with the "
+                    "relative change; with --approach, the value the block means approach (an "
+                    "exponential fitted to them). Reads each run's checkpoint.npz, so a run "
+                    "still going can be read.")
     parser.add_argument("runs", nargs="+", type=pathlib.Path, metavar="RUN",
                         help="run folders (holding checkpoint.npz) or checkpoint files")
     parser.add_argument("--length", type=_number(int, 2), required=True, metavar="STEPS",
@@ -777,8 +790,10 @@ def window_parser() -> argparse.ArgumentParser:
     parser.add_argument("--approach", action="store_true",
                         help="also fit m(t) = limit - A exp(-t / tau) to the block means (at "
                              "least 4 blocks) and print the limit, its standard error and tau "
-                             "in steps: the steady value of a run still approaching it ('-' "
-                             "where the means show no approach)")
+                             "in steps: an extrapolation of the steady value of a run still "
+                             "approaching it, whose standard error is the fit's only, not how "
+                             "far the flow's approach is from an exponential ('-' where the "
+                             "means show no approach)")
     return parser
 
 
@@ -840,11 +855,14 @@ def window_main(argv: list[str] | None = None) -> int:
             field, _, message = str(exc).partition(": ")
             flag = {"end": "--end", "length": "--length", "blocks": "--blocks"}.get(field, field)
             parser.error(f"argument {flag}: {run}: {message}")
-        flow = [data[f"series.{name}"][inside] for name in ("time", "kinetic_energy", "flow_rate")]
-        verdict = ("-", "-")
-        if flow[0].size >= 4 and all(np.isfinite(series).all() for series in flow):
-            state = classify_flow(*flow, window=1.0)
-            verdict = (state.label, f"{100 * state.relative_change:+.1f}%")
+        verdict = ("-", "-")                  # a checkpoint without these series: no verdict
+        names = ("series.time", "series.kinetic_energy", "series.flow_rate")
+        if all(name in data for name in names):
+            flow = [data[name][inside] for name in names]
+            energy = data["series.kinetic_energy"][steps <= end]
+            if flow[0].size >= 4 and all(np.isfinite(series).all() for series in flow):
+                state = classify_flow(*flow, window=1.0, peak_energy=np.nanmax(energy))
+                verdict = (state.label, f"{100 * state.relative_change:+.1f}%")
         approach = ()
         if args.approach:
             fit = fit_approach(window.centres, window.blocks)

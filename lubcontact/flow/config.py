@@ -50,6 +50,12 @@ FLOW_SPEED = 0.01
 downhill velocity in units of ``sqrt(g' d)``."""
 DT_UNIT = "sqrt(d/g')"
 """Unit of ``dt_fraction``: the time step is ``dt_fraction x sqrt(d / g')``."""
+STOP_RATIO = 1e-6
+"""Kinetic energy, relative to the run's largest, below which a flow is called stopped
+(``no_flow``, :func:`lubcontact.flow.measure.classify_flow`)."""
+STEADY_TOL = 0.05
+"""Relative change of the mean flow rate between a window's halves below which a flow is called
+steady (:func:`lubcontact.flow.measure.classify_flow`)."""
 
 
 def default_solver(fixed_point: bool = False) -> str:

@@ -24,6 +24,7 @@ from scipy import optimize
 
 from .. import checks
 from ..model.scene import Scene
+from .config import STEADY_TOL, STOP_RATIO
 
 STATES = ("unglued", "glued", "frictional")
 
@@ -417,11 +418,12 @@ class FlowState:
 
 
 def classify_flow(times: np.ndarray, energy: np.ndarray, rate: np.ndarray, *,
-                  stop_ratio: float = 1e-6, steady_tol: float = 0.05,
-                  window: float = 0.5) -> FlowState:
+                  stop_ratio: float = STOP_RATIO, steady_tol: float = STEADY_TOL,
+                  window: float = 0.5, peak_energy: float | None = None) -> FlowState:
     """Classify a run from its kinetic energy and flow-rate series.
 
-    - ``no_flow``: the energy fell below ``stop_ratio`` of its maximum;
+    - ``no_flow``: the energy fell below ``stop_ratio`` of its maximum (``peak_energy``
+      when given: the run's largest energy where the series is a window of it);
     - otherwise the last ``window`` fraction of the samples is split in two
       halves: ``steady`` if their mean flow rates differ by less than
       ``steady_tol`` (relative), ``accelerating`` if the rate grew by more,
@@ -431,7 +433,9 @@ def classify_flow(times: np.ndarray, energy: np.ndarray, rate: np.ndarray, *,
     energy = checks.as_array("energy", energy, shape=times.shape)
     rate = checks.as_array("rate", rate, shape=times.shape)
     checks.require(times.size >= 4, "times", "need at least 4 samples", times.size)
-    ratio = float(energy[-1] / energy.max()) if energy.max() > 0 else 0.0
+    peak = float(energy.max()) if peak_energy is None else max(float(peak_energy),
+                                                                float(energy.max()))
+    ratio = float(energy[-1] / peak) if peak > 0 else 0.0
     tail = rate[int((1.0 - window) * rate.size):]
     half = tail.size // 2
     first, second = tail[:half].mean(), tail[half:].mean()
@@ -540,34 +544,47 @@ class ApproachFit:
     found: bool
 
 
-APPROACH_SPAN = 10.0
+APPROACH_MAX_TAU_SPANS = 10.0
 """Longest time constant :func:`fit_approach` accepts, in spans of the fitted blocks' centres:
 beyond, the blocks lie on a straight line and the limit is not determined by them."""
+APPROACH_SIGNIFICANCE = 3.0
+"""Smallest amplitude of an approach :func:`fit_approach` accepts, in its standard errors: below,
+the block means' noise alone could give it (pure noise gave an approach for 25-40 % of seeds
+without this test)."""
 
 
 def fit_approach(centres: np.ndarray, means: np.ndarray) -> ApproachFit:
     """Fit ``m(t) = limit - amplitude exp(-(t - t_0) / tau)`` to block means (least squares).
 
     The limit is the steady value of a flow still accelerating or slowing, extrapolated from
-    how its approach slows down; its error is the fit's (the covariance of the least-squares
-    fit scaled by the residuals), so it does not include how far the exponential form is from
-    the flow's own approach. No approach is found (``found`` False, NaN values) when the fit
-    does not converge, when ``tau`` is not positive or longer than :data:`APPROACH_SPAN` times
-    the span of the centres (a straight line), or when the means do not vary (a level series:
-    its mean is its steady value).
+    how its approach slows down. Its error is the fit's (the covariance of the least-squares
+    fit scaled by the residuals): it does not include how far the exponential form is from
+    the flow's own approach, which can be larger (the records measure it on runs long enough
+    to compare). No approach is found (``found`` False, NaN values) when the means do not vary
+    (a level series: its mean is its steady value), when the fit does not converge or its
+    covariance cannot be estimated, when ``tau`` is not positive or longer than
+    :data:`APPROACH_MAX_TAU_SPANS` times the span of the centres (a straight line), or when the
+    amplitude is below :data:`APPROACH_SIGNIFICANCE` of its standard errors (noise). The fit
+    runs on the means shifted and scaled to a unit range, so their offset and unit do not
+    matter.
 
     Parameters
     ----------
     centres : ndarray, shape (k,)
         The blocks' middle steps (``WindowStatistics.centres``), increasing, k >= 4.
     means : ndarray, shape (k,)
-        The block means (``WindowStatistics.blocks``).
+        The block means (``WindowStatistics.blocks``), in the series' unit.
+
+    Returns
+    -------
+    ApproachFit
+        ``limit`` and ``limit_error`` in the means' unit, ``tau`` and ``tau_error`` in steps.
 
     Raises
     ------
     ValueError
-        Naming ``means`` for fewer than four blocks (three parameters), or ``centres`` when
-        they do not increase.
+        Naming ``means`` for fewer than four blocks (three parameters) or a non-finite mean,
+        ``centres`` when they do not increase.
     """
     centres = checks.as_array("centres", centres, shape=(None,))
     means = checks.as_array("means", means, shape=centres.shape)
@@ -576,25 +593,28 @@ def fit_approach(centres: np.ndarray, means: np.ndarray) -> ApproachFit:
     checks.require(bool(np.all(np.diff(centres) > 0)), "centres", "must increase", centres)
     none = ApproachFit(limit=np.nan, limit_error=np.nan, tau=np.nan, tau_error=np.nan,
                        found=False)
-    span = float(centres[-1] - centres[0])
-    if np.ptp(means) == 0:
+    spread = float(np.ptp(means))
+    if spread == 0:
         return none
+    span = float(centres[-1] - centres[0])
     elapsed = centres - centres[0]
+    unit = (means - means[-1]) / spread                 # the fit in a unit range
 
     def model(t: np.ndarray, limit: float, amplitude: float, tau: float) -> np.ndarray:
         return limit - amplitude * np.exp(-t / tau)
 
     try:
-        with warnings.catch_warnings(), np.errstate(over="ignore", divide="ignore"):
+        with warnings.catch_warnings(), np.errstate(all="ignore"):
             warnings.simplefilter("error", optimize.OptimizeWarning)    # no covariance: none
             parameters, covariance = optimize.curve_fit(
-                model, elapsed, means, p0=(means[-1], means[-1] - means[0], span / 2),
-                maxfev=20000)
+                model, elapsed, unit, p0=(0.0, unit[-1] - unit[0], span / 2), maxfev=20000)
     except (RuntimeError, optimize.OptimizeWarning):
         return none
-    limit, _, tau = (float(value) for value in parameters)
+    limit, amplitude, tau = (float(value) for value in parameters)
     errors = np.sqrt(np.diag(covariance))
-    if not (0 < tau <= APPROACH_SPAN * span and np.isfinite(errors).all()):
+    if not (0 < tau <= APPROACH_MAX_TAU_SPANS * span and np.isfinite(errors).all()
+            and abs(amplitude) > APPROACH_SIGNIFICANCE * errors[1]):
         return none
-    return ApproachFit(limit=limit, limit_error=float(errors[0]), tau=tau,
+    return ApproachFit(limit=float(means[-1] + spread * limit),
+                       limit_error=float(spread * errors[0]), tau=tau,
                        tau_error=float(errors[2]), found=True)

@@ -630,6 +630,51 @@ def test_the_window_command_prints_each_runs_window_statistics(tmp_path, capsys)
     assert capsys.readouterr().out.splitlines()[1].split()[4:7] == ["1.000", "0", "+0"]
 
 
+def synthetic_run(tmp_path, name, checkpoint, **series):
+    """A copy of ``checkpoint`` with its series replaced: steps 5..4000 every 5, the given
+    series (functions of the step), the others constant."""
+    data = dict(np.load(checkpoint))
+    steps = np.arange(5, 4001, 5)
+    data.update({"series.step": steps, "series.time": 0.01 * steps, "steps_done": np.array(4000),
+                 "series.kinetic_energy": np.ones(steps.size),
+                 "series.mean_velocity": np.full(steps.size, 2.0)})
+    data.update({f"series.{key}": function(steps) for key, function in series.items()})
+    np.savez(tmp_path / name, **data)
+    return str(tmp_path / name)
+
+
+def test_the_window_commands_verdict_is_the_windows_with_the_runs_peak_energy(tmp_path, capsys):
+    """The verdict column: ``measure.classify_flow`` on the window's halves, except that a run
+    whose energy fell below 1e-6 of its largest so far is ``no_flow`` (its flow-rate noise
+    is not an acceleration); fewer than four samples, or a checkpoint without the energy
+    series, give no verdict."""
+    _, checkpoint = flowing_layer(tmp_path)
+    stopped = synthetic_run(
+        tmp_path, "stopped.npz", checkpoint,
+        kinetic_energy=lambda step: np.where(step <= 2000, 1.0, 1e-20),
+        flow_rate=lambda step: np.where(step <= 2000, 10.0 + 0.01 * step,
+                                        1e-14 * np.sin(step)))
+
+    def verdict(*arguments):
+        assert flow_cli.window_main([stopped, *arguments]) == 0
+        return capsys.readouterr().out.splitlines()[1].split()[7:9]
+
+    assert verdict("--length", "1000")[0] == "no_flow"
+    steps = np.arange(1005, 2001, 5)
+    state = measure.classify_flow(0.01 * steps, np.ones(steps.size), 10.0 + 0.01 * steps,
+                                  window=1.0)
+    label, change = verdict("--length", "1000", "--end", "2000")
+    assert label == state.label == "accelerating"
+    assert float(change[:-1]) == pytest.approx(100 * state.relative_change, abs=0.051)
+    assert verdict("--length", "15", "--blocks", "3", "--end", "2000") == ["-", "-"]
+    assert verdict("--length", "20", "--blocks", "2", "--end", "2000")[0] == "steady"   # 4 samples
+    data = dict(np.load(stopped))
+    del data["series.kinetic_energy"]
+    np.savez(tmp_path / "older.npz", **data)
+    assert flow_cli.window_main([str(tmp_path / "older.npz"), "--length", "1000"]) == 0
+    assert capsys.readouterr().out.splitlines()[1].split()[7:9] == ["-", "-"]
+
+
 def test_the_window_command_fits_the_approach_of_the_block_means(tmp_path, capsys):
     """``--approach``: the limit and time constant of ``measure.fit_approach`` on the window's
     block means ('-' where there is no approach), after the verdict; fewer than 4 blocks name
@@ -648,7 +693,7 @@ def test_the_window_command_fits_the_approach_of_the_block_means(tmp_path, capsy
     header, row = capsys.readouterr().out.splitlines()
     assert header.split()[9:12] == ["limit", "s.e.", "tau"]
     assert row.split()[7] == "accelerating" and float(row.split()[9]) == pytest.approx(100.0)
-    assert float(row.split()[11]) == pytest.approx(1500.0)
+    assert float(row.split()[11]) == pytest.approx(1500.0) and float(row.split()[10]) < 1e-6
     assert flow_cli.window_main([*arguments, "--series", "mean_velocity"]) == 0
     assert capsys.readouterr().out.splitlines()[1].split()[9:12] == ["-", "-", "-"]
     with pytest.raises(SystemExit) as exit_:
