@@ -126,6 +126,11 @@ first strategy stalled at 3-9 ``tol`` and the three others at 4 to 4000 ``tol``,
 two thirds of the step (docs/records/benchmarks.md, "newton-ac on creeping beds")."""
 SIGMA_MIN = 1e-10
 """Floor of the proximal weight, in units of the median diagonal of ``W``."""
+SIGMA_MAX = 1e10
+"""Ceiling of the proximal weight, in the same units: a subproblem that would need more moves the
+forces by less than ``1 / SIGMA_MAX`` of its residual, so the phase has stalled. Without it a
+stuck gluey step raised the weight until the products overflowed (``inf`` and ``nan`` in the
+line search, hundreds of numpy warnings, then a fallback)."""
 
 STUCK = 0.9
 STUCK_RISE = 100.0
@@ -611,7 +616,8 @@ def _proximal_newton(function: AlartCurnier, unshifted: ConicProblem, forces: np
     :data:`SIGMA_MIN`, but not down to a weight whose subproblem was not solved
     since the error last fell by :data:`STALL_FACTOR`) and multiplied by 10
     after one whose was not (by :data:`STUCK_RISE` where that step did not lower the error
-    either: a stuck iterate). The next centre is a solved subproblem's solution
+    either: a stuck iterate; the phase has stalled when it would pass :data:`SIGMA_MAX`). The
+    next centre is a solved subproblem's solution
     (Newton's last iterate) even where its FCLIB error is above the centre's:
     re-centring at the best iterate posed the same subproblem again, and on
     creeping beds the weight then alternated between a subproblem that moved
@@ -652,6 +658,9 @@ def _proximal_newton(function: AlartCurnier, unshifted: ConicProblem, forces: np
         if scale > 0 and not inner.solved:  # a better-posed subproblem
             floor, floor_error = max(floor, scale), error
             scale *= STUCK_RISE if inner.error > STUCK * centre_error else 10.0
+            if scale > SIGMA_MAX * function.typical:
+                status = STALLED
+                break
         elif scale / 10.0 > floor:          # towards plain Newton, not to a weight that failed
             scale = max(scale / 10.0, SIGMA_MIN * function.typical)
         if inner.iterations == 0:
@@ -791,16 +800,19 @@ def _line_search(function: AlartCurnier, forces: np.ndarray, velocity: np.ndarra
     ``direction`` at ``forces`` (``2 psi`` for the Newton direction, ``|J^T phi|^2`` for
     steepest descent). A trial's velocity is ``velocity + alpha W d``: one product with ``W``
     per direction, not one per trial (on developed 2000-grain flows the search took five to six
-    trials per Newton iteration).
+    trials per Newton iteration). A trial whose residual is not finite (a direction far too
+    long) is rejected like any other that fails the bound.
     """
     if not slope > 0:
         return None
-    change = function.W @ direction
     alpha = 1.0
-    for _ in range(MAX_HALVINGS):
-        trial = forces + alpha * direction
-        phi, _, _ = function.residual(trial, velocity + alpha * change)
-        if 0.5 * float(phi @ phi) <= reference - ARMIJO * alpha * slope:
-            return trial
-        alpha *= 0.5
+    with np.errstate(over="ignore", invalid="ignore"):   # a trial too far: rejected below
+        change = function.W @ direction
+        for _ in range(MAX_HALVINGS):
+            trial = forces + alpha * direction
+            phi, _, _ = function.residual(trial, velocity + alpha * change)
+            merit = 0.5 * float(phi @ phi)
+            if np.isfinite(merit) and merit <= reference - ARMIJO * alpha * slope:
+                return trial
+            alpha *= 0.5
     return None

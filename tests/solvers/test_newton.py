@@ -1,5 +1,6 @@
 """newton-ac, the semismooth Newton method on the Alart-Curnier function, against exact answers,
 the Clarabel reference and Siconos' test problems."""
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -30,11 +31,13 @@ from lubcontact.solvers import (
 )
 from lubcontact.solvers.newton import (
     FALLBACK_GAP,
+    SIGMA_MAX,
     STALL_FACTOR,
     STALL_HORIZON,
     STALL_WINDOW,
     STRATEGY_GAP,
     AlartCurnier,
+    _line_search,
     _proximal_newton,
     _StallRule,
     fallback_chain,
@@ -178,6 +181,42 @@ def test_a_stuck_proximal_step_raises_the_weight_a_hundredfold(monkeypatch):
     phase = _proximal_newton(function, problem, start, 1e-10, 50, sigma=1e-3)
     # stuck: x100; progress, not solved: x10; solved; then the plain-Newton finish (weight 0)
     assert np.allclose(weights, [1e-3, 1e-1, 1.0, 0.0]) and phase.status == CONVERGED
+
+
+def test_the_proximal_weight_stops_rising_at_its_ceiling(monkeypatch):
+    """A subproblem stuck at every weight raises the weight a hundredfold each time, up to
+    SIGMA_MAX: there the phase has stalled (before, the weight rose until the products
+    overflowed on a stuck gluey flow step, with hundreds of numpy warnings)."""
+    problem = siconos_test_problem("FrictionContactProblem00237.dat").normalized()
+    function = AlartCurnier(problem)
+    start = np.zeros(problem.n_rows)
+    centre = function.coulomb_error(problem, start)
+    weights = []
+
+    def stuck_phase(function, unshifted, forces, tol, max_iter, inner_tol=0.0):
+        weights.append(function.sigma / function.typical)
+        return newton._Phase(forces=forces, status=MAX_ITER, iterations=1, error=centre,
+                             history=np.array([centre]), gradient_steps=0, solved=False,
+                             last=forces, last_error=centre)
+
+    monkeypatch.setattr(newton, "_newton_phase", stuck_phase)
+    phase = _proximal_newton(function, problem, start, 1e-10, 500, sigma=1e-3)
+    assert np.allclose(weights, 1e-3 * 100.0 ** np.arange(7))          # 1e-3 ... 1e9
+    assert max(weights) <= SIGMA_MAX and phase.status == newton.STALLED
+
+
+def test_a_line_search_rejects_a_direction_that_overflows_without_warnings():
+    """A direction so long that every trial's residual overflows is given up (None) quietly:
+    the trials are rejected, not reported as numpy warnings."""
+    problem = siconos_test_problem("FrictionContactProblem00237.dat").normalized()
+    function = AlartCurnier(problem)
+    forces = np.zeros(problem.n_rows)
+    phi, _, velocity = function.residual(forces)
+    merit = 0.5 * float(phi @ phi)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert _line_search(function, forces, velocity, np.full(problem.n_rows, 1e300),
+                            2.0 * merit, merit) is None
 
 
 def _errors(start: float, rate_per_window: float, windows: int) -> list[float]:
