@@ -128,9 +128,11 @@ SIGMA_MIN = 1e-10
 """Floor of the proximal weight, in units of the median diagonal of ``W``."""
 SIGMA_MAX = 1e10
 """Ceiling of the proximal weight, in the same units: a subproblem that would need more moves the
-forces by less than ``1 / SIGMA_MAX`` of its residual, so the phase has stalled. Without it a
-stuck gluey step raised the weight until the products overflowed (``inf`` and ``nan`` in the
-line search, hundreds of numpy warnings, then a fallback)."""
+forces by less than ``1 / SIGMA_MAX`` of its residual, so the phase has stalled. On a gluey
+flow step at 15 degrees the numpy lane's products overflowed (``inf`` and ``nan`` in the line
+search and the gradient step, hundreds of numpy warnings, then a fallback that converged): an
+unbounded weight is the likely cause (not reproduced: the step was not kept), a direction far
+too long the other, which :func:`_line_search` now rejects quietly."""
 
 STUCK = 0.9
 STUCK_RISE = 100.0
