@@ -15,7 +15,9 @@ model and angle (:mod:`lubcontact.flow.sweep`, each run resumable), and writes
 
 ``lubcontact window RUN ...`` reads runs' checkpoints (finished or not) and prints a
 sampled series over a window of steps: mean, block standard error, trend and block means
-(:func:`~lubcontact.flow.measure.window_statistics`).
+(:func:`~lubcontact.flow.measure.window_statistics`), the flow's verdict over the window
+(:func:`~lubcontact.flow.measure.classify_flow`) and, with ``--approach``, the limit the block
+means approach (:func:`~lubcontact.flow.measure.fit_approach`).
 
 Parsing imports neither the solvers nor the scenes nor matplotlib, so that
 ``--help`` is instant: the options' defaults are ``None`` (that is how an option
@@ -49,6 +51,8 @@ from .config import (
 )
 
 if TYPE_CHECKING:
+    import numpy as np
+
     from .run import FlowRun
 
 FLAGS = {"scene": "SCENE", "n_grains": "--n", "preset": "--preset", "model": "--model",
@@ -771,8 +775,7 @@ def window_parser() -> argparse.ArgumentParser:
                     "minus the first's), for each run given; the flow rate in "
                     f"{Q_UNIT}. Also the flow's verdict over the window: no_flow where the "
                     f"kinetic energy at its end is below {STOP_RATIO:g} of the run's largest so "
-                    "far, else "
-                    "from the mean flow rates of its two halves: steady (within "
+                    "far, else from the mean flow rates of its two halves: steady (within "
                     f"{100 * STEADY_TOL:g} %), accelerating or transient (slowing), with the "
                     "relative change; with --approach, the value the block means approach (an "
                     "exponential fitted to them). Reads each run's checkpoint.npz, so a run "
@@ -817,7 +820,7 @@ def window_main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     import numpy as np
 
-    from .measure import classify_flow, fit_approach, window_statistics
+    from .measure import fit_approach, window_statistics
     from .run import read_checkpoint
 
     if args.approach and args.blocks < 4:
@@ -855,14 +858,7 @@ def window_main(argv: list[str] | None = None) -> int:
             field, _, message = str(exc).partition(": ")
             flag = {"end": "--end", "length": "--length", "blocks": "--blocks"}.get(field, field)
             parser.error(f"argument {flag}: {run}: {message}")
-        verdict = ("-", "-")                  # a checkpoint without these series: no verdict
-        names = ("series.time", "series.kinetic_energy", "series.flow_rate")
-        if all(name in data for name in names):
-            flow = [data[name][inside] for name in names]
-            energy = data["series.kinetic_energy"][steps <= end]
-            if flow[0].size >= 4 and all(np.isfinite(series).all() for series in flow):
-                state = classify_flow(*flow, window=1.0, peak_energy=np.nanmax(energy))
-                verdict = (state.label, f"{100 * state.relative_change:+.1f}%")
+        verdict = _window_verdict(data, inside, steps <= end)
         approach = ()
         if args.approach:
             fit = fit_approach(window.centres, window.blocks)
@@ -884,6 +880,26 @@ def window_main(argv: list[str] | None = None) -> int:
               f"{_significant(window.standard_error, 2):>10s} {trend:>10s}  {label:>12s} "
               f"{change:>7s}  {fitted + ' ' if fitted else ''}{blocks}")
     return 0
+
+
+def _window_verdict(data: dict, inside: np.ndarray, so_far: np.ndarray) -> tuple[str, str]:
+    """The flow's verdict over a window (:func:`~lubcontact.flow.measure.classify_flow` on its
+    samples ``inside``, the peak energy over the samples ``so_far``) and its relative change,
+    as printed; ``("-", "-")`` for a checkpoint without the series or a window of fewer than four
+    finite samples."""
+    import numpy as np
+
+    from .measure import classify_flow
+
+    names = ("series.time", "series.kinetic_energy", "series.flow_rate")
+    if not all(name in data for name in names):
+        return "-", "-"
+    flow = [data[name][inside] for name in names]
+    if flow[0].size < 4 or not all(np.isfinite(series).all() for series in flow):
+        return "-", "-"
+    state = classify_flow(*flow, window=1.0,
+                          peak_energy=np.nanmax(data["series.kinetic_energy"][so_far]))
+    return state.label, f"{100 * state.relative_change:+.1f}%"
 
 
 def _significant(value: float, digits: int) -> str:
