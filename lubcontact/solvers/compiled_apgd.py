@@ -5,7 +5,9 @@ The compiled loops need the assembled ``W_it`` (``S W S``) and numba; each
 loader returns None when numba is unavailable, and the numpy loop of
 :func:`.gradient_loops.run_apgd` is then used. :func:`run_apgd_box` covers boxes
 (frictionless problems, with the active-set finish of :mod:`.active_set`),
-:func:`run_apgd_cones` boxes and 2D friction cones (UNION contacts included).
+:func:`run_apgd_cones` boxes and 2D friction cones (UNION contacts included),
+evaluating its stopping measure every :data:`CHECK_EVERY` iterations (about a
+third of an iteration each time; the numpy loop evaluates it at every one).
 
 :func:`joint_coulomb_apgd` is the joint phase of the fixed point on ``s``
 (``joint`` of :func:`lubcontact.solvers.solve_coulomb`): one Jacobi-scaled
@@ -28,6 +30,8 @@ from .dual_data import DIVERGENCE_FACTOR, DualData, ResidualTracker, initial_lip
 from .result import CONVERGED, DIVERGED, MAX_ITER
 
 _REQUEST_FINISH = 3                      # kernel status: the active set has settled
+CHECK_EVERY = 4
+"""Iterations between evaluations of the cone loop's stopping measure (:func:`run_apgd_cones`)."""
 _KERNEL_STATUS = {0: CONVERGED, 1: MAX_ITER, 2: DIVERGED}
 
 
@@ -79,8 +83,8 @@ def is_cone_2d(cones: Cones) -> bool:
 
 
 def run_apgd_cones(data: DualData, cones: Cones, z: np.ndarray, tol: float, max_iter: int,
-                   base: np.ndarray | None = None,
-                   every: int = 0) -> tuple[ResidualTracker, str, int, np.ndarray]:
+                   base: np.ndarray | None = None, every: int = 0,
+                   check_every: int = CHECK_EVERY) -> tuple[ResidualTracker, str, int, np.ndarray]:
     """APGD in the compiled kernel :func:`.kernels.apgd_cone2d` (2D friction and UNION cones).
 
     With ``every > 0`` and ``base`` (the iteration offset without shift) it
@@ -105,6 +109,9 @@ def run_apgd_cones(data: DualData, cones: Cones, z: np.ndarray, tol: float, max_
         Iteration offset without shift (with ``every > 0``).
     every : int
         Shift update period (0: no update, the convex problem).
+    check_every : int
+        Iterations between evaluations of the stopping measure (besides the first and the
+        last iteration); the history has one residual per evaluation.
 
     Returns
     -------
@@ -131,7 +138,7 @@ def run_apgd_cones(data: DualData, cones: Cones, z: np.ndarray, tol: float, max_
         positions(np.concatenate([cone_n, union_n])),
         positions(np.concatenate([cone_t[:, 0], union_t[:, 0]])),
         np.concatenate([cone_mu, union_mu]), union, data.ratio, z, tol, max_iter, lipschitz,
-        DIVERGENCE_FACTOR, every)
+        DIVERGENCE_FACTOR, every, check_every)
     data.products += products
     tracker = ResidualTracker(data, tol)
     tracker.history.extend(history)

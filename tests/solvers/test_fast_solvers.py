@@ -386,9 +386,12 @@ def gluey_problems():
 
 @pytest.mark.parametrize("scaling", [False, True])
 def test_compiled_and_numpy_union_apgd_loops_agree(gluey_problems, scaling):
-    """The compiled loop and the numpy loop on the same data: same iterations, same forces
-    to rounding, both pushed and pulled contacts in the solution."""
-    from lubcontact.solvers.compiled_apgd import run_apgd_cones
+    """The compiled loop and the numpy loop on the same data: with the stopping measure at
+    every iteration, same iterations, same forces to rounding, both pushed and pulled contacts
+    in the solution; with it every CHECK_EVERY iterations, the numpy loop's residuals at the
+    checked iterations, and a stop at the first check below the tolerance, which the numpy
+    loop's stop precedes (the residual is not monotone: it may take more than one check)."""
+    from lubcontact.solvers.compiled_apgd import CHECK_EVERY, run_apgd_cones
     from lubcontact.solvers.dual_data import prepare
     from lubcontact.solvers.gradient_loops import run_apgd
 
@@ -398,10 +401,21 @@ def test_compiled_and_numpy_union_apgd_loops_agree(gluey_problems, scaling):
         data = prepare(scaled, scaling, "matrix")
         z = np.zeros(scaled.n_rows)
         plain, plain_status, plain_iterations, _ = run_apgd(data, z, 1e-10, 20000)
-        compiled, status, iterations, _ = run_apgd_cones(data, scaled.cones, z, 1e-10, 20000)
+        compiled, status, iterations, _ = run_apgd_cones(data, scaled.cones, z, 1e-10, 20000,
+                                                         check_every=1)
         assert status == plain_status == "converged" and iterations == plain_iterations
         scale = np.abs(plain.best).max()
         assert np.abs(compiled.best - plain.best).max() <= 1e-10 * scale
+        checked, status, iterations, _ = run_apgd_cones(data, scaled.cones, z, 1e-10, 20000)
+        assert status == "converged" and iterations % CHECK_EVERY == 0
+        assert plain_iterations <= iterations < plain_iterations + 3 * CHECK_EVERY
+        checks = np.r_[0, np.arange(CHECK_EVERY - 1, iterations, CHECK_EVERY)]
+        assert len(checked.history) == checks.size
+        before = checks < plain_iterations
+        np.testing.assert_allclose(np.asarray(checked.history)[before],
+                                   np.asarray(plain.history)[checks[before]], rtol=1e-9)
+        assert np.all(np.asarray(checked.history)[:-1] > 1e-10) and checked.history[-1] <= 1e-10
+        assert np.abs(checked.best - plain.best).max() <= 1e-8 * scale
         normal = plain.best[: scaled.n_contacts]
         assert np.any(normal < -1e-6 * scale) and np.any(normal > 1e-6 * scale)
 
