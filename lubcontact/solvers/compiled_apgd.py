@@ -111,7 +111,8 @@ def run_apgd_cones(data: DualData, cones: Cones, z: np.ndarray, tol: float, max_
         Shift update period (0: no update, the convex problem).
     check_every : int
         Iterations between evaluations of the stopping measure (besides the first and the
-        last iteration); the history has one residual per evaluation.
+        last iteration), >= 1; the history has one residual per evaluation, and the best
+        iterate is the best of the evaluated ones.
 
     Returns
     -------
@@ -122,6 +123,8 @@ def run_apgd_cones(data: DualData, cones: Cones, z: np.ndarray, tol: float, max_
     offset : ndarray, shape (n,)
         The offset ``b_it`` of the last shift.
     """
+    if check_every < 1:
+        raise ValueError(f"check_every: must be >= 1, got {check_every}")
     kernel = cone_kernel()
     if data.matrix is None and data.factor is not None:
         operator = (*csr_arrays(data.factor), *csr_arrays(data.factor_transpose),

@@ -57,7 +57,9 @@ class MethodOutput:
         are left at None, :func:`~lubcontact.solvers.solve` times the whole
         call as ``solve_time``.
     residual_history : ndarray
-        Residual per iteration where the method records it (may be empty).
+        The residuals the method recorded, in order (may be empty): one per iteration, or one
+        per check where a method tests its stop less often (``nsgs``; ``apgd`` and its
+        variants on 2D friction cones, every :data:`.compiled_apgd.CHECK_EVERY` iterations).
     info : dict
         Method-specific extras.
     velocities : ndarray, shape (n_dof,), optional
@@ -101,7 +103,9 @@ class SolveResult:
     setup_time, solve_time : float
         Seconds spent normalising and building the method's data, and iterating.
     residual_history : ndarray
-        Residual per iteration where the method records it (may be empty).
+        The residuals the method recorded, in order (may be empty): one per iteration, or one
+        per check where a method tests its stop less often (``nsgs``; ``apgd`` and its
+        variants on 2D friction cones, every :data:`.compiled_apgd.CHECK_EVERY` iterations).
     info : dict
         Method-specific extras (e.g. the raw solver status).
     shift : ndarray, shape (nc,)
