@@ -6,8 +6,8 @@ loader returns None when numba is unavailable, and the numpy loop of
 :func:`.gradient_loops.run_apgd` is then used. :func:`run_apgd_box` covers boxes
 (frictionless problems, with the active-set finish of :mod:`.active_set`),
 :func:`run_apgd_cones` boxes and 2D friction cones (UNION contacts included),
-evaluating its stopping measure every :data:`CHECK_EVERY` iterations (about a
-third of an iteration each time; the numpy loop evaluates it at every one).
+evaluating its stopping measure (a second projection and three vector passes)
+every :data:`CHECK_EVERY` iterations; the numpy loop evaluates it at every one.
 
 :func:`joint_coulomb_apgd` is the joint phase of the fixed point on ``s``
 (``joint`` of :func:`lubcontact.solvers.solve_coulomb`): one Jacobi-scaled

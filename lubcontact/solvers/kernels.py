@@ -264,8 +264,8 @@ def apgd_cone2d(indptr, indices, values, t_indptr, t_indices, t_values, scratch,
     ``base_n + (W z)_n + mu |g_T|``), i.e. the modified (De Saxce) natural
     map of the Coulomb problem.
 
-    The stopping measure (a second projection and three vector passes, about a
-    third of an iteration) is evaluated at the first and last iterations and
+    The stopping measure (a second projection and three vector passes) is
+    evaluated at the first and last iterations and
     every ``check_every`` iterations between: the history holds those
     residuals only, and the best iterate is the best of them.
 
