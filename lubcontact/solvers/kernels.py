@@ -204,8 +204,9 @@ def apgd_box(indptr, indices, values, b, lower, upper, ratio, sign, x_old, wx_ol
 def friction_cone_point(normal, tangent, mu):
     """Projection of ``(normal, tangent)`` onto the 2D friction cone ``{|t| <= mu n}``,
     with the floating-point operations of :func:`lubcontact.cones.project_friction_cone`
-    (``size > 0`` where the boundary is reached: ``size = 0`` is inside or polar)."""
-    size = np.sqrt(tangent * tangent)
+    (``size > 0`` where the boundary is reached: ``size = 0`` is inside or polar; ``|t|``,
+    which is its ``sqrt(t * t)`` unless ``t * t`` under- or overflows)."""
+    size = abs(tangent)
     if size <= mu * normal and normal >= 0.0:
         return normal, tangent
     if mu * size <= -normal:

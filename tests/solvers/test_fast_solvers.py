@@ -457,6 +457,19 @@ def test_the_cone_loop_rejects_a_check_period_below_one(gluey_problems):
                        1e-8, 10, check_every=0)
 
 
+def test_the_compiled_loops_index_with_32_bits_unless_a_value_needs_64():
+    """scipy's int32 indices are viewed as uint32 (no copy), other integers converted, and a
+    value beyond 32 bits keeps 64 (``np.uintp``), its value unchanged."""
+    from lubcontact.solvers.compiled_apgd import positions
+
+    indices = np.array([0, 3, 7], dtype=np.int32)
+    viewed = positions(indices)
+    assert viewed.dtype == np.uint32 and np.shares_memory(viewed, indices)
+    assert positions(np.array([0, 5], dtype=np.int64)).dtype == np.uint32
+    large = positions(np.array([1, 2**32 + 5], dtype=np.int64))
+    assert large.dtype == np.uintp and int(large[1]) == 2**32 + 5
+
+
 @pytest.mark.parametrize("method", ["apgd", "apgd-jacobi"])
 def test_union_apgd_runs_compiled_and_matches_clarabel(gluey_problems, method):
     """``solve`` takes the compiled loop on 2D UNION problems, with ``W`` assembled (``matrix``)
