@@ -62,7 +62,7 @@ def positions(values: np.ndarray) -> np.ndarray:
     unless a value needs 64 bits (``np.uintp``): at 10^5 grains the product streams its
     indices from memory, and half their bytes made it 10 % faster."""
     values = np.asarray(values)
-    if values.dtype == np.int32 or values.dtype == np.uint32:
+    if values.dtype in (np.int32, np.uint32):
         return values.view(np.uint32)
     if values.size and values.max() > np.iinfo(np.uint32).max:
         return values.astype(np.uintp, copy=False)
