@@ -397,6 +397,14 @@ class ConeProjector:
             tangent_rows = nc + positions[:, None] * dim_t + np.arange(dim_t)
             self.pieces.append((normal_rows, tangent_rows, cones.mu[normal_rows]))
 
+    @cached_property
+    def box_rows(self) -> np.ndarray:
+        """The rows in no friction cone (the box's rows), increasing, shape (n_box,)."""
+        in_box = np.ones(self.lower.size, dtype=bool)
+        for normal_rows, tangent_rows, _ in self.pieces:
+            in_box[normal_rows] = in_box[tangent_rows] = False
+        return np.flatnonzero(in_box)
+
     def __call__(self, forces: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
         """``P_K(forces)``; ``out`` may be given to avoid an allocation (not ``forces``)."""
         out = np.maximum(forces, self.lower, out=out)     # np.clip costs 4x more on small vectors

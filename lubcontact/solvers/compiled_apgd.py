@@ -32,6 +32,12 @@ from .result import CONVERGED, DIVERGED, MAX_ITER
 _REQUEST_FINISH = 3                      # kernel status: the active set has settled
 CHECK_EVERY = 4
 """Iterations between evaluations of the cone loop's stopping measure (:func:`run_apgd_cones`)."""
+STREAMING_ROWS = 250_000
+"""Rows from which the cone loop passes over each vector once per stage (``streaming`` of
+:func:`.kernels.apgd_cone2d`): its dozen vectors and ``F`` then no longer stay in a 32 MB
+cache. Measured per iteration (docs/records/benchmarks.md): 8-10 % faster at 673 000 rows
+(10^5 grains), 3-12 % slower at 48 000-80 000 rows (12 000 grains), where the vectorised
+passes through work vectors win."""
 _KERNEL_STATUS = {0: CONVERGED, 1: MAX_ITER, 2: DIVERGED}
 
 
@@ -91,7 +97,8 @@ def is_cone_2d(cones: Cones) -> bool:
 
 def run_apgd_cones(data: DualData, cones: Cones, z: np.ndarray, tol: float, max_iter: int,
                    base: np.ndarray | None = None, every: int = 0,
-                   check_every: int = CHECK_EVERY) -> tuple[ResidualTracker, str, int, np.ndarray]:
+                   check_every: int = CHECK_EVERY, streaming: bool | None = None
+                   ) -> tuple[ResidualTracker, str, int, np.ndarray]:
     """APGD in the compiled kernel :func:`.kernels.apgd_cone2d` (2D friction and UNION cones).
 
     With ``every > 0`` and ``base`` (the iteration offset without shift) it
@@ -120,6 +127,9 @@ def run_apgd_cones(data: DualData, cones: Cones, z: np.ndarray, tol: float, max_
         Iterations between evaluations of the stopping measure (besides the first and the
         last iteration), >= 1; the history has one residual per evaluation, and the best
         iterate is the best of the evaluated ones.
+    streaming : bool, optional
+        The kernel's ``streaming`` passes (the same iterates); default: from
+        :data:`STREAMING_ROWS` rows on.
 
     Returns
     -------
@@ -142,13 +152,15 @@ def run_apgd_cones(data: DualData, cones: Cones, z: np.ndarray, tol: float, max_
     (cone_n, cone_t, cone_mu), (union_n, union_t, union_mu) = cones.projector.pieces
     union = np.repeat([False, True], [cone_n.size, union_n.size])
     lipschitz = initial_lipschitz(data, z)
-    best, best_residual, history, code, iterations, products, _, _, offset = kernel(
+    streaming = z.size >= STREAMING_ROWS if streaming is None else streaming
+    best, best_residual, history, code, iterations, products, _, offset = kernel(
         *operator, data.offset,
         data.offset if base is None else base, data.project.lower, data.project.upper,
+        positions(cones.projector.box_rows if streaming else np.zeros(0, dtype=np.uint32)),
         positions(np.concatenate([cone_n, union_n])),
         positions(np.concatenate([cone_t[:, 0], union_t[:, 0]])),
         np.concatenate([cone_mu, union_mu]), union, data.ratio, z, tol, max_iter, lipschitz,
-        DIVERGENCE_FACTOR, every, check_every)
+        DIVERGENCE_FACTOR, every, check_every, streaming)
     data.products += products
     tracker = ResidualTracker(data, tol)
     tracker.history.extend(history)

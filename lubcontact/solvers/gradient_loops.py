@@ -94,7 +94,7 @@ def run_apgd(data: DualData, z: np.ndarray, tol: float, max_iter: int,
     for k in range(1, max_iter + 1):
         gradient_y = wy + data.offset
         while True:
-            x = data.project(y - gradient_y / lipschitz)
+            x = data.project(y - gradient_y * (1.0 / lipschitz))    # as the compiled loops
             wx = data.product(x)
             d = x - y
             if d @ (wx - wy) <= lipschitz * (d @ d) * (1.0 + 1e-12):

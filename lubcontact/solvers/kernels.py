@@ -77,16 +77,22 @@ def loop_arrays(indptr, indices, values, t_indptr, t_indices, t_values, scratch,
 
 
 @numba.njit(cache=True, inline="always")
+def sufficient_decrease(num, den, lipschitz):
+    """Backtracking test of a step ``y -> x``: ``(x - y).W(x - y) <= L |x - y|^2`` (to a
+    relative 1e-12), given ``num = (x - y).W(x - y)`` and ``den = |x - y|^2``."""
+    return num <= lipschitz * den * (1.0 + 1e-12)
+
+
+@numba.njit(cache=True, inline="always")
 def step_accepted(x, y, wx, wy, lipschitz):
-    """Backtracking test of the step ``y -> x``: ``(x - y).W(x - y) <= L |x - y|^2``
-    (to a relative 1e-12), with ``wx = W x`` and ``wy = W y``."""
+    """:func:`sufficient_decrease` of the step ``y -> x``, with ``wx = W x`` and ``wy = W y``."""
     num = 0.0
     den = 0.0
     for i in range(x.size):
         d = x[i] - y[i]
         num += d * (wx[i] - wy[i])
         den += d * d
-    return num <= lipschitz * den * (1.0 + 1e-12)
+    return sufficient_decrease(num, den, lipschitz)
 
 
 @numba.njit(cache=True, inline="always")
@@ -114,9 +120,11 @@ def record_residual(k, residual, x, history, best, best_residual, first, tol, di
 
 
 @numba.njit(cache=True, inline="always")
-def extrapolate(theta, uphill, x, wx, x_old, wx_old, y, wy):
+def extrapolate(theta, uphill, x, wx, x_old, wx_old, y, wy, move):
     """Nesterov step ``y = x + beta (x - x_old)`` (and ``wy``), restarted (``beta = 0``,
-    ``theta = 1``) when ``uphill > 0``; moves ``x`` into ``x_old``. Returns the new ``theta``."""
+    ``theta = 1``) when ``uphill > 0``; with ``move``, copies ``x`` into ``x_old`` (and ``wx``
+    into ``wx_old``; a caller that swaps the arrays instead passes False). Returns the new
+    ``theta``."""
     theta_new = 0.5 * (-theta * theta + theta * np.sqrt(theta * theta + 4.0))
     beta = theta * (1.0 - theta) / (theta * theta + theta_new)
     if uphill > 0.0:
@@ -125,8 +133,9 @@ def extrapolate(theta, uphill, x, wx, x_old, wx_old, y, wy):
     for i in range(x.size):
         y[i] = x[i] + beta * (x[i] - x_old[i])
         wy[i] = wx[i] + beta * (wx[i] - wx_old[i])
-        x_old[i] = x[i]
-        wx_old[i] = wx[i]
+        if move:
+            x_old[i] = x[i]
+            wx_old[i] = wx[i]
     return theta_new
 
 
@@ -165,8 +174,9 @@ def apgd_box(indptr, indices, values, b, lower, upper, ratio, sign, x_old, wx_ol
     products, status, iterations = 0, 1, max_iter
     for k in range(max_iter):
         while True:
+            step = 1.0 / lipschitz
             for i in range(n):
-                x[i] = min(max(y[i] - (wy[i] + b[i]) / lipschitz, lower[i]), upper[i])
+                x[i] = min(max(y[i] - (wy[i] + b[i]) * step, lower[i]), upper[i])
             matvec(indptr, indices, values, x, wx)
             products += 1
             if step_accepted(x, y, wx, wy, lipschitz):
@@ -190,7 +200,7 @@ def apgd_box(indptr, indices, values, b, lower, upper, ratio, sign, x_old, wx_ol
         if code >= 0:
             status, iterations = code, k + 1
             break
-        theta = extrapolate(theta, uphill, x, wx, x_old, wx_old, y, wy)
+        theta = extrapolate(theta, uphill, x, wx, x_old, wx_old, y, wy, True)
         lipschitz *= 0.9
         unchanged = unchanged + 1 if changes == 0 else 0
         if stable > 0 and unchanged == stable:
@@ -215,35 +225,94 @@ def friction_cone_point(normal, tangent, mu):
     return scale, (mu * scale / size) * tangent
 
 
+@numba.njit(cache=True, inline="always")
+def cone_point(normal, tangent, mu, union):
+    """Projection of ``(normal, tangent)`` onto a 2D friction cone (:func:`friction_cone_point`)
+    or, for a UNION contact (``union``), onto the nearer of that cone and the pulled half-line
+    ``{n <= 0, t = 0}``, ties to the cone (as :class:`lubcontact.cones.ConeProjector`)."""
+    new_n, new_t = friction_cone_point(normal, tangent, mu)
+    if union:
+        pull_n = min(normal, 0.0)
+        d_cone = (new_n - normal) * (new_n - normal) + (new_t - tangent) * (new_t - tangent)
+        d_pull = (pull_n - normal) * (pull_n - normal) + tangent * tangent
+        if not d_cone <= d_pull:
+            return pull_n, 0.0
+    return new_n, new_t
+
+
 @numba.njit(cache=True)
 def project_cones(x, lower, upper, cone_n, cone_t, cone_mu, cone_union, out):
     """``out = P_K(x)``: rows clipped to ``[lower, upper]``, then each 2D friction cone
-    ``{|t| <= mu n}`` (normal row ``cone_n[c]``, tangential row ``cone_t[c]``) projected.
-
-    A contact with ``cone_union[c]`` is a UNION contact: it goes to the nearer of its
-    friction cone and the pulled half-line ``{n <= 0, t = 0}``, ties to the cone (as
-    :class:`lubcontact.cones.ConeProjector`).
-    """
+    ``{|t| <= mu n}`` (normal row ``cone_n[c]``, tangential row ``cone_t[c]``) projected by
+    :func:`cone_point` (``cone_union[c]``: a UNION contact)."""
     for i in range(x.size):
         out[i] = min(max(x[i], lower[i]), upper[i])
     for c in range(cone_n.size):
-        normal = x[cone_n[c]]
-        tangent = x[cone_t[c]]
-        new_n, new_t = friction_cone_point(normal, tangent, cone_mu[c])
-        if cone_union[c]:
-            pull_n = min(normal, 0.0)
-            d_cone = (new_n - normal) * (new_n - normal) + (new_t - tangent) * (new_t - tangent)
-            d_pull = (pull_n - normal) * (pull_n - normal) + tangent * tangent
-            if not d_cone <= d_pull:
-                new_n, new_t = pull_n, 0.0
-        out[cone_n[c]] = new_n
-        out[cone_t[c]] = new_t
+        out[cone_n[c]], out[cone_t[c]] = cone_point(x[cone_n[c]], x[cone_t[c]], cone_mu[c],
+                                                    cone_union[c])
+
+
+@numba.njit(cache=True, inline="always")
+def projected_step(y, wy, b, lipschitz, lower, upper, box_rows, cone_n, cone_t, cone_mu,
+                   cone_union, x):
+    """``x = P_K(y - (W y + b) / L)`` as :func:`project_cones` gives it (``1 / L`` multiplying, as
+    in every APGD loop: a division in this branchy pass cost 6 % of an iteration at 10^5
+    grains), in one pass over the rows
+    and without the trial point as a vector: the rows ``box_rows`` (those in no cone) clipped,
+    each cone's two rows projected by :func:`cone_point`."""
+    step = 1.0 / lipschitz
+    for k in range(box_rows.size):
+        i = box_rows[k]
+        x[i] = min(max(y[i] - (wy[i] + b[i]) * step, lower[i]), upper[i])
+    for c in range(cone_n.size):
+        n, t = cone_n[c], cone_t[c]
+        x[n], x[t] = cone_point(y[n] - (wy[n] + b[n]) * step, y[t] - (wy[t] + b[t]) * step,
+                                cone_mu[c], cone_union[c])
+
+
+@numba.njit(cache=True, inline="always")
+def step_sums(x, y, wx, wy, b, x_old):
+    """The sums of an APGD step ``y -> x``, in one pass: ``(x - y).W(x - y)`` and ``|x - y|^2``
+    (the backtracking test, :func:`step_accepted`), and ``(W y + b).(x - x_old)`` (the restart
+    test, uphill when positive)."""
+    num = 0.0
+    den = 0.0
+    uphill = 0.0
+    for i in range(x.size):
+        d = x[i] - y[i]
+        num += d * (wx[i] - wy[i])
+        den += d * d
+        uphill += (wy[i] + b[i]) * (x[i] - x_old[i])
+    return num, den, uphill
+
+
+@numba.njit(cache=True, inline="always")
+def natural_residual_squares(x, wx, b, base, shifted, ratio, lower, upper, box_rows, cone_n,
+                             cone_t, cone_mu, cone_union):
+    """``|D x - P_K(D x - D^-1 g)|^2`` with ``D = diag(ratio)`` and ``g = W x + b`` (``wx = W
+    x``), row by row without vectors; with ``shifted`` the cones' normal rows of ``g`` are
+    ``base_n + (W x)_n + mu |g_t|`` (the shift consistent with ``x``)."""
+    squares = 0.0
+    for k in range(box_rows.size):
+        i = box_rows[k]
+        scaled = x[i] * ratio[i]
+        projected = min(max(scaled - (wx[i] + b[i]) / ratio[i], lower[i]), upper[i])
+        squares += (scaled - projected) ** 2
+    for c in range(cone_n.size):
+        n, t = cone_n[c], cone_t[c]
+        g_t = wx[t] + b[t]
+        g_n = wx[n] + base[n] + cone_mu[c] * abs(g_t) if shifted else wx[n] + b[n]
+        scaled_n, scaled_t = x[n] * ratio[n], x[t] * ratio[t]
+        p_n, p_t = cone_point(scaled_n - g_n / ratio[n], scaled_t - g_t / ratio[t], cone_mu[c],
+                              cone_union[c])
+        squares += (scaled_n - p_n) ** 2 + (scaled_t - p_t) ** 2
+    return squares
 
 
 @numba.njit(cache=True)
 def apgd_cone2d(indptr, indices, values, t_indptr, t_indices, t_values, scratch, b, base, lower,
-                upper, cone_n, cone_t, cone_mu, cone_union, ratio, z0, tol, max_iter, lipschitz,
-                divergence, every, check_every):
+                upper, box_rows, cone_n, cone_t, cone_mu, cone_union, ratio, z0, tol, max_iter,
+                lipschitz, divergence, every, check_every, streaming):
     """APGD (restart, backtracking) on ``min 1/2 z.Wz + b.z, z in K`` with 2D friction cones.
 
     ``W z`` is applied by :func:`apply_operator` (``W`` assembled, or ``F`` and ``F^T``).
@@ -265,53 +334,68 @@ def apgd_cone2d(indptr, indices, values, t_indptr, t_indices, t_values, scratch,
     ``base_n + (W z)_n + mu |g_T|``), i.e. the modified (De Saxce) natural
     map of the Coulomb problem.
 
-    The stopping measure (a second projection and three vector passes) is
-    evaluated at the first and last iterations and
+    The stopping measure is evaluated at the first and last iterations and
     every ``check_every`` iterations between: the history holds those
     residuals only, and the best iterate is the best of them.
+
+    With ``streaming`` (problems whose vectors do not stay in the cache: the loop is bound by
+    the bytes it moves) the iterates are the same, each stage passing over the rows once:
+    the step by :func:`projected_step` (``box_rows``: the rows in no cone), the stopping measure
+    by :func:`natural_residual_squares` (the same value, summed in another order), and the new
+    iterate's arrays swapped with the last one's instead of copied. Without it the step and
+    the measure are vectorised passes through work vectors, faster while they stay in the
+    cache (docs/records/benchmarks.md).
 
     Returns
     -------
     best, best_residual, history (one residual per check), status (0 converged,
-    1 max_iter, 2 diverged), iterations, products, last iterate, Lipschitz
-    estimate, last offset ``b``.
+    1 max_iter, 2 diverged), iterations, products, Lipschitz estimate, last offset ``b``.
     """
     n = b.size
     b = b.copy()
     rms = 1.0 / np.sqrt(max(n, 1))
     x_old, wx_old, y, wy, x, wx, best, history = loop_arrays(
         indptr, indices, values, t_indptr, t_indices, t_values, scratch, z0, max_iter)
-    trial = np.empty(n)
-    projected = np.empty(n)
-    gradient = np.empty(n)
+    work = 0 if streaming else n
+    trial = np.empty(work)
+    projected = np.empty(work)
+    gradient = np.empty(work)
     best_residual, first = np.inf, -1.0
     products, theta, status, iterations, checks = 1, 1.0, 1, max_iter, 0
     for k in range(max_iter):
         while True:
-            for i in range(n):
-                trial[i] = y[i] - (wy[i] + b[i]) / lipschitz
-            project_cones(trial, lower, upper, cone_n, cone_t, cone_mu, cone_union, x)
+            if streaming:
+                projected_step(y, wy, b, lipschitz, lower, upper, box_rows, cone_n, cone_t,
+                               cone_mu, cone_union, x)
+            else:
+                step = 1.0 / lipschitz
+                for i in range(n):
+                    trial[i] = y[i] - (wy[i] + b[i]) * step
+                project_cones(trial, lower, upper, cone_n, cone_t, cone_mu, cone_union, x)
             apply_operator(indptr, indices, values, t_indptr, t_indices, t_values, scratch, x, wx)
             products += 1
-            if step_accepted(x, y, wx, wy, lipschitz):
+            num, den, uphill = step_sums(x, y, wx, wy, b, x_old)
+            if sufficient_decrease(num, den, lipschitz):
                 break
             lipschitz *= 2.0
-        uphill = 0.0
-        for i in range(n):
-            uphill += (wy[i] + b[i]) * (x[i] - x_old[i])
         if k == 0 or k == max_iter - 1 or (k + 1) % check_every == 0:
-            for i in range(n):
-                gradient[i] = wx[i] + b[i]
-            if every > 0:
-                for c in range(cone_n.size):
-                    gradient[cone_n[c]] = wx[cone_n[c]] + base[cone_n[c]] + cone_mu[c] * abs(
-                        gradient[cone_t[c]])
-            for i in range(n):
-                trial[i] = x[i] * ratio[i] - gradient[i] / ratio[i]
-            project_cones(trial, lower, upper, cone_n, cone_t, cone_mu, cone_union, projected)
-            squares = 0.0
-            for i in range(n):
-                squares += (x[i] * ratio[i] - projected[i]) ** 2
+            if streaming:
+                squares = natural_residual_squares(x, wx, b, base, every > 0, ratio, lower,
+                                                   upper, box_rows, cone_n, cone_t, cone_mu,
+                                                   cone_union)
+            else:
+                for i in range(n):
+                    gradient[i] = wx[i] + b[i]
+                if every > 0:
+                    for c in range(cone_n.size):
+                        gradient[cone_n[c]] = wx[cone_n[c]] + base[cone_n[c]] + cone_mu[c] * abs(
+                            gradient[cone_t[c]])
+                for i in range(n):
+                    trial[i] = x[i] * ratio[i] - gradient[i] / ratio[i]
+                project_cones(trial, lower, upper, cone_n, cone_t, cone_mu, cone_union, projected)
+                squares = 0.0
+                for i in range(n):
+                    squares += (x[i] * ratio[i] - projected[i]) ** 2
             best_residual, first, code = record_residual(checks, np.sqrt(squares) * rms, x,
                                                          history, best, best_residual, first,
                                                          tol, divergence)
@@ -322,9 +406,12 @@ def apgd_cone2d(indptr, indices, values, t_indptr, t_indices, t_values, scratch,
         if every > 0 and (k + 1) % every == 0:
             for c in range(cone_n.size):
                 b[cone_n[c]] = base[cone_n[c]] + cone_mu[c] * abs(wx[cone_t[c]] + b[cone_t[c]])
-        theta = extrapolate(theta, uphill, x, wx, x_old, wx_old, y, wy)
+        theta = extrapolate(theta, uphill, x, wx, x_old, wx_old, y, wy, not streaming)
+        if streaming:
+            x, x_old = x_old, x
+            wx, wx_old = wx_old, wx
         lipschitz *= 0.9
-    return best, best_residual, history[:checks], status, iterations, products, x, lipschitz, b
+    return best, best_residual, history[:checks], status, iterations, products, lipschitz, b
 
 
 @numba.njit(cache=True, inline="always")

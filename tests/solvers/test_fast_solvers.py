@@ -446,6 +446,35 @@ def test_the_cone_loop_checks_every_few_iterations_along_the_same_iterates(gluey
         assert checked.best_residual == history[checks].min() >= every_one.best_residual
 
 
+@pytest.mark.parametrize("every", [0, 1])
+def test_the_streaming_cone_loop_takes_the_same_iterates(gluey_problems, every):
+    """The cone loop's one-pass stages for problems beyond the cache (``streaming``) take the
+    same iterates as its vectorised passes, with UNION contacts and with box rows among Coulomb
+    contacts, exact Coulomb's
+    shift updates included: the same stop, iterations and best iterate bit for bit, and the
+    same residuals but for the order of their sums."""
+    from lubcontact.solvers.compiled_apgd import run_apgd_cones
+
+    problems = [problem for problem, _ in gluey_problems]
+    cones = problems[1].cones               # the pile with every other contact frictionless
+    kinds = cones.kinds.copy()
+    kinds[::2] = ConeKind.NONNEG
+    problems.append(problems[1].with_cones(Cones(kinds=kinds, mu=cones.mu,
+                                                 tangential=cones.tangential, tangent_dim=1)))
+    for problem in problems:
+        scaled = problem.normalized()
+        data = prepare(scaled, True, "matrix")
+        z = np.zeros(scaled.n_rows)
+        runs = [run_apgd_cones(data, scaled.cones, z, 1e-9, 3000, base=data.offset, every=every,
+                               streaming=streaming) for streaming in (False, True)]
+        (vectorised, status, iterations, offset), (streamed, status_s, iterations_s, offset_s) = runs
+        assert status == status_s and iterations == iterations_s > 20
+        np.testing.assert_array_equal(streamed.best, vectorised.best)
+        np.testing.assert_array_equal(offset_s, offset)
+        np.testing.assert_allclose(streamed.history, vectorised.history, rtol=1e-12)
+    assert problems[-1].cones.projector.box_rows.size > 0
+
+
 def test_the_cone_loop_rejects_a_check_period_below_one(gluey_problems):
     """A check period below one is a ValueError naming it (0 divided by zero in the kernel)."""
     from lubcontact.solvers.compiled_apgd import run_apgd_cones
