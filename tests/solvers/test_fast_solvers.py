@@ -110,6 +110,20 @@ def test_warm_start_helps_gradient_methods(piles, method):
     assert warm.iterations < 0.9 * cold.iterations
 
 
+@pytest.mark.parametrize("method", ["apgd", "apgd-jacobi", "bb", "pgd"])
+def test_a_warm_start_worse_than_zero_is_not_used(frictional, method):
+    """A warm start whose objective ``1/2 z.Wz + b.z`` is above zero's (the solution times 3:
+    9/2 - 3 times ``z*.Wz*`` > 0) starts the method from zero, as a cold solve, bit for bit; the
+    solution times 1/2 (objective below zero) is used."""
+    problem, reference = frictional
+    cold = solve(problem, method, tol=1e-7, max_iter=3000)
+    far = solve(problem, method, tol=1e-7, max_iter=3000, warm_start=3.0 * reference.forces)
+    assert far.status == cold.status and far.iterations == cold.iterations > 10
+    np.testing.assert_array_equal(far.forces, cold.forces)
+    near = solve(problem, method, tol=1e-7, max_iter=3000, warm_start=0.5 * reference.forces)
+    assert not np.array_equal(near.forces, cold.forces)
+
+
 def test_a_warm_start_that_already_meets_tol_costs_no_gradient_iteration(piles):
     """Only the exact finish runs: one LDL^T solve, counted as the single iteration."""
     case, reference = piles[0]
