@@ -262,7 +262,7 @@ def joint_coulomb_apgd(convex: ConicProblem, shift: np.ndarray, warm_start: np.n
     scaled = convex.with_shift(shift).normalized()
     data = prepare(scaled, scaling=True)
     z = initial_point(data, None if warm_start is None else warm_start / scaled.scaling.force,
-                      scaled.n_rows)
+                      scaled.cones)
     base = scaled.offset.copy()
     base[: scaled.n_contacts] -= scaled.shift
     tracker, _, iterations, _ = run_apgd_cones(data, scaled.cones, z, tol, max_iter,

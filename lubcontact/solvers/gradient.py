@@ -70,7 +70,7 @@ def _common(problem: ConicProblem, warm_start: np.ndarray | None, scaling: bool,
             operator: str, assembled: bool = False) -> tuple[DualData, np.ndarray, float, float]:
     start = time.perf_counter()
     data = prepare(problem, scaling, operator, assembled)
-    z = initial_point(data, warm_start, problem.n_rows)
+    z = initial_point(data, warm_start, problem.cones)
     return data, z, time.perf_counter() - start, time.perf_counter()
 
 

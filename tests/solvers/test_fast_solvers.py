@@ -124,6 +124,18 @@ def test_a_warm_start_worse_than_zero_is_not_used(frictional, method):
     assert not np.array_equal(near.forces, cold.forces)
 
 
+def test_a_warm_start_on_union_cones_is_kept_even_worse_than_zero(gluey_problems):
+    """With UNION contacts (K not convex) the warm start also picks each contact's piece: the
+    solution times 3, worse than zero in the objective, is still the start."""
+    problem, reference = gluey_problems[1]
+    cold = solve(problem, "apgd-jacobi", tol=1e-7, max_iter=3000)
+    far = solve(problem, "apgd-jacobi", tol=1e-7, max_iter=3000, warm_start=3.0 * reference.forces)
+    scaled = problem.normalized()
+    z = 3.0 * reference.forces / scaled.scaling.force
+    assert 0.5 * z @ (scaled.delassus @ z) + scaled.offset @ z > 0.0
+    assert not np.array_equal(far.forces, cold.forces)
+
+
 def test_a_warm_start_that_already_meets_tol_costs_no_gradient_iteration(piles):
     """Only the exact finish runs: one LDL^T solve, counted as the single iteration."""
     case, reference = piles[0]
