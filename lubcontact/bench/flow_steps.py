@@ -63,9 +63,11 @@ for ``newton-ac``, sweeps for ``nsgs``, inner first-order iterations for the oth
 ``per_product``: the solve's time per iteration (set-up included; median over the steps) over
 one scipy product ``W x`` on the last step's normalised ``W``;
 ``warm_cold``: iterations of the first timed step warm-started from the previous step (pair
-keys) over those of the same step started cold; ``*_pc``: percentage of the steps' total time
-in each phase (:attr:`~lubcontact.sim.trajectory.StepReport.timings`); ``peak_mb``: the
-process's peak resident memory so far (MB)."""
+keys) over those of the same step started cold (1 where the first-order methods set aside a
+warm start worse than zero: :func:`lubcontact.solvers.dual_data.initial_point`); ``*_pc``:
+percentage of the steps' total time in each phase
+(:attr:`~lubcontact.sim.trajectory.StepReport.timings`); ``peak_mb``: the process's peak
+resident memory so far (MB)."""
 
 
 PHASES = ("contacts", "assembly", "solve", "update")

@@ -7,7 +7,9 @@ loader returns None when numba is unavailable, and the numpy loop of
 (frictionless problems, with the active-set finish of :mod:`.active_set`),
 :func:`run_apgd_cones` boxes and 2D friction cones (UNION contacts included),
 evaluating its stopping measure (a second projection and three vector passes)
-every :data:`CHECK_EVERY` iterations; the numpy loop evaluates it at every one.
+every :data:`CHECK_EVERY` iterations; the numpy loop evaluates it at every one. From
+:data:`STREAMING_ROWS` rows on, the cone loop passes over each vector once per stage
+(``streaming``: the same iterates, for problems whose vectors do not stay in the cache).
 
 :func:`joint_coulomb_apgd` is the joint phase of the fixed point on ``s``
 (``joint`` of :func:`lubcontact.solvers.solve_coulomb`): one Jacobi-scaled

@@ -84,15 +84,19 @@ def sufficient_decrease(num, den, lipschitz):
 
 
 @numba.njit(cache=True, inline="always")
-def step_accepted(x, y, wx, wy, lipschitz):
-    """:func:`sufficient_decrease` of the step ``y -> x``, with ``wx = W x`` and ``wy = W y``."""
+def step_sums(x, y, wx, wy, b, x_old):
+    """The sums of an APGD step ``y -> x``, in one pass: ``(x - y).W(x - y)`` and ``|x - y|^2``
+    (the backtracking test, :func:`sufficient_decrease`), and ``(W y + b).(x - x_old)`` (the restart
+    test, uphill when positive)."""
     num = 0.0
     den = 0.0
+    uphill = 0.0
     for i in range(x.size):
         d = x[i] - y[i]
         num += d * (wx[i] - wy[i])
         den += d * d
-    return sufficient_decrease(num, den, lipschitz)
+        uphill += (wy[i] + b[i]) * (x[i] - x_old[i])
+    return num, den, uphill
 
 
 @numba.njit(cache=True, inline="always")
@@ -179,18 +183,17 @@ def apgd_box(indptr, indices, values, b, lower, upper, ratio, sign, x_old, wx_ol
                 x[i] = min(max(y[i] - (wy[i] + b[i]) * step, lower[i]), upper[i])
             matvec(indptr, indices, values, x, wx)
             products += 1
-            if step_accepted(x, y, wx, wy, lipschitz):
+            num, den, uphill = step_sums(x, y, wx, wy, b, x_old)
+            if sufficient_decrease(num, den, lipschitz):
                 break
             lipschitz *= 2.0
         squares = 0.0
-        uphill = 0.0
         changes = 0
         for i in range(n):
             g = wx[i] + b[i]
             scaled = x[i] * ratio[i]
             projected = min(max(scaled - g / ratio[i], lower[i]), upper[i])
             squares += (scaled - projected) ** 2
-            uphill += (wy[i] + b[i]) * (x[i] - x_old[i])
             row_active = sign[i] == 0.0 or sign[i] * (x[i] - g) > 0.0
             if row_active != active[i]:
                 changes += 1
@@ -268,22 +271,6 @@ def projected_step(y, wy, b, lipschitz, lower, upper, box_rows, cone_n, cone_t, 
         n, t = cone_n[c], cone_t[c]
         x[n], x[t] = cone_point(y[n] - (wy[n] + b[n]) * step, y[t] - (wy[t] + b[t]) * step,
                                 cone_mu[c], cone_union[c])
-
-
-@numba.njit(cache=True, inline="always")
-def step_sums(x, y, wx, wy, b, x_old):
-    """The sums of an APGD step ``y -> x``, in one pass: ``(x - y).W(x - y)`` and ``|x - y|^2``
-    (the backtracking test, :func:`step_accepted`), and ``(W y + b).(x - x_old)`` (the restart
-    test, uphill when positive)."""
-    num = 0.0
-    den = 0.0
-    uphill = 0.0
-    for i in range(x.size):
-        d = x[i] - y[i]
-        num += d * (wx[i] - wy[i])
-        den += d * d
-        uphill += (wy[i] + b[i]) * (x[i] - x_old[i])
-    return num, den, uphill
 
 
 @numba.njit(cache=True, inline="always")
