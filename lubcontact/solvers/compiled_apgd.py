@@ -37,9 +37,9 @@ CHECK_EVERY = 4
 STREAMING_ROWS = 250_000
 """Rows from which the cone loop passes over each vector once per stage (``streaming`` of
 :func:`.kernels.apgd_cone2d`): its dozen vectors and ``F`` then no longer stay in a 32 MB
-cache. Measured per iteration (docs/records/benchmarks.md): 8-10 % faster at 673 000 rows
-(10^5 grains), 3-12 % slower at 48 000-80 000 rows (12 000 grains), where the vectorised
-passes through work vectors win."""
+cache. Measured per iteration, the two paths in one process (docs/records/benchmarks.md): 10 %
+faster at 673 192 rows (10^5 grains), 7 % slower at 48 001 and 81 692 rows (12 000 grains),
+where the vectorised passes through work vectors win."""
 _KERNEL_STATUS = {0: CONVERGED, 1: MAX_ITER, 2: DIVERGED}
 
 

@@ -476,9 +476,8 @@ def test_the_cone_loop_checks_every_few_iterations_along_the_same_iterates(gluey
 def test_the_streaming_cone_loop_takes_the_same_iterates(gluey_problems, every):
     """The cone loop's one-pass stages for problems beyond the cache (``streaming``) take the
     same iterates as its vectorised passes, with UNION contacts and with box rows among Coulomb
-    contacts, exact Coulomb's
-    shift updates included: the same stop, iterations and best iterate bit for bit, and the
-    same residuals but for the order of their sums."""
+    contacts, exact Coulomb's shift updates included: the same stop, iterations and best iterate
+    bit for bit, and the same residuals but for the order of their sums."""
     from lubcontact.solvers.compiled_apgd import run_apgd_cones
 
     problems = [problem for problem, _ in gluey_problems]
