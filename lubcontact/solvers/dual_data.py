@@ -347,7 +347,7 @@ def initial_point(data: DualData, warm_start: np.ndarray | None, cones: Cones) -
 
     A developed flow renews its force network every step: on dry flows from 2 000 to 10^5
     grains the previous step's forces, matched by pair, were worse than zero in the objective
-    on every step measured, and APGD from zero took 8-20 % fewer iterations
+    on every step measured, and `apgd-jacobi` from zero took 8-20 % fewer iterations per step
     (docs/records/benchmarks.md); a warm start near the solution (a pile at rest, the fixed
     point's next inner solve) has a negative objective and is kept. With UNION contacts K is
     not convex and the warm start also picks each contact's piece (pushed or pulled): it is
