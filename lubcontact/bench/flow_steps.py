@@ -48,7 +48,7 @@ from ..scenes import inclined
 from ..sim.simulation import Simulation
 from ..sim.state import SimulationState
 from ..solvers import SolveSettings
-from .harness import warm_up
+from .harness import iterative, warm_up
 from .options import check_methods, names
 from .statistics import scaling_exponents
 from .tables import format_table
@@ -182,11 +182,16 @@ def product_time(problem: StepProblem, repeats: int = 20) -> float:
 
 
 def time_method(sim: Simulation, method: str, steps: int, tol: float,
-                friction: str = "exact") -> dict[str, Any]:
+                friction: str = "exact", joint: int = 0) -> dict[str, Any]:
     """Solve ``steps`` steps of ``sim`` from its current state with ``method`` (``friction``:
-    one of :data:`FRICTIONS`); the state is kept."""
+    one of :data:`FRICTIONS`; ``joint`` > 0: exact Coulomb by a first-order method with the fixed
+    point's joint phase, ``joint`` of :func:`~lubcontact.solvers.coulomb.solve_coulomb`, the
+    method labelled ``method+jointN``); the state is kept."""
     start = sim.state.copy()              # the steps below move sim.state in place
-    settings = SolveSettings(method=method, tol=tol, exact_coulomb=friction == "exact")
+    exact = friction == "exact"
+    joint = joint if exact and iterative(method) else 0
+    settings = SolveSettings(method=method, tol=tol, exact_coulomb=exact,
+                             options={"joint": joint} if joint else {})
     sim.step(settings)                       # untimed: compilation, caches
     _, _, problem, guess, shift = sim.next_problem()
     cold = settings.solve(problem).iterations
@@ -207,7 +212,8 @@ def time_method(sim: Simulation, method: str, steps: int, tol: float,
             phases[phase] += report.timings[phase]
     sim.restore(start)
     total = sum(times)
-    return {"friction": friction, "method": method, "contacts": int(np.mean(contacts)),
+    return {"friction": friction, "method": f"{method}+joint{joint}" if joint else method,
+            "contacts": int(np.mean(contacts)),
             "s_per_step": float(np.median(times)),
             "iterations": float(np.median(iterations)), "warm_cold": warm / max(cold, 1),
             "per_product": float(np.median(per_iteration)) / product_time(report.problem),
@@ -242,6 +248,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--friction", type=names, default=["exact"],
                         help="comma list of exact (Coulomb's law), relaxation (its convex "
                              "relaxation) (default: exact)")
+    parser.add_argument("--joint", type=int, default=0,
+                        help="exact friction by the first-order methods: the fixed point's joint "
+                             "phase, shift updated every JOINT iterations inside the solver "
+                             "(0: none; default 0)")
     parser.add_argument("--json", type=pathlib.Path, help="write the rows to this JSON file")
     parser.add_argument("--figure", type=pathlib.Path,
                         help="draw s/step against grains (log-log, fitted exponents) to this PNG")
@@ -254,6 +264,8 @@ def main(argv: list[str] | None = None) -> int:
                         ("--settle-steps", args.settle_steps)):
         if value < 1:
             parser.error(f"argument {flag}: must be >= 1, got {value}")
+    if args.joint < 0:
+        parser.error(f"argument --joint: must be >= 0, got {args.joint}")
     if not args.tol > 0:
         parser.error(f"argument --tol: must be > 0, got {args.tol}")
     for model in args.models:
@@ -280,7 +292,8 @@ def main(argv: list[str] | None = None) -> int:
             for friction in args.friction:
                 for method in args.methods:
                     row = {"n_grains": n_grains, "model": model,
-                           **time_method(sim, method, args.steps, args.tol, friction)}
+                           **time_method(sim, method, args.steps, args.tol, friction,
+                                         args.joint)}
                     rows.append(row)
                     print(format_table([row], COLUMNS), flush=True)
                     if args.json:             # rewritten after each row: a stopped run keeps them

@@ -32,7 +32,8 @@ def test_bench_flow_prints_a_row_per_method_and_reuses_its_cache(tmp_path, capsy
 
 
 @pytest.mark.parametrize("bad, flag", [(["--sizes", "0"], "--sizes"), (["--methods", "nope"], "--methods"),
-                                       (["--models", "wet"], "--models"), (["--tol", "0"], "--tol")])
+                                       (["--models", "wet"], "--models"), (["--tol", "0"], "--tol"),
+                                       (["--joint", "-1"], "--joint")])
 def test_bad_flags_are_one_line_errors(bad, flag, capsys):
     with pytest.raises(SystemExit) as exit_:
         flow_steps.main(bad)
@@ -61,6 +62,23 @@ def test_a_layer_widened_to_each_size_gives_rows_an_exponent_and_a_figure(tmp_pa
     assert "# dry exact apgd: s/step ~ N^" in out
     assert (tmp_path / "scaling.png").stat().st_size > 10_000
     assert len(list((tmp_path / "cache").glob("widened-*-2x.npz"))) == 1
+
+
+def test_exact_rows_with_the_joint_phase_are_labelled_and_converge(tmp_path):
+    """``--joint 5``: the first-order method's exact rows run the fixed point's joint phase
+    (labelled ``+joint5``) and converge to the FCLIB tolerance; newton-ac's rows are unchanged."""
+    layer = tmp_path / "layer"
+    config = RunConfig(scene="inclined_flow", n_grains=24, width=12.0, model="dry", angle=24.0,
+                       steps=6, dt_fraction=0.05, settle_steps=0, checkpoint_every=6)
+    FlowRun(config, initial_scene(config, layer), layer).advance(6)
+    argv = ["--sizes", "24", "--layer", str(layer / "checkpoint.npz"), "--methods",
+            "apgd-jacobi,newton-ac", "--joint", "5", "--steps", "2", "--cache", str(tmp_path),
+            "--json", str(tmp_path / "rows.json")]
+    assert flow_steps.main(argv) == 0
+    rows = json.loads((tmp_path / "rows.json").read_text())
+    assert [row["method"] for row in rows] == ["apgd-jacobi+joint5", "newton-ac"]
+    for row in rows:
+        assert row["statuses"] == "converged" and row["max_fclib_error"] <= 1e-5
 
 
 def test_a_size_that_is_not_a_multiple_of_the_layer_is_a_one_line_error(tmp_path, capsys):
