@@ -392,10 +392,12 @@ def apgd_cone2d(indptr, indices, values, t_indptr, t_indices, t_values, scratch,
         if every > 0 and (k + 1) % every == 0:
             for c in range(cone_n.size):
                 b[cone_n[c]] = base[cone_n[c]] + cone_mu[c] * abs(wx[cone_t[c]] + b[cone_t[c]])
-        theta = extrapolate(theta, uphill, x, wx, x_old, wx_old, y, wy, not streaming)
-        if streaming:
+        if streaming:                   # each call with a constant flag: a loop without a branch
+            theta = extrapolate(theta, uphill, x, wx, x_old, wx_old, y, wy, False)
             x, x_old = x_old, x
             wx, wx_old = wx_old, wx
+        else:
+            theta = extrapolate(theta, uphill, x, wx, x_old, wx_old, y, wy, True)
         lipschitz *= 0.9
     return best, best_residual, history[:checks], status, iterations, products, lipschitz, b
 
