@@ -128,6 +128,14 @@ class ConicProblemMixin:
                        cones.n_rows)
         return self._replaced(cones=cones)
 
+    def keep_matrices(self, copy: ConicProblem) -> None:
+        """Keep the cached matrices (``MATRICES``) that ``copy``, a copy of this problem with
+        another shift or other cones, has built and this problem has not: they depend on
+        neither, and later copies of this problem then share them."""
+        for name in MATRICES:
+            if name in copy.__dict__:
+                self.__dict__.setdefault(name, copy.__dict__[name])
+
     def _replaced(self, **changes: Any) -> Self:
         """A copy with ``changes`` (checked by the constructor) and this problem's cached matrices
         (they depend on neither shift nor cones)."""

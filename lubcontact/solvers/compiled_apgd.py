@@ -230,7 +230,7 @@ def run_apgd_box(data: DualData, z: np.ndarray, tol: float, max_iter: int,
             return tracker, CONVERGED, done
 
 
-def joint_coulomb_apgd(convex: ConicProblem, shift: np.ndarray, warm_start: np.ndarray | None,
+def joint_coulomb_apgd(convex: ConicProblem, scaled: ConicProblem, warm_start: np.ndarray | None,
                        tol: float, max_iter: int,
                        every: int) -> tuple[np.ndarray, np.ndarray, int]:
     """Coulomb's problem by APGD with the shift updated inside (``joint`` of
@@ -241,8 +241,10 @@ def joint_coulomb_apgd(convex: ConicProblem, shift: np.ndarray, warm_start: np.n
     convex : ConicProblem
         The convex problem (UNION contacts fixed on a piece), in physical units,
         with 2D friction cones (:func:`joint_applies`).
-    shift : ndarray, shape (nc,)
-        The starting shift (physical length units).
+    scaled : ConicProblem
+        Its normalised form with the starting shift (``convex.with_shift(shift).normalized()``,
+        or a copy of the caller's normalised problem with that shift and the same cones: the
+        matrices it builds stay with it).
     warm_start : ndarray, shape (n_rows,), or None
         Starting forces (physical units).
     tol : float
@@ -261,7 +263,6 @@ def joint_coulomb_apgd(convex: ConicProblem, shift: np.ndarray, warm_start: np.n
     iterations : int
         The iterations done; the outer loop of the fixed point checks the result.
     """
-    scaled = convex.with_shift(shift).normalized()
     data = prepare(scaled, scaling=True)
     z = initial_point(data, None if warm_start is None else warm_start / scaled.scaling.force,
                       scaled.cones)

@@ -52,7 +52,6 @@ from ..problem.cones import ConeKind
 from ..problem.conic import ConicProblem
 from ..problem.metrics import coulomb_shift
 from .compiled_apgd import joint_applies, joint_coulomb_apgd
-from .dual_data import is_small
 from .registry import solve, solver_info
 from .result import CONVERGED, FAILED, MAX_ITER, CoulombResult
 
@@ -126,9 +125,6 @@ def solve_coulomb(problem: ConicProblem, method: str = "clarabel", *, tol: float
                        warm_start=warm_start, **options)
         return CoulombResult.single(result)
     normalized = problem.normalized()           # set up once: only the shift changes below
-    normalized.delassus  # noqa: B018  (built here once, shared by every inner solve's copy)
-    if is_small(normalized):                    # and the dense W of the solvers' dense lane
-        normalized.dense_delassus  # noqa: B018
     length, force_unit = normalized.scaling.length, normalized.scaling.force
     accelerator = _Anderson(anderson)
     branches = _Branches(problem, warm_start, threshold=max(1e3 * tol, 1e-7))
@@ -136,9 +132,10 @@ def solve_coulomb(problem: ConicProblem, method: str = "clarabel", *, tol: float
     joint_iterations = 0
     convex = branches.problem()
     if joint > 0 and joint_applies(convex.cones):
+        scaled = branches.on(normalized).with_shift(branches.restrict(current) / length)
         forces, current, joint_iterations = joint_coulomb_apgd(
-            convex, branches.restrict(current), forces, tol,
-            20000 if max_iter is None else max_iter, joint)
+            convex, scaled, forces, tol, 20000 if max_iter is None else max_iter, joint)
+        normalized.keep_matrices(scaled)
         inner += joint_iterations
     shift_change = force_change = np.inf
     converged = False
@@ -146,9 +143,13 @@ def solve_coulomb(problem: ConicProblem, method: str = "clarabel", *, tol: float
         convex = branches.problem()
         used = branches.restrict(current)
         inner_tol = tol if forcing == 0 else max(tol, forcing * min(shift_change, 1.0))
+        scaled = branches.on(normalized).with_shift(used / length)
         result = solve(convex.with_shift(used), method, tol=inner_tol, max_iter=max_iter,
-                       warm_start=forces,
-                       normalized=branches.on(normalized).with_shift(used / length), **options)
+                       warm_start=forces, normalized=scaled, **options)
+        # the matrices the method built (W, its factor or its dense form, as it needs), kept for
+        # the next outer iterations' copies: built once, and only those the method uses (the
+        # first-order methods of a large problem apply F^T F and never assemble W)
+        normalized.keep_matrices(scaled)
         inner += result.iterations
         if forces is not None:
             force_change = _relative_change(result.forces / force_unit, forces / force_unit)
