@@ -98,6 +98,8 @@ class ConicProblem(Protocol):
 
     def with_cones(self, cones: Cones) -> ConicProblem: ...
 
+    def keep_matrices(self, copy: ConicProblem) -> None: ...
+
 
 class ConicProblemMixin:
     """Members both problem classes derive the same way.
