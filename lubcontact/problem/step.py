@@ -24,7 +24,7 @@ import scipy.sparse as sp
 
 from .. import checks
 from .cones import Cones
-from .conic import MATRICES, ConicProblemMixin, Scaling
+from .conic import MATRICES, ConicProblem, ConicProblemMixin, Scaling
 
 
 @dataclass
@@ -254,6 +254,14 @@ class StepProblem(ConicProblemMixin):
         problem = object.__new__(cls)
         problem.__dict__.update(fields)
         return problem
+
+    def keep_matrices(self, copy: ConicProblem) -> None:
+        """:meth:`ConicProblemMixin.keep_matrices`, and the Jacobian of a normalised problem once
+        ``copy`` has built it (:meth:`__getattr__`): later copies then share it instead of each
+        scaling ``H`` again."""
+        super().keep_matrices(copy)
+        if "jacobian" in copy.__dict__:
+            self.__dict__.setdefault("jacobian", copy.__dict__["jacobian"])
 
     def _replaced(self, **changes: Any) -> StepProblem:
         """The copy :meth:`with_shift` and :meth:`with_cones` make, without the constructor: this

@@ -343,16 +343,19 @@ class ResidualTracker:
 
 def initial_point(data: DualData, warm_start: np.ndarray | None, cones: Cones) -> np.ndarray:
     """The starting iterate: zero, or the warm start in iteration variables, projected onto K;
-    on convex cones only when its objective ``1/2 z.W_it z + b_it.z`` is below zero's (0).
+    on convex cones only when its objective ``1/2 z.W_it z + b_it.z`` is not above zero's (0).
 
     A developed flow renews its force network every step: on dry flows from 2 000 to 10^5
     grains the previous step's forces, matched by pair, were worse than zero in the objective
     on every step measured, and `apgd-jacobi` from zero took 8-20 % fewer iterations per step
-    (docs/records/benchmarks.md); a warm start near the solution (a pile at rest, the fixed
-    point's next inner solve) has a negative objective and is kept. With UNION contacts K is
-    not convex and the warm start also picks each contact's piece (pushed or pulled): it is
-    always kept (from zero, `apgd` ended a step of a 12 000-grain gluey flow at `max_iter`,
-    where the warm start converged in 664 iterations). The test costs one product ``W_it z``.
+    (docs/records/benchmarks.md); a warm start near the solution (a pile at rest; usually the
+    fixed point's next inner solve, whose new shift may move the objective) has a negative
+    objective and is kept. With UNION contacts K is not convex and the warm start also picks
+    each contact's piece (pushed or pulled): it is always kept (from zero, `apgd` ended a
+    step of a 12 000-grain gluey flow's relaxation at `max_iter`, where the warm start
+    converged in 664 iterations). The fixed point on s fixes each UNION contact on a piece
+    (convex cones), so its inner solves apply the test. The test costs one product ``W_it z``,
+    counted in ``data.products``.
 
     Parameters
     ----------

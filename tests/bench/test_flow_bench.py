@@ -65,8 +65,8 @@ def test_a_layer_widened_to_each_size_gives_rows_an_exponent_and_a_figure(tmp_pa
 
 
 def test_exact_rows_with_the_joint_phase_are_labelled_and_converge(tmp_path):
-    """``--joint 5``: the first-order method's exact rows run the fixed point's joint phase
-    (labelled ``+joint5``) and converge to the FCLIB tolerance; newton-ac's rows are unchanged."""
+    """``--joint 5``: the first-order method's exact rows are labelled ``+joint5`` and converge
+    to the FCLIB tolerance; newton-ac, which has no fixed point, keeps its name."""
     layer = tmp_path / "layer"
     config = RunConfig(scene="inclined_flow", n_grains=24, width=12.0, model="dry", angle=24.0,
                        steps=6, dt_fraction=0.05, settle_steps=0, checkpoint_every=6)

@@ -145,7 +145,8 @@ def test_outer_iterations_share_the_delassus_matrix(matrix):
 def test_the_fixed_point_builds_only_the_operator_its_method_uses():
     """On a problem above the dense lane, a first-order method applies ``F^T (F x)``: the fixed
     point does not assemble ``W`` for it (0.17 s and more memory per 10^5-grain step), and
-    every inner solve after the first shares the factor the first one built."""
+    every inner solve after the first shares the factor and the scaled ``H`` the first one
+    built."""
     scene = deposit_pile(60, seed=5)                       # a 60-grain pile on a floor
     contacts = find_contacts(scene, 0.05)
     law = Coulomb(0.3)
@@ -157,7 +158,8 @@ def test_the_fixed_point_builds_only_the_operator_its_method_uses():
 
     @register("test-spy", kind=FIRST_ORDER)
     def _spy(scaled, **kwargs):
-        seen.append(("delassus" in scaled.__dict__, scaled.__dict__.get("delassus_factor")))
+        seen.append(("delassus" in scaled.__dict__, scaled.__dict__.get("delassus_factor"),
+                     scaled.__dict__.get("jacobian")))
         return apgd(scaled, **kwargs)
 
     try:
@@ -165,9 +167,11 @@ def test_the_fixed_point_builds_only_the_operator_its_method_uses():
     finally:
         unregister("test-spy")
     assert result.outer_iterations >= 2 and len(seen) == result.outer_iterations
-    assert not any(assembled for assembled, _ in seen)
-    factors = [factor for _, factor in seen]
-    assert factors[0] is None and all(f is factors[1] for f in factors[1:]) and factors[1] is not None
+    assert not any(assembled for assembled, _, _ in seen)
+    for position in (1, 2):         # the factor L, and the normalised H its offset needs
+        built = [entry[position] for entry in seen]
+        assert built[0] is None and built[1] is not None
+        assert all(matrix is built[1] for matrix in built[1:])
 
 
 def test_settings_validate_their_fields():
