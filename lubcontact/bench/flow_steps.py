@@ -48,7 +48,7 @@ from ..scenes import inclined
 from ..sim.simulation import Simulation
 from ..sim.state import SimulationState
 from ..solvers import SolveSettings
-from .harness import iterative, warm_up
+from .harness import has_joint_phase, warm_up
 from .options import check_methods, names
 from .statistics import scaling_exponents
 from .tables import format_table
@@ -184,12 +184,13 @@ def product_time(problem: StepProblem, repeats: int = 20) -> float:
 def time_method(sim: Simulation, method: str, steps: int, tol: float,
                 friction: str = "exact", joint: int = 0) -> dict[str, Any]:
     """Solve ``steps`` steps of ``sim`` from its current state with ``method`` (``friction``:
-    one of :data:`FRICTIONS`; ``joint`` > 0: exact Coulomb by a first-order method with the fixed
-    point's joint phase, ``joint`` of :func:`~lubcontact.solvers.coulomb.solve_coulomb`, the
-    method labelled ``method+jointN``); the state is kept."""
+    one of :data:`FRICTIONS`; ``joint`` > 0: exact Coulomb starting with the fixed point's joint
+    phase, ``joint`` of :func:`~lubcontact.solvers.coulomb.solve_coulomb`, for the methods that
+    have one (:func:`~.harness.has_joint_phase`), labelled ``method+jointN``); the state is
+    kept."""
     start = sim.state.copy()              # the steps below move sim.state in place
     exact = friction == "exact"
-    joint = joint if exact and iterative(method) else 0
+    joint = joint if exact and has_joint_phase(method) else 0
     settings = SolveSettings(method=method, tol=tol, exact_coulomb=exact,
                              options={"joint": joint} if joint else {})
     sim.step(settings)                       # untimed: compilation, caches
@@ -249,9 +250,9 @@ def main(argv: list[str] | None = None) -> int:
                         help="comma list of exact (Coulomb's law), relaxation (its convex "
                              "relaxation) (default: exact)")
     parser.add_argument("--joint", type=int, default=0,
-                        help="exact friction by the first-order methods: the fixed point's joint "
-                             "phase, shift updated every JOINT iterations inside the solver "
-                             "(0: none; default 0)")
+                        help="exact friction starting with the fixed point's joint phase (the "
+                             "first-order methods and newton-ac), shift updated every JOINT "
+                             "iterations inside the solver (0: none; default 0)")
     parser.add_argument("--json", type=pathlib.Path, help="write the rows to this JSON file")
     parser.add_argument("--figure", type=pathlib.Path,
                         help="draw s/step against grains (log-log, fitted exponents) to this PNG")

@@ -26,7 +26,6 @@ import scipy.sparse as sp
 
 from ..problem.cones import Cones
 from ..problem.conic import ConicProblem
-from ..problem.metrics import coulomb_shift
 from .active_set import ActiveSetFinish
 from .dual_data import DIVERGENCE_FACTOR, DualData, ResidualTracker, initial_lipschitz, initial_point, prepare
 from .result import CONVERGED, DIVERGED, MAX_ITER
@@ -40,6 +39,8 @@ STREAMING_ROWS = 250_000
 cache. Measured per iteration, the two paths in one process (docs/records/benchmarks.md): 10 %
 faster at 673 192 rows (10^5 grains), 7 % slower at 48 001 and 81 692 rows (12 000 grains),
 where the vectorised passes through work vectors win."""
+JOINT_MAX_ITER = 20_000
+"""The joint phase's iteration cap where the caller gives none."""
 _KERNEL_STATUS = {0: CONVERGED, 1: MAX_ITER, 2: DIVERGED}
 
 
@@ -230,23 +231,20 @@ def run_apgd_box(data: DualData, z: np.ndarray, tol: float, max_iter: int,
             return tracker, CONVERGED, done
 
 
-def joint_coulomb_apgd(convex: ConicProblem, scaled: ConicProblem, warm_start: np.ndarray | None,
-                       tol: float, max_iter: int,
-                       every: int) -> tuple[np.ndarray, np.ndarray, int]:
-    """Coulomb's problem by APGD with the shift updated inside (``joint`` of
-    :func:`lubcontact.solvers.solve_coulomb`).
+def joint_coulomb_apgd(scaled: ConicProblem, warm_start: np.ndarray | None, tol: float,
+                       max_iter: int, every: int) -> tuple[np.ndarray, int]:
+    """Coulomb's problem by APGD with the shift updated inside (the joint phase of
+    :func:`lubcontact.solvers.solve_coulomb` and of ``newton-ac``).
 
     Parameters
     ----------
-    convex : ConicProblem
-        The convex problem (UNION contacts fixed on a piece), in physical units,
-        with 2D friction cones (:func:`joint_applies`).
     scaled : ConicProblem
-        Its normalised form with the starting shift (``convex.with_shift(shift).normalized()``,
-        or a copy of the caller's normalised problem with that shift and the same cones: the
-        matrices it builds stay with it).
+        A normalised problem with 2D friction cones (:func:`joint_applies`; UNION contacts
+        fixed on a piece for the fixed point) and the starting shift (a copy of the caller's
+        normalised problem with that shift and the same cones: the matrices it builds stay
+        with it).
     warm_start : ndarray, shape (n_rows,), or None
-        Starting forces (physical units).
+        Starting forces (scaled units).
     tol : float
         Tolerance on the modified (De Saxce) natural map.
     max_iter : int
@@ -257,21 +255,18 @@ def joint_coulomb_apgd(convex: ConicProblem, scaled: ConicProblem, warm_start: n
     Returns
     -------
     forces : ndarray, shape (n_rows,)
-        The best iterate (physical units).
-    shift : ndarray, shape (nc,)
-        The shift ``mu |g_T|`` they map to (physical units).
+        The best iterate (scaled units); the caller checks it (the outer loop of the fixed
+        point, the Newton method).
     iterations : int
-        The iterations done; the outer loop of the fixed point checks the result.
+        The iterations done.
     """
     data = prepare(scaled, scaling=True)
-    z = initial_point(data, None if warm_start is None else warm_start / scaled.scaling.force,
-                      scaled.cones)
+    z = initial_point(data, warm_start, scaled.cones)
     base = scaled.offset.copy()
     base[: scaled.n_contacts] -= scaled.shift
     tracker, _, iterations, _ = run_apgd_cones(data, scaled.cones, z, tol, max_iter,
                                                base=data.scale * base, every=every)
-    forces = tracker.best * data.scale * scaled.scaling.force
-    return forces, coulomb_shift(convex, forces), iterations
+    return tracker.best * data.scale, iterations
 
 
 def joint_applies(cones: Cones) -> bool:

@@ -51,7 +51,7 @@ from .. import checks
 from ..problem.cones import ConeKind
 from ..problem.conic import ConicProblem
 from ..problem.metrics import coulomb_shift
-from .compiled_apgd import joint_applies, joint_coulomb_apgd
+from .compiled_apgd import JOINT_MAX_ITER, joint_applies, joint_coulomb_apgd
 from .registry import solve, solver_info
 from .result import CONVERGED, FAILED, MAX_ITER, CoulombResult
 
@@ -95,11 +95,13 @@ def solve_coulomb(problem: ConicProblem, method: str = "clarabel", *, tol: float
         that updates the shift from its iterate every ``joint`` iterations
         (:func:`lubcontact.solvers.kernels.apgd_cone2d`), to ``tol`` on the
         modified natural map and at most ``max_iter`` iterations (default
-        20000); its forces and shift then start the outer loop, whose tests are
-        unchanged (the inner solves check the joint result with the shift
-        frozen). 1 to 5 worked best on the 1000-grain settling pile (2 outer
-        iterations and 760 APGD iterations to ``tol = 1e-6`` instead of 27 and
-        5400). 0: no joint phase.
+        :data:`~lubcontact.solvers.compiled_apgd.JOINT_MAX_ITER`); its forces and shift then
+        start the outer loop, whose tests are unchanged (the inner solves check the joint
+        result with the shift frozen). 1 to 5 worked best on the 1000-grain settling pile (2
+        outer iterations and 760 APGD iterations to ``tol = 1e-6`` instead of 27 and 5400).
+        0: no joint phase. A method that solves exact Coulomb itself (``native_coulomb``)
+        is given ``joint`` as an option when it is > 0 (``newton-ac``: the joint phase
+        before its Newton phases).
     **options
         Passed to the inner solver.
 
@@ -114,6 +116,8 @@ def solve_coulomb(problem: ConicProblem, method: str = "clarabel", *, tol: float
         change only the shift of the prepared problem (``W`` is not rebuilt).
     """
     if solver_info(method).native_coulomb and problem.cones.has_friction:
+        if joint:
+            options["joint"] = joint
         return solve_native_coulomb(problem, method, tol=tol, max_iter=max_iter,
                                     warm_start=warm_start, max_outer=max_outer, **options)
     tol_fp = checks.positive_scalar("tol_fp", tol_fp)
@@ -133,8 +137,11 @@ def solve_coulomb(problem: ConicProblem, method: str = "clarabel", *, tol: float
     convex = branches.problem()
     if joint > 0 and joint_applies(convex.cones):
         scaled = branches.on(normalized).with_shift(branches.restrict(current) / length)
-        forces, current, joint_iterations = joint_coulomb_apgd(
-            convex, scaled, forces, tol, 20000 if max_iter is None else max_iter, joint)
+        joined, joint_iterations = joint_coulomb_apgd(
+            scaled, None if forces is None else forces / force_unit, tol,
+            JOINT_MAX_ITER if max_iter is None else max_iter, joint)
+        forces = joined * force_unit
+        current = coulomb_shift(convex, forces)
         normalized.keep_matrices(scaled)
         inner += joint_iterations
     shift_change = force_change = np.inf
@@ -240,7 +247,8 @@ def solve_native_coulomb(problem: ConicProblem, method: str, *, tol: float = 1e-
     return CoulombResult(**{**vars(result), "status": status, "iterations": iterations},
                          outer_iterations=outer, shift_change=0.0, inner_status=result.status,
                          fixed_point_converged=status == CONVERGED, shift_history=np.zeros(outer),
-                         pulled=branches.pulled_contacts, branch_flips=branches.flips)
+                         pulled=branches.pulled_contacts, branch_flips=branches.flips,
+                         joint_iterations=out.info.get("joint_iterations", 0))
 
 
 def _relative_change(new: np.ndarray, old: np.ndarray) -> float:

@@ -74,6 +74,7 @@ from ..problem.cones import Cones
 from ..problem.conic import ConicProblem
 from ..problem.metrics import coulomb_error
 from ..problem.step import diagonal_scaled
+from .compiled_apgd import joint_applies, joint_coulomb_apgd
 from .coulomb import solve_coulomb
 from .dual_data import DENSE_LIMIT, dense_lu, dense_lu_solve, is_small
 from .registry import ALL_CONES, NEWTON, register
@@ -190,6 +191,9 @@ at 1.07e-5 and 1.22e-5, and apgd-jacobi's fixed point then took 10.5-10.8 s, hal
 for polished answers 2-2.5 times worse. On Siconos' 2020-contact file (tol 1e-8) Gauss-Seidel's
 polished answer (3.2e-7) is not kept, Newton's best being 3.1e-7, and apgd-jacobi's converges
 (docs/records/benchmarks.md, "newton-ac on creeping beds: the fallbacks near tol")."""
+
+JOINT_START_ITERATIONS = 2000
+"""Cap on the iterations of the joint phase before the Newton phases (``joint``)."""
 
 STALLED = "stalled"
 """Status of a Newton phase that stalled (reported in ``info``, never as a result's status)."""
@@ -476,7 +480,7 @@ def _newton_direction(J: sp.csr_matrix | np.ndarray, active: np.ndarray,
 @register("newton-ac", kind=NEWTON, cones=ALL_CONES, warm_start=True, native_coulomb=True)
 def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = 500,
                          warm_start: np.ndarray | None = None, fallback: str | None = "auto",
-                         replay: MethodOutput | None = None) -> MethodOutput:
+                         joint: int = 0, replay: MethodOutput | None = None) -> MethodOutput:
     """Semismooth Newton on the Alart-Curnier function (exact Coulomb, one LU per iteration).
 
     Parameters
@@ -502,6 +506,19 @@ def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = 5
         generalised Jacobian is singular at the solution for every proximal
         weight tried (degenerate contacts, e.g. the 7002-contact Siconos
         granular file with its indefinite ``W``).
+    joint : int
+        If > 0, on 2D convex cones (no UNION contact) of more than
+        :data:`~lubcontact.solvers.dual_data.DENSE_LIMIT` rows (the sparse lane): first the
+        joint phase of the fixed point
+        (:func:`~lubcontact.solvers.compiled_apgd.joint_coulomb_apgd`: APGD that updates the
+        shift every ``joint`` iterations, to ``tol``, at most :data:`JOINT_START_ITERATIONS`
+        iterations) from the warm start; the Newton phases then start from its forces where
+        their FCLIB error is below the warm start's. 0: none. On developed dry flows its
+        forces (FCLIB error near ``tol``) leave Newton 2 iterations instead of 15-23; on the
+        compiled lane the APGD run costs more than the Newton iterations it saves, and with
+        UNION contacts it ends on the wrong piece of the contacts that change piece, from
+        where Newton took more iterations on 12 000-grain gluey steps
+        (docs/records/benchmarks.md, "newton-ac from the joint phase").
     replay : MethodOutput, optional
         Returned as is (see ``native_coulomb`` in :class:`~lubcontact.solvers.SolverInfo`).
 
@@ -509,7 +526,8 @@ def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = 5
     -------
     MethodOutput
         ``iterations``: Newton iterations plus the fallback's inner iterations.
-        ``info``: ``newton_iterations`` (each one LU, more where a
+        ``info``: ``joint_iterations`` (the joint phase's, with ``joint``; counted in
+        ``iterations`` too), ``newton_iterations`` (each one LU, more where a
         singular block is regularised), ``reused_factorisations`` (the sparse lane's LUs
         saved by a block met again: :class:`_Factorisations`), ``gradient_steps``
         (steepest-descent steps taken where the Newton direction failed),
@@ -526,12 +544,19 @@ def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = 5
     unshifted = problem.with_shift(np.zeros(problem.cones.count)) if problem.shift.any() else problem
     forces = np.zeros(problem.n_rows) if warm_start is None else np.array(warm_start, dtype=float)
     setup_time = time.perf_counter() - start
+    joint_iterations = 0
+    if joint > 0 and not function.dense and problem.cones.is_convex and joint_applies(problem.cones):
+        joined, joint_iterations = joint_coulomb_apgd(problem, forces, tol, JOINT_START_ITERATIONS,
+                                                      joint)
+        if function.coulomb_error(unshifted, joined) < function.coulomb_error(unshifted, forces):
+            forces = joined
     phase = _strategies(function, unshifted, forces, tol, max_iter)
-    forces, iterations = phase.forces, phase.iterations
+    forces, iterations = phase.forces, phase.iterations + joint_iterations
     status = INACCURATE if phase.status == STALLED else phase.status
     info = {"newton_iterations": phase.iterations, "gradient_steps": phase.gradient_steps,
             "proximal_steps": phase.proximal_steps, "strategies": phase.strategies,
-            "newton_status": phase.status, "error": phase.error}
+            "newton_status": phase.status, "error": phase.error,
+            "joint_iterations": joint_iterations}
     chain = () if phase.status == CONVERGED else fallback_chain(problem.cones, fallback)
     best_error = phase.error
     for name in chain:

@@ -228,20 +228,6 @@ def test_trio_with_glue_and_friction_clarabel_and_fast_agree():
 
 
 # -- joint fixed point (shift updated inside APGD) ------------------------------------------------
-@pytest.fixture(scope="module")
-def settling_step():
-    """The 31st step of a 60-grain frictional settling pile (mu = 0.3), with Clarabel's fixed point."""
-    sim = Simulation(scenes.settling_pile(60, seed=3), Coulomb(0.3), 0.05, solver="apgd-jacobi",
-                     tol=1e-8, tol_fp=1e-6, on_failure="ignore")
-    sim.run(30)
-    contacts = find_contacts(sim.scene, sim.d_max)
-    cones = sim.law.cones(contacts, sim.state.pairs.lookup(contacts.keys))
-    problem = assemble(sim.scene, contacts, cones, sim.dt, rotations=sim.law.needs_rotation)
-    reference = solve_coulomb(problem, "clarabel", tol=1e-10, tol_fp=1e-10, max_outer=500)
-    assert reference.success and problem.n_contacts >= 30
-    return problem, reference
-
-
 @pytest.mark.parametrize("joint", [0, 1, 5])
 def test_joint_fixed_point_matches_clarabel(settling_step, joint):
     """The joint phase solves Coulomb's problem inside APGD; the outer loop then checks it with
@@ -265,3 +251,4 @@ def test_joint_phase_stops_honestly_when_capped(settling_step):
                            max_outer=3)
     assert capped.status == solvers.MAX_ITER and not capped.fixed_point_converged
     assert coulomb_error(problem.normalized(), capped.forces / capped.force_scale) > 1e-7
+

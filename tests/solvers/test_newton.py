@@ -321,6 +321,17 @@ def test_union_contacts_are_solved_natively_in_one_solve():
     assert np.any(pulled) and np.any(~pulled[kinds == ConeKind.UNION])   # both pieces occur
 
 
+def test_union_contacts_skip_the_joint_start(monkeypatch):
+    """The joint phase would shift both pieces of a UNION contact (spurious minimisers): with
+    UNION contacts newton-ac runs without it (on the sparse lane too)."""
+    case = load_cases()["gamma_states_gluey_coulomb"]
+    use_the_sparse_lane(monkeypatch)
+    plain = solve_coulomb(case.problem, "newton-ac", tol=1e-10)
+    joint = solve_coulomb(case.problem, "newton-ac", tol=1e-10, joint=5)
+    assert joint.joint_iterations == 0
+    np.testing.assert_array_equal(joint.forces, plain.forces)
+
+
 @pytest.fixture(scope="module")
 def stalling():
     """Siconos' 2020-contact granular file at tol 1e-8: every Newton strategy stalls (indefinite
@@ -709,3 +720,42 @@ def test_an_exact_solve_by_newton_ac_leaves_the_callers_problem_as_it_was(name):
     solve_coulomb(problem, "newton-ac", tol=1e-10)
     assert set(problem.__dict__) - cached == set()
     assert np.array_equal(problem.velocity(forces), before)
+
+
+# -- the joint phase before the Newton phases ----------------------------------------------------
+def test_newton_after_the_joint_phase_matches_clarabel_in_fewer_newton_iterations(settling_step,
+                                                                                   monkeypatch):
+    """newton-ac's joint start on the sparse lane: the joint phase's forces start the Newton
+    phases, which then only finish (newton-ac's test, the FCLIB error at tol, is unchanged)."""
+    problem, reference = settling_step
+    use_the_sparse_lane(monkeypatch)
+    plain = solve_coulomb(problem, "newton-ac", tol=1e-9)
+    joint = solve_coulomb(problem, "newton-ac", tol=1e-9, joint=5)
+    assert plain.success and joint.success and plain.joint_iterations == 0
+    assert joint.joint_iterations == joint.info["joint_iterations"] > 0
+    assert joint.iterations == joint.joint_iterations + joint.info["newton_iterations"]
+    assert joint.info["newton_iterations"] < plain.info["newton_iterations"]
+    assert velocity_error(problem, joint.velocities, reference.velocities) <= 1e-6
+    assert coulomb_error(problem.normalized(), joint.forces / joint.force_scale) <= 1e-9
+
+
+def test_a_joint_phase_worse_than_the_warm_start_does_not_start_newton(settling_step, monkeypatch):
+    """From a solution the joint phase (which stops at tol on its own measure) ends farther
+    from Coulomb's law than its start: the Newton phases start from the warm start itself."""
+    problem, _ = settling_step
+    use_the_sparse_lane(monkeypatch)
+    solution = solve_coulomb(problem, "newton-ac", tol=1e-9).forces
+    plain = solve_coulomb(problem, "newton-ac", tol=1e-9, warm_start=solution)
+    joint = solve_coulomb(problem, "newton-ac", tol=1e-9, warm_start=solution, joint=5)
+    assert joint.joint_iterations > 0
+    assert joint.info["newton_iterations"] == plain.info["newton_iterations"]
+    np.testing.assert_array_equal(joint.forces, plain.forces)
+
+
+def test_the_compiled_lane_skips_the_joint_start(settling_step):
+    """At most DENSE_LIMIT rows the compiled Newton phases cost less than the APGD run."""
+    problem, _ = settling_step
+    plain = solve_coulomb(problem, "newton-ac", tol=1e-9)
+    joint = solve_coulomb(problem, "newton-ac", tol=1e-9, joint=5)
+    assert problem.n_rows <= newton.DENSE_LIMIT and joint.joint_iterations == 0
+    np.testing.assert_array_equal(joint.forces, plain.forces)
