@@ -48,7 +48,8 @@ from ..scenes import inclined
 from ..sim.simulation import Simulation
 from ..sim.state import SimulationState
 from ..solvers import SolveSettings
-from .harness import has_joint_phase, warm_up
+from ..solvers.coulomb import has_joint_phase
+from .harness import warm_up
 from .options import check_methods, names
 from .statistics import scaling_exponents
 from .tables import format_table
@@ -185,9 +186,9 @@ def time_method(sim: Simulation, method: str, steps: int, tol: float,
                 friction: str = "exact", joint: int = 0) -> dict[str, Any]:
     """Solve ``steps`` steps of ``sim`` from its current state with ``method`` (``friction``:
     one of :data:`FRICTIONS`; ``joint`` > 0: exact Coulomb starting with the fixed point's joint
-    phase, ``joint`` of :func:`~lubcontact.solvers.coulomb.solve_coulomb`, for the methods that
-    have one (:func:`~.harness.has_joint_phase`), labelled ``method+jointN``); the state is
-    kept."""
+    phase, ``joint`` of :func:`~lubcontact.solvers.coulomb.solve_coulomb`, for the methods it
+    applies to (:func:`~lubcontact.solvers.coulomb.has_joint_phase`), labelled
+    ``method+jointN``); the state is kept."""
     start = sim.state.copy()              # the steps below move sim.state in place
     exact = friction == "exact"
     joint = joint if exact and has_joint_phase(method) else 0

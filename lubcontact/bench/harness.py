@@ -15,7 +15,6 @@ come from the solver registry (:func:`lubcontact.solvers.solver_info`,
 """
 from __future__ import annotations
 
-import inspect
 import time
 import warnings
 from collections.abc import Callable, Sequence
@@ -107,15 +106,6 @@ def warm_up(problem: ConicProblem, names: Sequence[str]) -> None:
 def iterative(method: str) -> bool:
     """Whether ``method`` is of the first-order family (its accuracy is bought by iterations)."""
     return solver_info(method).kind == FIRST_ORDER
-
-
-def has_joint_phase(method: str) -> bool:
-    """Whether exact Coulomb by ``method`` can start with the fixed point's joint phase
-    (``joint`` of :func:`~lubcontact.solvers.solve_coulomb`): a first-order method inside the
-    fixed point, or a native Coulomb method with a ``joint`` option (``newton-ac``)."""
-    info = solver_info(method)
-    return iterative(method) or (info.native_coulomb
-                                 and "joint" in inspect.signature(info.function).parameters)
 
 
 REFERENCE_TRUST = 1e-8

@@ -181,8 +181,8 @@ def _add_common(parser: argparse.ArgumentParser, resume: bool, steps: bool = Tru
     add("--max-outer", type=_number(int, 1), default=None,
         help=f"outer-iteration cap of the fixed point on s {_default('max_outer')}")
     add("--joint", type=_number(int, 0), default=None,
-        help="fixed point: update the shift inside APGD every that many iterations, 0: never "
-             f"{_default('joint')}")
+        help="exact Coulomb: start each step with the joint phase, APGD updating the shift "
+             f"every that many iterations, 0: never {_default('joint')}")
     add("--mu", dest="friction", type=_number(float, 0), default=None,
         help="Coulomb friction coefficient" + ("; may change on --resume" if resume else "")
              + " (default: the preset's, 0.3)")

@@ -28,6 +28,14 @@ DEFAULT_EXACT_SOLVER = "newton-ac"
 solve per step; on developed 300-grain flows 9.0x (dry) and 3.9x (gluey) faster than ``apgd``
 with its fixed point, every step at FCLIB error <= 1e-6 where apgd's end at ``max_iter``
 (docs/records/benchmarks.md)."""
+DEFAULT_JOINT = 5
+"""``joint`` of runs with exact Coulomb friction: each step starts with the fixed point's joint
+phase (APGD updating the shift every 5 iterations) where it applies: before ``newton-ac``'s
+Newton phases on steps of more than ``DENSE_LIMIT`` rows without UNION contacts, on developed
+dry flows of 400 to 12 800 grains 2.2-3.9x faster per step (FCLIB errors at most 7.5e-7, most
+steps at round-off), on the first steps of a tilted bed as fast; before the outer loop of a
+first-order method's fixed point (a gluey 2 000-grain flow, ``apgd-jacobi``: 0.33 against 0.48 s
+per step) (docs/records/benchmarks.md, "newton-ac from the joint phase")."""
 REFERENCE_SOLVER = "clarabel"
 """The default otherwise (always registered)."""
 
@@ -120,10 +128,11 @@ class RunConfig:
     tol_fp, max_outer : float, int
         Tolerance and outer-iteration cap of that fixed point.
     joint : int
-        Solve Coulomb's problem jointly inside the first APGD run, updating
-        the shift every ``joint`` iterations, before the outer loop checks it
-        (``solve_coulomb(joint=...)`` of :mod:`lubcontact.solvers.coulomb`;
-        0: plain outer loop).
+        Exact Coulomb friction: start each step by solving Coulomb's problem jointly in one
+        APGD run that updates the shift every ``joint`` iterations, before the outer loop of
+        the fixed point or ``newton-ac``'s Newton phases
+        (``solve_coulomb(joint=...)`` of :mod:`lubcontact.solvers.coulomb`; default
+        :data:`DEFAULT_JOINT`; 0: none).
     friction : float or None
         Coulomb coefficient overriding the preset's ``mu`` (None: the preset's).
     viscosity, roughness : float or None
@@ -195,7 +204,7 @@ class RunConfig:
     fixed_point: bool = False
     tol_fp: float = 1e-8
     max_outer: int = 50
-    joint: int = 0
+    joint: int = DEFAULT_JOINT
     friction: float | None = None
     viscosity: float | None = None
     roughness: float | None = None

@@ -45,6 +45,8 @@ a local (FCLIB) problem, so the same formula covers both.
 """
 from __future__ import annotations
 
+import inspect
+
 import numpy as np
 
 from .. import checks
@@ -100,8 +102,8 @@ def solve_coulomb(problem: ConicProblem, method: str = "clarabel", *, tol: float
         result with the shift frozen). 1 to 5 worked best on the 1000-grain settling pile (2
         outer iterations and 760 APGD iterations to ``tol = 1e-6`` instead of 27 and 5400).
         0: no joint phase. A method that solves exact Coulomb itself (``native_coulomb``)
-        is given ``joint`` as an option when it is > 0 (``newton-ac``: the joint phase
-        before its Newton phases).
+        is given ``joint`` as an option when it is > 0 and the method has one
+        (:func:`has_joint_phase`; ``newton-ac``: the joint phase before its Newton phases).
     **options
         Passed to the inner solver.
 
@@ -116,7 +118,7 @@ def solve_coulomb(problem: ConicProblem, method: str = "clarabel", *, tol: float
         change only the shift of the prepared problem (``W`` is not rebuilt).
     """
     if solver_info(method).native_coulomb and problem.cones.has_friction:
-        if joint:
+        if joint and has_joint_phase(method):
             options["joint"] = joint
         return solve_native_coulomb(problem, method, tol=tol, max_iter=max_iter,
                                     warm_start=warm_start, max_outer=max_outer, **options)
@@ -249,6 +251,14 @@ def solve_native_coulomb(problem: ConicProblem, method: str, *, tol: float = 1e-
                          fixed_point_converged=status == CONVERGED, shift_history=np.zeros(outer),
                          pulled=branches.pulled_contacts, branch_flips=branches.flips,
                          joint_iterations=out.info.get("joint_iterations", 0))
+
+
+def has_joint_phase(method: str) -> bool:
+    """Whether ``joint`` of :func:`solve_coulomb` applies to ``method``: any method iterated by
+    the fixed point, a native Coulomb method only with a ``joint`` option of its own
+    (``newton-ac``; Siconos' solvers have none)."""
+    info = solver_info(method)
+    return not info.native_coulomb or "joint" in inspect.signature(info.function).parameters
 
 
 def _relative_change(new: np.ndarray, old: np.ndarray) -> float:

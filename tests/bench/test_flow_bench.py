@@ -65,9 +65,10 @@ def test_a_layer_widened_to_each_size_gives_rows_an_exponent_and_a_figure(tmp_pa
 
 
 def test_exact_rows_with_the_joint_phase_are_labelled_and_converge(tmp_path):
-    """``--joint 5``: the first-order method's exact rows are labelled ``+joint5``, converge to
-    the FCLIB tolerance and take fewer inner iterations than the plain fixed point on the same
-    steps (the joint phase ran); newton-ac, which has no fixed point, keeps its name."""
+    """``--joint 5``: the exact rows of the methods it applies to (a first-order method's fixed
+    point, newton-ac's start) are labelled ``+joint5`` and converge to the FCLIB tolerance; the
+    first-order method's take fewer inner iterations than the plain fixed point on the same
+    steps (the joint phase ran)."""
     layer = tmp_path / "layer"
     config = RunConfig(scene="inclined_flow", n_grains=24, width=12.0, model="dry", angle=24.0,
                        steps=6, dt_fraction=0.05, settle_steps=0, checkpoint_every=6)
@@ -77,7 +78,7 @@ def test_exact_rows_with_the_joint_phase_are_labelled_and_converge(tmp_path):
             "--json", str(tmp_path / "rows.json")]
     assert flow_steps.main(argv) == 0
     rows = json.loads((tmp_path / "rows.json").read_text())
-    assert [row["method"] for row in rows] == ["apgd-jacobi+joint5", "newton-ac"]
+    assert [row["method"] for row in rows] == ["apgd-jacobi+joint5", "newton-ac+joint5"]
     for row in rows:
         assert row["statuses"] == "converged" and row["max_fclib_error"] <= 1e-5
     plain = argv[:argv.index("--joint")] + argv[argv.index("--joint") + 2:]

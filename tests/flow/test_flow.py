@@ -10,7 +10,7 @@ from lubcontact.flow import cli as flow_cli
 from lubcontact.flow import demo as flow_demo
 from lubcontact.flow import measure
 from lubcontact.flow.bed import initial_scene
-from lubcontact.flow.config import RunConfig
+from lubcontact.flow.config import DEFAULT_JOINT, RunConfig
 from lubcontact.flow.run import FlowRun
 from lubcontact.model import laws
 from lubcontact.model.scene import Grains, Scene
@@ -246,6 +246,16 @@ def final_state(run):
             run.sim.state.pairs.keys.copy(), run.sim.state.pairs.gamma.copy(), run.sim.scene.time)
 
 
+def test_exact_runs_start_each_step_with_the_joint_phase_by_default():
+    """The default exact solver with the default ``joint``: newton-ac is given the joint start
+    (``--joint 0`` turns it off)."""
+    scene = initial_scene(small_config())
+    default = FlowRun(small_config(solver=""), scene)
+    assert default.sim.settings.method == "newton-ac" and default.config.joint == DEFAULT_JOINT > 0
+    assert default.sim.settings.options == {"joint": DEFAULT_JOINT}
+    assert FlowRun(small_config(solver="", joint=0), scene).sim.settings.options == {}
+
+
 RESUME_CASES = {"dry-clarabel-fixed-point": dict(model="dry"),
                 "gluey-apgd": dict(model="gluey", solver="apgd", fixed_point=False, tol=1e-6),
                 "dry-apgd-joint-fixed-point": dict(model="dry", solver="apgd", tol=1e-6, tol_fp=1e-6,
@@ -264,7 +274,7 @@ def test_resume_from_checkpoint_reaches_the_uninterrupted_state(tmp_path, case):
     assert straight.last_report.contacts.count > 5          # grains touched the bed and each other
     if config.model == "gluey":
         assert np.count_nonzero(straight.sim.state.pairs.gamma < 0) > 5
-    if config.joint:                                        # the joint phase of the fixed point ran
+    if "joint" in RESUME_CASES[case]:                       # the joint phase of the fixed point ran
         assert straight.last_report.result.joint_iterations > 0
 
     first = FlowRun(config, scene, tmp_path)

@@ -29,6 +29,7 @@ from lubcontact.solvers import (
     solve_coulomb,
     solver_info,
 )
+from lubcontact.solvers.coulomb import has_joint_phase
 from lubcontact.solvers.newton import (
     FALLBACK_GAP,
     SIGMA_MAX,
@@ -739,6 +740,21 @@ def test_newton_after_the_joint_phase_matches_clarabel_in_fewer_newton_iteration
     assert coulomb_error(problem.normalized(), joint.forces / joint.force_scale) <= 1e-9
 
 
+def test_newtons_answer_from_the_joint_phase_is_taken_below_joint_finish_tol(settling_step,
+                                                                            monkeypatch):
+    """The joint phase stops just below tol, where the finish's plain Newton iterations may not
+    lower the error (on developed dry flows): Newton then goes on to JOINT_FINISH tol (here the
+    finish is switched off; without the rule the answer stays at 3.5e-8, above 1e-9)."""
+    problem, reference = settling_step
+    use_the_sparse_lane(monkeypatch)
+    monkeypatch.setattr(newton, "FINISH_ITERATIONS", 0)
+    result = solve_coulomb(problem, "newton-ac", tol=1e-6, joint=5)
+    assert result.success and result.joint_iterations > 0
+    assert coulomb_error(problem.normalized(), result.forces / result.force_scale) \
+        <= newton.JOINT_FINISH * 1e-6
+    assert velocity_error(problem, result.velocities, reference.velocities) <= 1e-8
+
+
 def test_a_joint_phase_worse_than_the_warm_start_does_not_start_newton(settling_step, monkeypatch):
     """From a solution the joint phase (which stops at tol on its own measure) ends farther
     from Coulomb's law than its start: the Newton phases start from the warm start itself."""
@@ -759,3 +775,21 @@ def test_the_compiled_lane_skips_the_joint_start(settling_step):
     joint = solve_coulomb(problem, "newton-ac", tol=1e-9, joint=5)
     assert problem.n_rows <= newton.DENSE_LIMIT and joint.joint_iterations == 0
     np.testing.assert_array_equal(joint.forces, plain.forces)
+
+
+def test_a_native_coulomb_method_without_a_joint_option_is_not_given_one():
+    """A run's default ``joint`` reaches every exact solve: a native Coulomb method without the
+    option (Siconos' solvers) solves as without it."""
+    problem = siconos_test_problem("FrictionContactProblem00237.dat")
+
+    @register("native-without-joint-test", kind=FIRST_ORDER, cones=ALL_CONES, native_coulomb=True)
+    def native(problem, *, tol, max_iter=None, warm_start=None, replay=None):
+        return replay or newton_alart_curnier(problem, tol=tol, warm_start=warm_start)
+
+    try:
+        assert not has_joint_phase("native-without-joint-test")
+        result = solve_coulomb(problem, "native-without-joint-test", tol=1e-8, joint=5)
+    finally:
+        unregister("native-without-joint-test")
+    assert has_joint_phase("newton-ac") and has_joint_phase("apgd-jacobi")
+    assert result.status == CONVERGED and result.joint_iterations == 0
