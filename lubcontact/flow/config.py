@@ -32,8 +32,8 @@ DEFAULT_JOINT = 5
 """``joint`` of runs with exact Coulomb friction: each step starts with the fixed point's joint
 phase (APGD updating the shift every 5 iterations) where it applies: before ``newton-ac``'s
 Newton phases on steps of more than ``DENSE_LIMIT`` rows without UNION contacts, on developed
-dry flows of 400 to 12 800 grains 2.2-3.9x faster per step (FCLIB errors at most 7.5e-7, most
-steps at round-off), on the first steps of a tilted bed as fast; before the outer loop of a
+dry flows of 400 to 12 800 grains 1.7-3.1x faster per step (FCLIB errors at most 1.5e-10),
+on the first steps of a tilted bed as fast; before the outer loop of a
 first-order method's fixed point (a gluey 2 000-grain flow, ``apgd-jacobi``: 0.33 against 0.48 s
 per step) (docs/records/benchmarks.md, "newton-ac from the joint phase")."""
 REFERENCE_SOLVER = "clarabel"

@@ -520,12 +520,12 @@ def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = 5
         (:func:`~lubcontact.solvers.compiled_apgd.joint_coulomb_apgd`: APGD that updates the
         shift every ``joint`` iterations, to ``tol``, at most :data:`JOINT_START_ITERATIONS`
         iterations) from the warm start; the Newton phases then start from its forces where
-        their FCLIB error is below the warm start's. 0: none. On developed dry flows its
-        forces (FCLIB error near ``tol``) leave Newton 2 iterations instead of 15-23; on the
-        compiled lane the APGD run costs more than the Newton iterations it saves, and with
-        UNION contacts it ends on the wrong piece of the contacts that change piece, from
-        where Newton took more iterations on 12 000-grain gluey steps
-        (docs/records/benchmarks.md, "newton-ac from the joint phase").
+        their FCLIB error is below the warm start's, and go on to :data:`JOINT_FINISH` ``tol``.
+        0: none. On developed dry flows its forces (FCLIB error near ``tol``) leave Newton 2 to
+        13 iterations instead of 15-28; on the compiled lane the APGD run costs more than the
+        Newton iterations it saves, and with UNION contacts it ends on the wrong piece of the
+        contacts that change piece, from where Newton took more iterations on 12 000-grain
+        gluey steps (docs/records/benchmarks.md, "newton-ac from the joint phase").
     replay : MethodOutput, optional
         Returned as is (see ``native_coulomb`` in :class:`~lubcontact.solvers.SolverInfo`).
 
