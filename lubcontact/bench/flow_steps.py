@@ -252,8 +252,9 @@ def main(argv: list[str] | None = None) -> int:
                              "relaxation) (default: exact)")
     parser.add_argument("--joint", type=int, default=0,
                         help="exact friction starting with the fixed point's joint phase (the "
-                             "first-order methods and newton-ac), shift updated every JOINT "
-                             "iterations inside the solver (0: none; default 0)")
+                             "first-order methods and newton-ac, which runs it on steps of more "
+                             "than 300 rows without UNION contacts), shift updated every JOINT "
+                             "iterations inside one APGD run (0: none; default 0)")
     parser.add_argument("--json", type=pathlib.Path, help="write the rows to this JSON file")
     parser.add_argument("--figure", type=pathlib.Path,
                         help="draw s/step against grains (log-log, fitted exponents) to this PNG")

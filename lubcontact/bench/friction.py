@@ -61,6 +61,7 @@ import numpy as np
 from ..problem.conic import ConicProblem
 from ..problem.metrics import coulomb_error, scaled_coulomb_error, velocity_error
 from ..solvers import SolveSettings
+from ..solvers.coulomb import has_joint_phase
 from .friction_problems import (
     EXTERNAL,
     ExternalProblem,
@@ -89,16 +90,17 @@ def coulomb_settings(method: str, tol: float, tol_fp: float, max_outer: int, for
                      anderson: int, max_iter: int | None = None, joint: int = 0) -> SolveSettings:
     """Exact Coulomb by the fixed point around ``method``.
 
-    Inexact inner solves (``forcing``), ``anderson``, ``max_iter`` and the
-    joint phase (``joint`` of :func:`~lubcontact.solvers.coulomb.solve_coulomb`,
-    passed when > 0) apply to iterative (first-order) methods only; the others
-    keep the fixed point's defaults.
+    Inexact inner solves (``forcing``), ``anderson`` and ``max_iter`` apply to iterative
+    (first-order) methods only, the joint phase (``joint`` of
+    :func:`~lubcontact.solvers.coulomb.solve_coulomb`, passed when > 0) to the methods of
+    :func:`~lubcontact.solvers.coulomb.has_joint_phase` (``newton-ac`` too); the others keep
+    the fixed point's defaults.
     """
+    start = {"joint": joint} if joint > 0 and has_joint_phase(method) else {}
     if not iterative(method):
-        return SolveSettings(method=method, tol=tol, tol_fp=tol_fp, max_outer=max_outer)
-    options = dict(forcing=forcing, anderson=anderson)
-    if joint > 0:
-        options["joint"] = joint
+        return SolveSettings(method=method, tol=tol, tol_fp=tol_fp, max_outer=max_outer,
+                             options=start)
+    options = dict(forcing=forcing, anderson=anderson, **start)
     return SolveSettings(method=method, tol=tol, max_iter=max_iter, tol_fp=tol_fp,
                          max_outer=max_outer, options=options)
 
@@ -263,8 +265,8 @@ def parser() -> argparse.ArgumentParser:
     parser.add_argument("--max-iter", type=int, default=None,
                         help="iterative methods: iteration cap of each inner solve (method default)")
     parser.add_argument("--joint", type=int, default=0,
-                        help="iterative methods: joint phase of the fixed point, shift updated "
-                             "every JOINT iterations inside the solver (0: none)")
+                        help="iterative methods and newton-ac: the joint phase first, shift "
+                             "updated every JOINT iterations inside one APGD run (0: none)")
     parser.add_argument("--quick", action="store_true",
                         help="the small external problems only (667-contact Siconos, "
                              "Box_Stacks, LMGC, local_problem_test)")

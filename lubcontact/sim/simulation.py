@@ -58,7 +58,8 @@ class Simulation:
         Solver tolerance.
     solver_options : dict, optional
         Extra keyword arguments for the solver; ``joint``, ``forcing`` and
-        ``anderson`` go to the fixed point on s only (frictional steps).
+        ``anderson`` go to the fixed point on s only (frictional steps; ``joint`` also to
+        ``newton-ac``, which starts its Newton phases with it).
     on_failure : {"raise", "warn", "ignore", "fallback"}
         Policy when a step's solve does not converge: ``raise`` stops with
         :class:`~lubcontact.solvers.SolverError` before the state is touched,

@@ -39,8 +39,6 @@ STREAMING_ROWS = 250_000
 cache. Measured per iteration, the two paths in one process (docs/records/benchmarks.md): 10 %
 faster at 673 192 rows (10^5 grains), 7 % slower at 48 001 and 81 692 rows (12 000 grains),
 where the vectorised passes through work vectors win."""
-JOINT_MAX_ITER = 20_000
-"""The joint phase's iteration cap where the caller gives none."""
 _KERNEL_STATUS = {0: CONVERGED, 1: MAX_ITER, 2: DIVERGED}
 
 
@@ -240,9 +238,9 @@ def joint_coulomb_apgd(scaled: ConicProblem, warm_start: np.ndarray | None, tol:
     ----------
     scaled : ConicProblem
         A normalised problem with 2D friction cones (:func:`joint_applies`; UNION contacts
-        fixed on a piece for the fixed point) and the starting shift (a copy of the caller's
-        normalised problem with that shift and the same cones: the matrices it builds stay
-        with it).
+        fixed on a piece for the fixed point) and the starting shift (the fixed point passes a
+        copy of its normalised problem with that shift and the same cones, ``newton-ac`` its own
+        problem: the matrices built here stay with it).
     warm_start : ndarray, shape (n_rows,), or None
         Starting forces (scaled units).
     tol : float

@@ -45,17 +45,18 @@ a local (FCLIB) problem, so the same formula covers both.
 """
 from __future__ import annotations
 
-import inspect
-
 import numpy as np
 
 from .. import checks
 from ..problem.cones import ConeKind
 from ..problem.conic import ConicProblem
 from ..problem.metrics import coulomb_shift
-from .compiled_apgd import JOINT_MAX_ITER, joint_applies, joint_coulomb_apgd
-from .registry import solve, solver_info
+from .compiled_apgd import joint_applies, joint_coulomb_apgd
+from .registry import FIRST_ORDER, solve, solver_info
 from .result import CONVERGED, FAILED, MAX_ITER, CoulombResult
+
+JOINT_MAX_ITER = 20_000
+"""The fixed point's joint phase's iteration cap where ``max_iter`` is not given."""
 
 
 def solve_coulomb(problem: ConicProblem, method: str = "clarabel", *, tol: float = 1e-9, tol_fp: float = 1e-8,
@@ -97,7 +98,7 @@ def solve_coulomb(problem: ConicProblem, method: str = "clarabel", *, tol: float
         that updates the shift from its iterate every ``joint`` iterations
         (:func:`lubcontact.solvers.kernels.apgd_cone2d`), to ``tol`` on the
         modified natural map and at most ``max_iter`` iterations (default
-        :data:`~lubcontact.solvers.compiled_apgd.JOINT_MAX_ITER`); its forces and shift then
+        :data:`JOINT_MAX_ITER`); its forces and shift then
         start the outer loop, whose tests are unchanged (the inner solves check the joint
         result with the shift frozen). 1 to 5 worked best on the 1000-grain settling pile (2
         outer iterations and 760 APGD iterations to ``tol = 1e-6`` instead of 27 and 5400).
@@ -254,11 +255,15 @@ def solve_native_coulomb(problem: ConicProblem, method: str, *, tol: float = 1e-
 
 
 def has_joint_phase(method: str) -> bool:
-    """Whether ``joint`` of :func:`solve_coulomb` applies to ``method``: any method iterated by
-    the fixed point, a native Coulomb method only with a ``joint`` option of its own
-    (``newton-ac``; Siconos' solvers have none)."""
+    """Whether exact Coulomb by ``method`` is meant to start with the joint phase: a first-order
+    method (the fixed point's joint phase), or a native Coulomb method with a ``joint`` option
+    of its own (``newton-ac``), to which :func:`solve_coulomb` passes it (Siconos' solvers have
+    none). The fixed point runs the joint phase before any other method's outer loop too when
+    given ``joint``; the benchmarks give it to these methods only."""
     info = solver_info(method)
-    return not info.native_coulomb or "joint" in inspect.signature(info.function).parameters
+    if info.native_coulomb:
+        return "joint" in info.parameters
+    return info.kind == FIRST_ORDER
 
 
 def _relative_change(new: np.ndarray, old: np.ndarray) -> float:

@@ -498,7 +498,8 @@ def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = 5
         Stop when the FCLIB error is below it.
     max_iter : int
         Cap on Newton iterations (one LU each: dense up to :data:`DENSE_LIMIT` active rows,
-        sparse above).
+        sparse above); the joint phase (``joint``) has its own cap,
+        :data:`JOINT_START_ITERATIONS`.
     warm_start : ndarray, shape (n_rows,), optional
         Initial forces (scaled); zero otherwise.
     fallback : str or None
@@ -532,9 +533,10 @@ def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = 5
     Returns
     -------
     MethodOutput
-        ``iterations``: Newton iterations plus the fallback's inner iterations.
-        ``info``: ``joint_iterations`` (the joint phase's, with ``joint``; counted in
-        ``iterations`` too), ``newton_iterations`` (each one LU, more where a
+        ``iterations``: the joint phase's APGD iterations, Newton iterations (the
+        finish from the joint phase's forces included) and the fallback's inner iterations.
+        ``info``: ``joint_iterations`` (the joint phase's, with ``joint``),
+        ``newton_iterations`` (each one LU, more where a
         singular block is regularised), ``reused_factorisations`` (the sparse lane's LUs
         saved by a block met again: :class:`_Factorisations`), ``gradient_steps``
         (steepest-descent steps taken where the Newton direction failed),
@@ -559,7 +561,7 @@ def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = 5
         if joined_start:
             forces = joined
     phase = _strategies(function, unshifted, forces, tol, max_iter)
-    forces, iterations = phase.forces, phase.iterations + joint_iterations
+    forces, iterations, history = phase.forces, phase.iterations + joint_iterations, phase.history
     status = INACCURATE if phase.status == STALLED else phase.status
     info = {"newton_iterations": phase.iterations, "gradient_steps": phase.gradient_steps,
             "proximal_steps": phase.proximal_steps, "strategies": phase.strategies,
@@ -570,6 +572,7 @@ def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = 5
                                   STRATEGIES[0])
         iterations += finish.iterations
         info["newton_iterations"] += finish.iterations
+        history = np.concatenate([history, finish.history[1:]])
         if finish.error < phase.error:
             forces, info["error"] = finish.forces, finish.error
     chain = () if phase.status == CONVERGED else fallback_chain(problem.cones, fallback)
@@ -599,7 +602,7 @@ def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = 5
     info["reused_factorisations"] = function.factorisations.reused     # the polishes' too
     return MethodOutput(forces, status, iterations, setup_time=setup_time,
                         solve_time=time.perf_counter() - start - setup_time,
-                        residual_history=phase.history, info=info)
+                        residual_history=history, info=info)
 
 
 def fallback_chain(cones: Cones, fallback: str | None) -> tuple[str, ...]:

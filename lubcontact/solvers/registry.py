@@ -22,6 +22,7 @@ Adding a solver (see ``docs/guide/adding-a-solver.md``)::
 """
 from __future__ import annotations
 
+import inspect
 import time
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
@@ -81,6 +82,8 @@ class SolverInfo:
     step_only : bool
         Whether it needs a :class:`~lubcontact.problem.StepProblem` (a primal
         form over velocities and masses; a local problem has neither).
+    parameters : frozenset of str
+        The keyword parameters of ``function`` (read once, at registration).
     native_coulomb : bool
         Whether it solves exact Coulomb friction itself (reading its input as
         the Coulomb problem with ``q = b - [s, 0]``, e.g. Siconos):
@@ -103,6 +106,7 @@ class SolverInfo:
     step_only: bool
     native_coulomb: bool
     description: str
+    parameters: frozenset = frozenset()
 
     def rejection(self, problem: ConicProblem) -> str | None:
         """Why this method cannot solve ``problem``, or None when it can."""
@@ -154,7 +158,8 @@ def register(name: str, *, kind: str = FIRST_ORDER, cones: Iterable[ConeKind] = 
                                      second_order=second_order, warm_start=warm_start,
                                      polishing=polishing, step_only=step_only,
                                      native_coulomb=native_coulomb,
-                                     description=description or (doc[0] if doc else ""))
+                                     description=description or (doc[0] if doc else ""),
+                                     parameters=frozenset(inspect.signature(function).parameters))
         return function
 
     return wrap

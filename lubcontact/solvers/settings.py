@@ -47,7 +47,8 @@ class SolveSettings:
     options : dict
         Extra keyword arguments of the method (a ``max_iter`` given here
         moves to the field); ``joint``, ``forcing`` and ``anderson`` go to
-        the fixed point only.
+        the fixed point only (``joint`` also to a native Coulomb method that has the option,
+        ``newton-ac``: :func:`~lubcontact.solvers.coulomb.has_joint_phase`).
     """
 
     method: str = "clarabel"

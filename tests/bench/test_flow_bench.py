@@ -64,11 +64,16 @@ def test_a_layer_widened_to_each_size_gives_rows_an_exponent_and_a_figure(tmp_pa
     assert len(list((tmp_path / "cache").glob("widened-*-2x.npz"))) == 1
 
 
-def test_exact_rows_with_the_joint_phase_are_labelled_and_converge(tmp_path):
+def test_exact_rows_with_the_joint_phase_are_labelled_and_converge(tmp_path, monkeypatch):
     """``--joint 5``: the exact rows of the methods it applies to (a first-order method's fixed
     point, newton-ac's start) are labelled ``+joint5`` and converge to the FCLIB tolerance; the
     first-order method's take fewer inner iterations than the plain fixed point on the same
-    steps (the joint phase ran)."""
+    steps, newton-ac's more (its APGD iterations counted: the joint phase ran, on the sparse
+    lane forced here)."""
+    from lubcontact.solvers import dual_data, newton
+
+    monkeypatch.setattr(dual_data, "DENSE_OPERATOR_LIMIT", 0)
+    monkeypatch.setattr(newton, "DENSE_LIMIT", 0)
     layer = tmp_path / "layer"
     config = RunConfig(scene="inclined_flow", n_grains=24, width=12.0, model="dry", angle=24.0,
                        steps=6, dt_fraction=0.05, settle_steps=0, checkpoint_every=6)
@@ -84,9 +89,10 @@ def test_exact_rows_with_the_joint_phase_are_labelled_and_converge(tmp_path):
     plain = argv[:argv.index("--joint")] + argv[argv.index("--joint") + 2:]
     plain[plain.index("--json") + 1] = str(tmp_path / "plain.json")
     assert flow_steps.main(plain) == 0
-    fixed_point = json.loads((tmp_path / "plain.json").read_text())[0]
-    assert fixed_point["method"] == "apgd-jacobi"
+    fixed_point, newton_alone = json.loads((tmp_path / "plain.json").read_text())
+    assert (fixed_point["method"], newton_alone["method"]) == ("apgd-jacobi", "newton-ac")
     assert rows[0]["iterations"] < fixed_point["iterations"]
+    assert rows[1]["iterations"] > newton_alone["iterations"]
 
 
 def test_a_size_that_is_not_a_multiple_of_the_layer_is_a_one_line_error(tmp_path, capsys):

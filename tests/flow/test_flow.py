@@ -246,17 +246,26 @@ def final_state(run):
             run.sim.state.pairs.keys.copy(), run.sim.state.pairs.gamma.copy(), run.sim.scene.time)
 
 
-def test_exact_runs_start_each_step_with_the_joint_phase_by_default():
-    """The default exact solver with the default ``joint``: newton-ac is given the joint start
-    (``--joint 0`` turns it off)."""
+def test_exact_runs_start_each_step_with_the_joint_phase_by_default(monkeypatch):
+    """The default exact solver with the default ``joint``: newton-ac starts its steps with the
+    joint phase (here on the sparse lane, forced: the flow's steps are small), ``--joint 0``
+    without."""
+    from lubcontact.solvers import dual_data, newton
+
+    monkeypatch.setattr(dual_data, "DENSE_OPERATOR_LIMIT", 0)
+    monkeypatch.setattr(newton, "DENSE_LIMIT", 0)
     scene = initial_scene(small_config())
-    default = FlowRun(small_config(solver=""), scene)
-    assert default.sim.settings.method == "newton-ac" and default.config.joint == DEFAULT_JOINT > 0
-    assert default.sim.settings.options == {"joint": DEFAULT_JOINT}
-    assert FlowRun(small_config(solver="", joint=0), scene).sim.settings.options == {}
+    joint_iterations = {}
+    for joint in (DEFAULT_JOINT, 0):
+        run = FlowRun(small_config(solver="", **({} if joint else {"joint": 0})), scene)
+        assert run.sim.settings.method == "newton-ac" and run.config.joint == joint
+        run.advance(run.config.steps)
+        assert run.last_report.contacts.count > 5
+        joint_iterations[joint] = run.last_report.result.joint_iterations
+    assert DEFAULT_JOINT > 0 and joint_iterations[DEFAULT_JOINT] > 0 and joint_iterations[0] == 0
 
 
-RESUME_CASES = {"dry-clarabel-fixed-point": dict(model="dry"),
+RESUME_CASES = {"dry-clarabel-fixed-point": dict(model="dry", joint=0),
                 "gluey-apgd": dict(model="gluey", solver="apgd", fixed_point=False, tol=1e-6),
                 "dry-apgd-joint-fixed-point": dict(model="dry", solver="apgd", tol=1e-6, tol_fp=1e-6,
                                                    joint=5)}
@@ -274,7 +283,7 @@ def test_resume_from_checkpoint_reaches_the_uninterrupted_state(tmp_path, case):
     assert straight.last_report.contacts.count > 5          # grains touched the bed and each other
     if config.model == "gluey":
         assert np.count_nonzero(straight.sim.state.pairs.gamma < 0) > 5
-    if "joint" in RESUME_CASES[case]:                       # the joint phase of the fixed point ran
+    if config.joint and config.fixed_point:                 # the joint phase of the fixed point ran
         assert straight.last_report.result.joint_iterations > 0
 
     first = FlowRun(config, scene, tmp_path)

@@ -251,4 +251,3 @@ def test_joint_phase_stops_honestly_when_capped(settling_step):
                            max_outer=3)
     assert capped.status == solvers.MAX_ITER and not capped.fixed_point_converged
     assert coulomb_error(problem.normalized(), capped.forces / capped.force_scale) > 1e-7
-
