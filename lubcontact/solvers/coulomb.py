@@ -98,13 +98,13 @@ def solve_coulomb(problem: ConicProblem, method: str = "clarabel", *, tol: float
         that updates the shift from its iterate every ``joint`` iterations
         (:func:`lubcontact.solvers.kernels.apgd_cone2d`), to ``tol`` on the
         modified natural map and at most ``max_iter`` iterations (default
-        :data:`JOINT_MAX_ITER`); its forces and shift then
-        start the outer loop, whose tests are unchanged (the inner solves check the joint
-        result with the shift frozen). 1 to 5 worked best on the 1000-grain settling pile (2
-        outer iterations and 760 APGD iterations to ``tol = 1e-6`` instead of 27 and 5400).
-        0: no joint phase. A method that solves exact Coulomb itself (``native_coulomb``)
-        is given ``joint`` as an option when it is > 0 and the method has one
-        (:func:`has_joint_phase`; ``newton-ac``: the joint phase before its Newton phases).
+        :data:`JOINT_MAX_ITER`); its forces and shift then start the outer loop, whose tests
+        are unchanged (the inner solves check the joint result with the shift frozen). 1 to 5
+        worked best on the 1000-grain settling pile (2 outer iterations and 760 APGD
+        iterations to ``tol = 1e-6`` instead of 27 and 5400). 0: no joint phase. A method
+        that solves exact Coulomb itself (``native_coulomb``) is given ``joint`` as an option
+        when it is > 0 and the method has one (:func:`has_joint_phase`; ``newton-ac``: the
+        joint phase before its Newton phases).
     **options
         Passed to the inner solver.
 
