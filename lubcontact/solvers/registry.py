@@ -82,8 +82,6 @@ class SolverInfo:
     step_only : bool
         Whether it needs a :class:`~lubcontact.problem.StepProblem` (a primal
         form over velocities and masses; a local problem has neither).
-    parameters : frozenset of str
-        The keyword parameters of ``function`` (read once, at registration).
     native_coulomb : bool
         Whether it solves exact Coulomb friction itself (reading its input as
         the Coulomb problem with ``q = b - [s, 0]``, e.g. Siconos):
@@ -94,6 +92,8 @@ class SolverInfo:
         as is).
     description : str
         One line for tables and ``--help``.
+    parameters : frozenset of str
+        The keyword parameters of ``function`` (read once, at registration).
     """
 
     name: str
