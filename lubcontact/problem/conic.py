@@ -71,6 +71,10 @@ class ConicProblem(Protocol):
         """``L`` with ``W = L^T L`` when known (a step problem), else None."""
 
     @property
+    def delassus_rank_bound(self) -> int:
+        """An upper bound on the rank of ``W``."""
+
+    @property
     def dense_delassus(self) -> np.ndarray:
         """``W`` as a dense array, shape (n_rows, n_rows) (built on demand: small problems)."""
 
@@ -115,6 +119,11 @@ class ConicProblemMixin:
     @property
     def n_rows(self) -> int:
         return self.cones.n_rows
+
+    @property
+    def delassus_rank_bound(self) -> int:
+        """An upper bound on the rank of ``W``: ``n_rows`` where nothing else is known."""
+        return self.n_rows
 
     def natural_residual(self, forces: np.ndarray) -> float:
         """``|lam - P_K(lam - (W lam + b))|`` in this problem's units."""

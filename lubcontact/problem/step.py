@@ -86,6 +86,13 @@ class StepProblem(ConicProblemMixin):
     def n_dof(self) -> int:
         return self.mass.shape[0]
 
+    @property
+    def delassus_rank_bound(self) -> int:
+        """An upper bound on the rank of ``W = dt^2 H M^-1 H^T``: ``min(n_dof, n_rows)``. A
+        packing with more contact rows than degrees of freedom (a pile at rest, hyperstatic)
+        has a singular ``W``."""
+        return min(self.n_dof, self.n_rows)
+
     @cached_property
     def jacobian_transpose(self) -> sp.csc_matrix:
         """``H^T`` (n_dof x n_rows) in CSC form, sharing ``H``'s arrays: the products ``H^T lam``."""

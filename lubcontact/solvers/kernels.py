@@ -651,8 +651,10 @@ def jacobian_rows_2d(W, rho, lower, upper, box, cone_n, cone_t, cone_mu, unilate
 def sparse_jacobian_rows_2d(indptr, indices, data, rho, lower, upper, box, cone_n, cone_t,
                             cone_mu, unilateral, sigma, y):
     """:func:`jacobian_rows_2d` with ``W`` in CSR form (``indptr``, ``indices``, ``data``):
-    ``(rows, J_indptr, J_indices, J_data)``, the active rows (m,) and the CSR arrays of their
-    rows of ``J`` (m x n), columns unsorted in each row. A row of ``J`` is ``e_i`` plus at most
+    ``(rows, J_indptr, J_indices, J_data, plain)``, the active rows (m,), the CSR arrays of
+    their rows of ``J`` (m x n), columns unsorted in each row, and how many of them are rows of
+    ``diag(rho) (W + sigma I)`` (``G``'s row is the identity's: box rows inside their bounds,
+    pushed normal rows, sticking tangential rows). A row of ``J`` is ``e_i`` plus at most
     two rows of ``W`` scaled, so it is accumulated in a dense scratch row over the union of
     their patterns (an entry of ``G`` that is exactly 0, as on a sliding tangential row, adds
     nothing)."""
@@ -672,9 +674,11 @@ def sparse_jacobian_rows_2d(indptr, indices, data, rho, lower, upper, box, cone_
     scratch = np.zeros(n)
     seen = np.full(n, -1)
     pattern = np.empty(n, dtype=np.int64)
-    count = 0
+    count = plain = 0
     for a in range(m):
         i = rows[a]
+        if first_col[i] == i and first_val[i] == 1.0 and second_col[i] < 0:
+            plain += 1
         seen[i], scratch[i], pattern[0] = a, 1.0, i          # the identity's entry
         size = 1
         for column, value in ((first_col[i], first_val[i]), (second_col[i], second_val[i])):
@@ -697,7 +701,7 @@ def sparse_jacobian_rows_2d(indptr, indices, data, rho, lower, upper, box, cone_
             J_data[count + k] = scratch[pattern[k]]
         count += size
         J_indptr[a + 1] = count
-    return rows, J_indptr, J_indices[:count], J_data[:count]
+    return rows, J_indptr, J_indices[:count], J_data[:count], plain
 
 
 @numba.njit(cache=True)

@@ -304,7 +304,7 @@ def test_jacobian_matches_finite_differences_away_from_kinks():
     rng = np.random.default_rng(0)
     forces = np.abs(rng.normal(size=problem.n_rows))
     phi, y, _ = function.residual(forces)
-    rows, active = function.jacobian(y)                # the rows of J where G is not zero
+    rows, active, _ = function.jacobian(y)                # the rows of J where G is not zero
     assert rows.shape == (np.count_nonzero(active), problem.n_rows)
     direction = rng.normal(size=problem.n_rows)
     product = direction.copy()                         # J's other rows are the identity's
@@ -478,11 +478,11 @@ def test_small_problems_take_the_dense_lane_with_the_same_newton_steps(name, mon
     assert dual_data.is_small(problem)
     function = AlartCurnier(problem)
     y = function.residual(np.abs(np.random.default_rng(1).normal(size=problem.n_rows)))[1]
-    rows, active = function.jacobian(y)
+    rows, active, _ = function.jacobian(y)
     dense = solve_coulomb(problem, "newton-ac", tol=1e-10)
     use_the_sparse_lane(monkeypatch)
     sparse_function = AlartCurnier(problem)
-    sparse_rows, sparse_active = sparse_function.jacobian(y)
+    sparse_rows, sparse_active, _ = sparse_function.jacobian(y)
     assert isinstance(rows, np.ndarray) and not isinstance(sparse_rows, np.ndarray)
     assert np.array_equal(active, sparse_active)
     assert np.allclose(rows, sparse_rows.toarray(), rtol=0, atol=1e-13 * np.abs(rows).max())
@@ -543,7 +543,7 @@ def test_the_compiled_residual_jacobian_and_error_are_their_numpy_twins(name, si
         rows, J = kernel.jacobian_rows_2d(function.W, function.rho, function.lower, function.upper,
                                           function.box, function.cone_n, function.tangent_rows,
                                           function.cone_mu, function.unilateral, function.sigma, y)
-        expected, active = function.jacobian(y)
+        expected, active, _ = function.jacobian(y)
         assert np.array_equal(rows, np.flatnonzero(active))
         assert np.abs(J - expected).max() <= 1e-13 * max(np.abs(expected).max(initial=0.0), 1.0)
 
@@ -563,9 +563,9 @@ def test_the_compiled_sparse_jacobian_rows_are_the_numpy_rows(name, sigma, monke
     for _ in range(20):
         forces = rng.normal(size=problem.n_rows) * rng.choice([1e-3, 1.0, 1e3], size=problem.n_rows)
         y = function.residual(forces)[1]
-        rows, active = function.jacobian(y)
+        rows, active, _ = function.jacobian(y)
         function.compiled_rows = False
-        expected, expected_active = function.jacobian(y)
+        expected, expected_active, _ = function.jacobian(y)
         function.compiled_rows = True
         assert np.array_equal(active, expected_active)
         difference = np.abs(rows.toarray() - expected.toarray()).max(initial=0.0)
@@ -672,6 +672,60 @@ def test_an_active_block_met_again_is_solved_with_its_kept_factors():
     assert kept.reused == 1
     newton._newton_direction(second, active, phi, kept)    # pushed out by A, then the changed A
     assert kept.reused == 1
+
+
+@pytest.fixture(scope="module")
+def pile_at_rest():
+    """The step after 160 steps of a 30-grain frictional settling pile (mu = 0.3), at rest:
+    more sticking rows than degrees of freedom (hyperstatic), and the previous step's forces."""
+    from lubcontact import scenes
+    from lubcontact.model.laws import Coulomb
+    from lubcontact.sim.simulation import Simulation
+
+    sim = Simulation(scenes.settling_pile(30, seed=3), Coulomb(0.3), 0.05, solver="newton-ac",
+                     tol=1e-8, fixed_point=True, tol_fp=1e-6, on_failure="ignore")
+    sim.run(160)
+    _, _, problem, guess, _ = sim.next_problem()
+    return problem, guess
+
+
+def test_a_block_singular_by_its_count_of_sticking_rows_skips_the_failed_factorisation(
+        pile_at_rest, monkeypatch):
+    """At rest, plain Newton's active block has more rows of W than degrees of freedom: singular.
+    The Jacobian says so (not with a proximal weight, which makes it regular), and the direction
+    is the regularised one without SuperLU first failing on the block (at 12 800 grains that
+    failure took 1.8 s against 0.17 s for the factorisation)."""
+    import scipy.sparse.linalg as spla
+
+    problem, guess = pile_at_rest
+    use_the_sparse_lane(monkeypatch)
+    answer = solve_coulomb(problem, "newton-ac", tol=1e-8, warm_start=guess)
+    assert answer.status == CONVERGED
+    scaled = problem.normalized()
+    function = AlartCurnier(scaled)
+    phi, y, _ = function.residual(answer.forces / scaled.scaling.force)
+    J, active, singular = function.jacobian(y)
+    assert singular and function.rank_bound == problem.n_dof < active.sum() <= problem.n_rows
+    function.set_proximal(1e-3 * function.typical, answer.forces / scaled.scaling.force)
+    assert not function.jacobian(function.residual(answer.forces / scaled.scaling.force)[1])[2]
+    outcomes = []
+    factorise = spla.splu
+
+    def counted(matrix, **options):
+        try:
+            factors = factorise(matrix, **options)
+        except RuntimeError:
+            outcomes.append("singular")
+            raise
+        outcomes.append("factorised")
+        return factors
+
+    monkeypatch.setattr(newton.spla, "splu", counted)
+    tried = newton._newton_direction(J, active, phi)
+    assert outcomes == ["singular", "factorised"]
+    outcomes.clear()
+    assert np.array_equal(newton._newton_direction(J, active, phi, singular=True), tried)
+    assert outcomes == ["factorised"]
 
 
 def test_the_compiled_lu_solves_like_numpy_and_reports_an_exactly_singular_block():
