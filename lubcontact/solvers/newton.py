@@ -165,7 +165,8 @@ that cycle between two pieces."""
 
 FINISH_ITERATIONS = 2
 """Plain Newton iterations after the proximal loop converged (kept where they lower the error):
-quadratic convergence takes a solution at ``tol`` to round-off where the Jacobian is regular."""
+quadratic convergence takes a solution at ``tol`` to round-off where the Jacobian is regular
+(none on the sparse lane where it is singular by its count: :meth:`AlartCurnier.hyperstatic`)."""
 
 FALLBACKS_2D = ("nsgs", "apgd-jacobi")
 FALLBACKS_UNION = ("nsgs",)
@@ -198,7 +199,8 @@ JOINT_FINISH = 1e-3
 stops just below ``tol``, and on 6 of 40 steps of a developed dry 2 000-grain flow the two
 plain Newton iterations after it did not lower its FCLIB error (5e-7 to 8e-7), leaving
 velocities 2e-5 to 8e-5 from the exact ones (from the warm start Newton's iterates end at
-round-off)."""
+round-off). None where plain Newton's block at those forces is singular by its count (a pile
+at rest: :meth:`AlartCurnier.hyperstatic`)."""
 JOINT_START_ITERATIONS = 2000
 """Cap on the iterations of the joint phase before the Newton phases (``joint``)."""
 
@@ -409,6 +411,20 @@ class AlartCurnier:
             J = J + diagonal_scaled(G, columns=self.sigma * self.rho)
         return J.tocsr(), active, self._counted_singular(plain)
 
+    def hyperstatic(self, forces: np.ndarray) -> bool:
+        """Whether plain Newton's active block at ``forces`` is singular by its count of sticking
+        rows (:meth:`_counted_singular`), as on a pile at rest, on the sparse lane (False on the
+        dense lanes of small problems, where an iteration costs little). There the Newton
+        iterations past ``tol`` do not converge quadratically:
+        on a deposited 400-grain layer ten of them took the FCLIB error from 1.3e-7 to 1.0e-7,
+        and at 12 800 grains each cost three times the whole joint phase
+        (docs/records/benchmarks.md, "newton-ac on piles at rest"). Sets the proximal weight
+        to 0 (plain Newton)."""
+        if self.dense:
+            return False
+        self.set_proximal(0.0, forces)
+        return self.jacobian(self.residual(forces)[1])[2]
+
     def _counted_singular(self, plain: int) -> bool:
         """Whether an active block with ``plain`` rows of ``diag(rho) W`` (``G``'s row the
         identity's) is singular by a count: plain Newton (``sigma`` = 0) and more such rows than
@@ -537,7 +553,8 @@ def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = 5
         joint phase of the fixed point
         (:func:`~lubcontact.solvers.compiled_apgd.joint_coulomb_apgd`: APGD that updates the
         shift every ``joint`` iterations, to ``tol``, at most :data:`JOINT_START_ITERATIONS`
-        iterations) from the warm start; the Newton phases then start from its forces where
+        iterations) from the warm start, unless the warm start's FCLIB error is below ``tol``
+        already (a pile at rest); the Newton phases then start from its forces where
         their FCLIB error is below the warm start's, and go on to :data:`JOINT_FINISH` ``tol``.
         0: none. On developed dry flows its forces (FCLIB error near ``tol``) leave Newton 2 to
         13 iterations instead of 15-28; on the compiled lane the APGD run costs more than the
@@ -572,11 +589,13 @@ def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = 5
     setup_time = time.perf_counter() - start
     joint_iterations, joined_start = 0, False
     if joint > 0 and not function.dense and problem.cones.is_convex and joint_applies(problem.cones):
-        joined, joint_iterations = joint_coulomb_apgd(problem, forces, tol, JOINT_START_ITERATIONS,
-                                                      joint)
-        joined_start = function.coulomb_error(unshifted, joined) < function.coulomb_error(unshifted, forces)
-        if joined_start:
-            forces = joined
+        start_error = function.coulomb_error(unshifted, forces)
+        if start_error > tol:                       # a pile at rest: the warm start is the answer
+            joined, joint_iterations = joint_coulomb_apgd(problem, forces, tol,
+                                                          JOINT_START_ITERATIONS, joint)
+            joined_start = function.coulomb_error(unshifted, joined) < start_error
+            if joined_start:
+                forces = joined
     phase = _strategies(function, unshifted, forces, tol, max_iter)
     forces, iterations, history = phase.forces, phase.iterations + joint_iterations, phase.history
     status = INACCURATE if phase.status == STALLED else phase.status
@@ -584,7 +603,8 @@ def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = 5
             "proximal_steps": phase.proximal_steps, "strategies": phase.strategies,
             "newton_status": phase.status, "error": phase.error,
             "joint_iterations": joint_iterations}
-    if joined_start and phase.status == CONVERGED and phase.error > JOINT_FINISH * tol:
+    if joined_start and phase.status == CONVERGED and phase.error > JOINT_FINISH * tol \
+            and not function.hyperstatic(forces):
         finish = _proximal_newton(function, unshifted, forces, JOINT_FINISH * tol, POLISH_ITERATIONS,
                                   STRATEGIES[0])
         iterations += finish.iterations
@@ -730,7 +750,8 @@ def _proximal_newton(function: AlartCurnier, unshifted: ConicProblem, forces: np
             break
     if best[0] <= tol:
         status = CONVERGED
-        if scale > 0:                   # the proximal loop stops at tol; plain Newton is quadratic here
+        # the proximal loop stops at tol; plain Newton is quadratic here, unless its block is singular
+        if scale > 0 and not function.hyperstatic(best[1]):
             function.set_proximal(0.0, best[1])
             finish = _newton_phase(function, unshifted, best[1], 0.0, FINISH_ITERATIONS)
             iterations += finish.iterations

@@ -728,6 +728,28 @@ def test_a_block_singular_by_its_count_of_sticking_rows_skips_the_failed_factori
     assert outcomes == ["factorised"]
 
 
+def test_no_newton_iterations_past_tol_where_the_block_is_singular_by_its_count(
+        pile_at_rest, settling_step, monkeypatch):
+    """Past tol, plain Newton is run for its quadratic convergence, which a singular block does not
+    have: at rest (hyperstatic) newton-ac's answer is the same with and without the finishing
+    iterations; on a moving pile they run (more iterations, a lower error)."""
+    use_the_sparse_lane(monkeypatch)
+    for (problem, guess), at_rest in ((pile_at_rest, True), ((settling_step[0], None), False)):
+        default = solve_coulomb(problem, "newton-ac", tol=1e-6, warm_start=guess)
+        with monkeypatch.context() as patch:
+            patch.setattr(newton, "FINISH_ITERATIONS", 0)
+            unfinished = solve_coulomb(problem, "newton-ac", tol=1e-6, warm_start=guess)
+        assert default.status == unfinished.status == CONVERGED
+        scaled = problem.normalized()
+        assert AlartCurnier(scaled).hyperstatic(default.forces / scaled.scaling.force) == at_rest
+        if at_rest:
+            assert default.info["newton_iterations"] == unfinished.info["newton_iterations"]
+            np.testing.assert_array_equal(default.forces, unfinished.forces)
+        else:
+            assert default.info["newton_iterations"] > unfinished.info["newton_iterations"]
+            assert default.info["error"] < 1e-3 * unfinished.info["error"]
+
+
 def test_the_compiled_lu_solves_like_numpy_and_reports_an_exactly_singular_block():
     """``kernels.lu_solve`` (LAPACK's gesv through numba's bindings, given the transpose) solves
     what ``np.linalg.solve`` solves, returns ok False on an exactly singular matrix instead of
@@ -826,16 +848,20 @@ def test_newtons_answer_from_the_joint_phase_is_taken_below_joint_finish_tol(set
 
 
 def test_a_joint_phase_worse_than_the_warm_start_does_not_start_newton(settling_step, monkeypatch):
-    """From a solution the joint phase (which stops at tol on its own measure) ends farther
-    from Coulomb's law than its start: the Newton phases start from the warm start itself."""
+    """Near a solution (FCLIB error 1.2e-9, tol 1e-9) the joint phase, which stops at tol on its
+    own measure, ends farther from Coulomb's law (2.2e-9): the Newton phases start from the warm
+    start itself. From the solution (below tol) the joint phase does not run."""
     problem, _ = settling_step
     use_the_sparse_lane(monkeypatch)
     solution = solve_coulomb(problem, "newton-ac", tol=1e-9).forces
-    plain = solve_coulomb(problem, "newton-ac", tol=1e-9, warm_start=solution)
-    joint = solve_coulomb(problem, "newton-ac", tol=1e-9, warm_start=solution, joint=5)
-    assert joint.joint_iterations > 0
-    assert joint.info["newton_iterations"] == plain.info["newton_iterations"]
-    np.testing.assert_array_equal(joint.forces, plain.forces)
+    near = solution * (1 + 5e-10 * np.random.default_rng(0).normal(size=solution.size))
+    assert 1e-9 < coulomb_error(problem.normalized(), near / problem.normalized().scaling.force)
+    for start, joint_runs in ((near, True), (solution, False)):
+        plain = solve_coulomb(problem, "newton-ac", tol=1e-9, warm_start=start)
+        joint = solve_coulomb(problem, "newton-ac", tol=1e-9, warm_start=start, joint=5)
+        assert (joint.joint_iterations > 0) == joint_runs
+        assert joint.info["newton_iterations"] == plain.info["newton_iterations"]
+        np.testing.assert_array_equal(joint.forces, plain.forces)
 
 
 def test_the_compiled_lane_skips_the_joint_start(settling_step):
