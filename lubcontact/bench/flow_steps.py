@@ -65,7 +65,8 @@ for ``newton-ac``, sweeps for ``nsgs``, inner first-order iterations for the oth
 one scipy product ``W x`` on the last step's normalised ``W``;
 ``warm_cold``: iterations of the first timed step warm-started from the previous step (pair
 keys) over those of the same step started cold (1 where the first-order methods set aside a
-warm start worse than zero: :func:`lubcontact.solvers.dual_data.initial_point`); ``*_pc``:
+warm start worse than zero: :func:`lubcontact.solvers.dual_data.initial_point`; empty with
+``--no-cold``); ``*_pc``:
 percentage of the steps' total time in each phase
 (:attr:`~lubcontact.sim.trajectory.StepReport.timings`); ``peak_mb``: the process's peak
 resident memory so far (MB)."""
@@ -183,21 +184,24 @@ def product_time(problem: StepProblem, repeats: int = 20) -> float:
 
 
 def time_method(sim: Simulation, method: str, steps: int, tol: float,
-                friction: str = "exact", joint: int = 0) -> dict[str, Any]:
+                friction: str = "exact", joint: int = 0, cold: bool = True) -> dict[str, Any]:
     """Solve ``steps`` steps of ``sim`` from its current state with ``method`` (``friction``:
     one of :data:`FRICTIONS`; ``joint`` > 0: exact Coulomb starting with the fixed point's joint
     phase, ``joint`` of :func:`~lubcontact.solvers.coulomb.solve_coulomb`, for the methods it
     applies to (:func:`~lubcontact.solvers.coulomb.has_joint_phase`), labelled
-    ``method+jointN``); the state is kept."""
+    ``method+jointN``; ``cold``: solve the first timed step from zero forces as well, for
+    ``warm_cold``); the state is kept."""
     start = sim.state.copy()              # the steps below move sim.state in place
     exact = friction == "exact"
     joint = joint if exact and has_joint_phase(method) else 0
     settings = SolveSettings(method=method, tol=tol, exact_coulomb=exact,
                              options={"joint": joint} if joint else {})
     sim.step(settings)                       # untimed: compilation, caches
-    _, _, problem, guess, shift = sim.next_problem()
-    cold = settings.solve(problem).iterations
-    warm = settings.solve(problem, guess, shift).iterations
+    ratio = {}
+    if cold:
+        _, _, problem, guess, shift = sim.next_problem()
+        ratio["warm_cold"] = settings.solve(problem, guess, shift).iterations / \
+            max(settings.solve(problem).iterations, 1)
     times, iterations, errors, contacts, statuses = [], [], [], [], set()
     per_iteration = []
     phases = dict.fromkeys(PHASES, 0.0)
@@ -217,7 +221,7 @@ def time_method(sim: Simulation, method: str, steps: int, tol: float,
     return {"friction": friction, "method": f"{method}+joint{joint}" if joint else method,
             "contacts": int(np.mean(contacts)),
             "s_per_step": float(np.median(times)),
-            "iterations": float(np.median(iterations)), "warm_cold": warm / max(cold, 1),
+            "iterations": float(np.median(iterations)), **ratio,
             "per_product": float(np.median(per_iteration)) / product_time(report.problem),
             "max_fclib_error": float(max(errors)),
             **{f"{phase}_pc": 100.0 * phases[phase] / total for phase in PHASES},
@@ -255,6 +259,10 @@ def main(argv: list[str] | None = None) -> int:
                              "first-order methods and newton-ac, which runs it on steps of more "
                              "than 300 rows without UNION contacts), shift updated every JOINT "
                              "iterations inside one APGD run (0: none; default 0)")
+    parser.add_argument("--no-cold", dest="cold", action="store_false",
+                        help="do not solve a step from zero forces (its warm_cold column is left "
+                             "empty): newton-ac from zero on a 10^5-grain pile at rest had not "
+                             "ended after 10 minutes")
     parser.add_argument("--json", type=pathlib.Path, help="write the rows to this JSON file")
     parser.add_argument("--figure", type=pathlib.Path,
                         help="draw s/step against grains (log-log, fitted exponents) to this PNG")
@@ -296,7 +304,7 @@ def main(argv: list[str] | None = None) -> int:
                 for method in args.methods:
                     row = {"n_grains": n_grains, "model": model,
                            **time_method(sim, method, args.steps, args.tol, friction,
-                                         args.joint)}
+                                         args.joint, args.cold)}
                     rows.append(row)
                     print(format_table([row], COLUMNS), flush=True)
                     if args.json:             # rewritten after each row: a stopped run keeps them

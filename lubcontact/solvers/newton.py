@@ -194,7 +194,8 @@ polished answer (3.2e-7) is not kept, Newton's best being 3.1e-7, and apgd-jacob
 (docs/records/benchmarks.md, "newton-ac on creeping beds: the fallbacks near tol")."""
 
 JOINT_FINISH = 1e-3
-"""From the joint phase's forces, Newton's answer is taken below ``JOINT_FINISH tol`` (at most
+"""From the joint phase's forces (or a warm start below ``tol``, where the joint phase does not
+run), Newton's answer is taken below ``JOINT_FINISH tol`` (at most
 :data:`POLISH_ITERATIONS` more iterations, kept where they lower the error): the joint phase
 stops just below ``tol``, and on 6 of 40 steps of a developed dry 2 000-grain flow the two
 plain Newton iterations after it did not lower its FCLIB error (5e-7 to 8e-7), leaving
@@ -555,7 +556,8 @@ def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = 5
         shift every ``joint`` iterations, to ``tol``, at most :data:`JOINT_START_ITERATIONS`
         iterations) from the warm start, unless the warm start's FCLIB error is below ``tol``
         already (a pile at rest); the Newton phases then start from its forces where
-        their FCLIB error is below the warm start's, and go on to :data:`JOINT_FINISH` ``tol``.
+        their FCLIB error is below the warm start's, and from either start near ``tol`` go on to
+        :data:`JOINT_FINISH` ``tol``.
         0: none. On developed dry flows its forces (FCLIB error near ``tol``) leave Newton 2 to
         13 iterations instead of 15-28; on the compiled lane the APGD run costs more than the
         Newton iterations it saves, and with UNION contacts it ends on the wrong piece of the
@@ -587,14 +589,15 @@ def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = 5
     unshifted = problem.with_shift(np.zeros(problem.cones.count)) if problem.shift.any() else problem
     forces = np.zeros(problem.n_rows) if warm_start is None else np.array(warm_start, dtype=float)
     setup_time = time.perf_counter() - start
-    joint_iterations, joined_start = 0, False
+    joint_iterations, near_tol = 0, False     # near_tol: Newton starts from forces at tol
     if joint > 0 and not function.dense and problem.cones.is_convex and joint_applies(problem.cones):
         start_error = function.coulomb_error(unshifted, forces)
-        if start_error > tol:                       # a pile at rest: the warm start is the answer
+        near_tol = start_error <= tol               # the warm start is an answer already
+        if not near_tol:
             joined, joint_iterations = joint_coulomb_apgd(problem, forces, tol,
                                                           JOINT_START_ITERATIONS, joint)
-            joined_start = function.coulomb_error(unshifted, joined) < start_error
-            if joined_start:
+            near_tol = function.coulomb_error(unshifted, joined) < start_error
+            if near_tol:
                 forces = joined
     phase = _strategies(function, unshifted, forces, tol, max_iter)
     forces, iterations, history = phase.forces, phase.iterations + joint_iterations, phase.history
@@ -603,7 +606,7 @@ def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = 5
             "proximal_steps": phase.proximal_steps, "strategies": phase.strategies,
             "newton_status": phase.status, "error": phase.error,
             "joint_iterations": joint_iterations}
-    if joined_start and phase.status == CONVERGED and phase.error > JOINT_FINISH * tol \
+    if near_tol and phase.status == CONVERGED and phase.error > JOINT_FINISH * tol \
             and not function.hyperstatic(forces):
         finish = _proximal_newton(function, unshifted, forces, JOINT_FINISH * tol, POLISH_ITERATIONS,
                                   STRATEGIES[0])

@@ -43,16 +43,18 @@ def test_bad_flags_are_one_line_errors(bad, flag, capsys):
 
 def test_a_layer_widened_to_each_size_gives_rows_an_exponent_and_a_figure(tmp_path, capsys):
     """A 24-grain run's checkpoint widened to 24 and 48 grains: twice the contacts at twice the
-    grains, both frictions timed, the rows kept as JSON, the figure drawn."""
+    grains, both frictions timed, the rows kept as JSON, the figure drawn (no cold solves)."""
     layer = tmp_path / "layer"
     config = RunConfig(scene="inclined_flow", n_grains=24, width=12.0, model="dry", angle=24.0,
                        steps=6, dt_fraction=0.05, settle_steps=0, checkpoint_every=6, sample_every=3)
     FlowRun(config, initial_scene(config, layer), layer).advance(6)
     argv = ["--sizes", "24", "48", "--layer", str(layer / "checkpoint.npz"), "--methods", "apgd",
             "--friction", "exact,relaxation", "--steps", "2", "--cache", str(tmp_path / "cache"),
-            "--json", str(tmp_path / "rows.json"), "--figure", str(tmp_path / "scaling.png")]
+            "--json", str(tmp_path / "rows.json"), "--figure", str(tmp_path / "scaling.png"),
+            "--no-cold"]
     assert flow_steps.main(argv) == 0
     rows = json.loads((tmp_path / "rows.json").read_text())
+    assert not any("warm_cold" in row for row in rows)
     assert [(row["n_grains"], row["friction"]) for row in rows] == [
         (24, "exact"), (24, "relaxation"), (48, "exact"), (48, "relaxation")]
     assert rows[2]["contacts"] == pytest.approx(2 * rows[0]["contacts"], rel=0.1)

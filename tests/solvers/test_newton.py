@@ -847,6 +847,26 @@ def test_newtons_answer_from_the_joint_phase_is_taken_below_joint_finish_tol(set
     assert velocity_error(problem, result.velocities, reference.velocities) <= 1e-8
 
 
+def test_a_warm_start_below_tol_skips_the_joint_phase_and_goes_on_to_joint_finish_tol(
+        settling_step, monkeypatch):
+    """A warm start whose FCLIB error is below tol (3.8e-7 against 1e-6) is an answer already:
+    the joint phase does not run, and Newton goes on from it to JOINT_FINISH tol, as from the
+    joint phase's forces (the plain finish switched off)."""
+    problem, _ = settling_step
+    use_the_sparse_lane(monkeypatch)
+    monkeypatch.setattr(newton, "FINISH_ITERATIONS", 0)
+    scaled = problem.normalized()
+    solution = solve_coulomb(problem, "newton-ac", tol=1e-9).forces
+    near = solution * (1 + 1e-7 * np.random.default_rng(0).normal(size=solution.size))
+    assert 1e-7 < coulomb_error(scaled, near / scaled.scaling.force) < 1e-6
+    result = solve_coulomb(problem, "newton-ac", tol=1e-6, warm_start=near, joint=5)
+    assert result.success and result.joint_iterations == 0
+    assert coulomb_error(scaled, result.forces / result.force_scale) <= newton.JOINT_FINISH * 1e-6
+    plain = solve_coulomb(problem, "newton-ac", tol=1e-6, warm_start=near)
+    assert plain.info["newton_iterations"] == 0          # without joint: the warm start as it is
+    assert np.allclose(plain.forces, near, rtol=1e-15, atol=0)   # scaled and back: rounding
+
+
 def test_a_joint_phase_worse_than_the_warm_start_does_not_start_newton(settling_step, monkeypatch):
     """Near a solution (FCLIB error 1.2e-9, tol 1e-9) the joint phase, which stops at tol on its
     own measure, ends farther from Coulomb's law (2.2e-9): the Newton phases start from the warm
