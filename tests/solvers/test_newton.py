@@ -732,13 +732,21 @@ def test_no_newton_iterations_past_tol_where_the_block_is_singular_by_its_count(
         pile_at_rest, settling_step, monkeypatch):
     """Past tol, plain Newton is run for its quadratic convergence, which a singular block does not
     have: at rest (hyperstatic) newton-ac's answer is the same with and without the finishing
-    iterations; on a moving pile they run (more iterations, a lower error)."""
+    iterations, and from the joint phase without the finish to JOINT_FINISH tol; on a moving
+    pile they run (more iterations, a lower error)."""
     use_the_sparse_lane(monkeypatch)
     for (problem, guess), at_rest in ((pile_at_rest, True), ((settling_step[0], None), False)):
         default = solve_coulomb(problem, "newton-ac", tol=1e-6, warm_start=guess)
+        joint = solve_coulomb(problem, "newton-ac", tol=1e-6, warm_start=guess, joint=5)
         with monkeypatch.context() as patch:
             patch.setattr(newton, "FINISH_ITERATIONS", 0)
             unfinished = solve_coulomb(problem, "newton-ac", tol=1e-6, warm_start=guess)
+            patch.setattr(newton, "JOINT_FINISH", 1.0)
+            joint_unfinished = solve_coulomb(problem, "newton-ac", tol=1e-6, warm_start=guess,
+                                             joint=5)
+        assert joint.joint_iterations > 0
+        assert (joint.info["newton_iterations"] == joint_unfinished.info["newton_iterations"]) \
+            == at_rest
         assert default.status == unfinished.status == CONVERGED
         scaled = problem.normalized()
         assert AlartCurnier(scaled).hyperstatic(default.forces / scaled.scaling.force) == at_rest
@@ -847,41 +855,17 @@ def test_newtons_answer_from_the_joint_phase_is_taken_below_joint_finish_tol(set
     assert velocity_error(problem, result.velocities, reference.velocities) <= 1e-8
 
 
-def test_a_warm_start_below_tol_skips_the_joint_phase_and_goes_on_to_joint_finish_tol(
-        settling_step, monkeypatch):
-    """A warm start whose FCLIB error is below tol (3.8e-7 against 1e-6) is an answer already:
-    the joint phase does not run, and Newton goes on from it to JOINT_FINISH tol, as from the
-    joint phase's forces (the plain finish switched off)."""
-    problem, _ = settling_step
-    use_the_sparse_lane(monkeypatch)
-    monkeypatch.setattr(newton, "FINISH_ITERATIONS", 0)
-    scaled = problem.normalized()
-    solution = solve_coulomb(problem, "newton-ac", tol=1e-9).forces
-    near = solution * (1 + 1e-7 * np.random.default_rng(0).normal(size=solution.size))
-    assert 1e-7 < coulomb_error(scaled, near / scaled.scaling.force) < 1e-6
-    result = solve_coulomb(problem, "newton-ac", tol=1e-6, warm_start=near, joint=5)
-    assert result.success and result.joint_iterations == 0
-    assert coulomb_error(scaled, result.forces / result.force_scale) <= newton.JOINT_FINISH * 1e-6
-    plain = solve_coulomb(problem, "newton-ac", tol=1e-6, warm_start=near)
-    assert plain.info["newton_iterations"] == 0          # without joint: the warm start as it is
-    assert np.allclose(plain.forces, near, rtol=1e-15, atol=0)   # scaled and back: rounding
-
-
 def test_a_joint_phase_worse_than_the_warm_start_does_not_start_newton(settling_step, monkeypatch):
-    """Near a solution (FCLIB error 1.2e-9, tol 1e-9) the joint phase, which stops at tol on its
-    own measure, ends farther from Coulomb's law (2.2e-9): the Newton phases start from the warm
-    start itself. From the solution (below tol) the joint phase does not run."""
+    """From a solution the joint phase (which stops at tol on its own measure) ends farther
+    from Coulomb's law than its start: the Newton phases start from the warm start itself."""
     problem, _ = settling_step
     use_the_sparse_lane(monkeypatch)
     solution = solve_coulomb(problem, "newton-ac", tol=1e-9).forces
-    near = solution * (1 + 5e-10 * np.random.default_rng(0).normal(size=solution.size))
-    assert 1e-9 < coulomb_error(problem.normalized(), near / problem.normalized().scaling.force)
-    for start, joint_runs in ((near, True), (solution, False)):
-        plain = solve_coulomb(problem, "newton-ac", tol=1e-9, warm_start=start)
-        joint = solve_coulomb(problem, "newton-ac", tol=1e-9, warm_start=start, joint=5)
-        assert (joint.joint_iterations > 0) == joint_runs
-        assert joint.info["newton_iterations"] == plain.info["newton_iterations"]
-        np.testing.assert_array_equal(joint.forces, plain.forces)
+    plain = solve_coulomb(problem, "newton-ac", tol=1e-9, warm_start=solution)
+    joint = solve_coulomb(problem, "newton-ac", tol=1e-9, warm_start=solution, joint=5)
+    assert joint.joint_iterations > 0
+    assert joint.info["newton_iterations"] == plain.info["newton_iterations"]
+    np.testing.assert_array_equal(joint.forces, plain.forces)
 
 
 def test_the_compiled_lane_skips_the_joint_start(settling_step):
