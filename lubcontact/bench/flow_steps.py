@@ -200,8 +200,9 @@ def time_method(sim: Simulation, method: str, steps: int, tol: float,
     ratio = {}
     if cold:
         _, _, problem, guess, shift = sim.next_problem()
-        ratio["warm_cold"] = settings.solve(problem, guess, shift).iterations / \
-            max(settings.solve(problem).iterations, 1)
+        from_zero = settings.solve(problem).iterations
+        warm = settings.solve(problem, guess, shift).iterations
+        ratio["warm_cold"] = warm / max(from_zero, 1)
     times, iterations, errors, contacts, statuses = [], [], [], [], set()
     per_iteration = []
     phases = dict.fromkeys(PHASES, 0.0)

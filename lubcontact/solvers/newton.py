@@ -237,6 +237,8 @@ class AlartCurnier:
         ``cone_t``'s one column (planar problems only).
     q_scale : float
         ``1 + |q|``, the FCLIB error's denominator (planar problems only).
+    rank_bound : int
+        An upper bound on the rank of ``W`` (the problem's ``delassus_rank_bound``).
     """
 
     def __init__(self, problem: ConicProblem):
@@ -332,15 +334,17 @@ class AlartCurnier:
                                           self.q_scale))
         return coulomb_error(unshifted, forces, velocity)
 
-    def jacobian(self, y: np.ndarray) -> tuple[sp.csr_matrix | np.ndarray, np.ndarray, bool]:
+    def jacobian(self, y: np.ndarray) -> tuple[sp.csr_matrix | np.ndarray, np.ndarray, int]:
         """The rows of ``J = I - G + G diag(rho) (W + sigma I)`` at ``y`` where ``G`` is not zero.
 
         Returns
         -------
-        (scipy.sparse.csr_matrix or ndarray, ndarray of bool, bool)
+        (scipy.sparse.csr_matrix or ndarray, ndarray of bool, int)
             Those rows, shape (m, n_rows) (a dense array on a small problem), the mask of
-            the m rows (``active``; every other row of ``J`` is the identity's), and whether
-            their block ``J_AA`` is singular by a count (:meth:`_counted_singular`). Only they are
+            the m rows (``active``; every other row of ``J`` is the identity's), and how many
+            of them are rows of ``diag(rho) (W + sigma I)`` (``G``'s row is the identity's: box
+            rows inside their bounds, pushed normal rows, sticking tangential rows; for
+            :meth:`singular_by_count`). Only they are
             assembled: ``G``'s product with ``W`` for all rows cost 30 % of a Newton step on a
             developed 3200-grain flow. On the sparse lane a 2D problem's rows are assembled by
             :func:`~lubcontact.solvers.kernels.sparse_jacobian_rows_2d` (``compiled_rows``).
@@ -355,7 +359,7 @@ class AlartCurnier:
             active = np.zeros(self.n_rows, dtype=bool)
             active[rows] = True
             return (sp.csr_matrix((data, indices, indptr), shape=(rows.size, self.n_rows)), active,
-                    self._counted_singular(plain))
+                    plain)
         plain = 0                                       # rows of G that are the identity's
         rows, cols, vals = [], [], []
         box = np.flatnonzero(self.box & (y > self.lower) & (y < self.upper))
@@ -403,29 +407,29 @@ class AlartCurnier:
             if self.sigma:
                 J += G * (self.sigma * self.rho)
             J[np.arange(m), np.flatnonzero(active)] += 1.0
-            return J, active, self._counted_singular(plain)
+            return J, active, plain
         G = sp.csr_matrix((np.concatenate(vals), (position[rows], np.concatenate(cols))), shape=(m, n))
         identity = sp.csr_matrix((np.ones(m), (np.arange(m), np.flatnonzero(active))), shape=(m, n))
         J = identity - G + G @ self.scaled_W
         if self.sigma:
             J = J + diagonal_scaled(G, columns=self.sigma * self.rho)
-        return J.tocsr(), active, self._counted_singular(plain)
+        return J.tocsr(), active, plain
 
     def hyperstatic(self, forces: np.ndarray) -> bool:
         """Whether plain Newton's active block at ``forces`` is singular by its count of sticking
-        rows (:meth:`_counted_singular`), as on a pile at rest, on the sparse lane (False on the
+        rows (:meth:`singular_by_count`), as on a pile at rest, on the sparse lane (False on the
         dense lanes of small problems, where an iteration costs little). There the Newton
         iterations past ``tol`` do not converge quadratically:
         on a deposited 400-grain layer ten of them took the FCLIB error from 1.3e-7 to 1.0e-7,
         and at 12 800 grains each cost three times the whole joint phase
-        (docs/records/benchmarks.md, "newton-ac on piles at rest"). Sets the proximal weight
-        to 0 (plain Newton)."""
+        (docs/records/benchmarks.md, "newton-ac on piles at rest"). On the sparse lane it
+        leaves the proximal weight at 0 (plain Newton, centred at ``forces``)."""
         if self.dense:
             return False
         self.set_proximal(0.0, forces)
-        return self.jacobian(self.residual(forces)[1])[2]
+        return self.singular_by_count(self.jacobian(self.residual(forces)[1])[2])
 
-    def _counted_singular(self, plain: int) -> bool:
+    def singular_by_count(self, plain: int) -> bool:
         """Whether an active block with ``plain`` rows of ``diag(rho) W`` (``G``'s row the
         identity's) is singular by a count: plain Newton (``sigma`` = 0) and more such rows than
         ``W``'s rank bound (:attr:`~lubcontact.problem.ConicProblem.delassus_rank_bound`: the
@@ -484,7 +488,7 @@ def _newton_direction(J: sp.csr_matrix | np.ndarray, active: np.ndarray,
     A singular active block (``W`` rank deficient: more sticking rows than
     degrees of freedom) is regularised, ``J_AA + delta I`` with ``delta`` from
     :data:`REGULARISATIONS` in turn (a proximal step, as in Siconos' PROX), from the first
-    positive one where the block is ``singular`` by a count (:meth:`AlartCurnier.jacobian`);
+    positive one where the block is ``singular`` by a count (:meth:`AlartCurnier.singular_by_count`);
     None when every one fails.
     """
     direction = -phi.copy()
@@ -496,7 +500,7 @@ def _newton_direction(J: sp.csr_matrix | np.ndarray, active: np.ndarray,
     dense = rows.size <= DENSE_LIMIT
     block = J[:, rows] if isinstance(J, np.ndarray) else \
         J[:, rows].toarray() if dense else J[:, rows].tocsc()
-    for delta in REGULARISATIONS[1:] if singular else REGULARISATIONS:
+    for delta in (delta for delta in REGULARISATIONS if delta > 0 or not singular):
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("error", spla.MatrixRankWarning)
@@ -829,8 +833,9 @@ def _newton_phase(function: AlartCurnier, unshifted: ConicProblem, forces: np.nd
     status = MAX_ITER
     while error > tol and iterations < max_iter and np.sqrt(2.0 * merit) > inner_tol:
         iterations += 1
-        J, active, singular = function.jacobian(y)
-        newton = _newton_direction(J, active, phi, function.factorisations, singular)
+        J, active, plain = function.jacobian(y)
+        newton = _newton_direction(J, active, phi, function.factorisations,
+                                   function.singular_by_count(plain))
         step = None
         if newton is not None:
             step = _line_search(function, forces, velocity, newton, 2.0 * merit, max(recent))

@@ -552,8 +552,8 @@ def test_the_compiled_residual_jacobian_and_error_are_their_numpy_twins(name, si
 @pytest.mark.parametrize("sigma", [0.0, 1e-2])
 def test_the_compiled_sparse_jacobian_rows_are_the_numpy_rows(name, sigma, monkeypatch):
     """On the sparse lane (limits set to zero) a 2D problem's Jacobian rows are assembled by a
-    compiled kernel: the same active rows and values as the numpy sparse product, at points
-    with every contact state."""
+    compiled kernel: the same active rows and values as the numpy sparse product, and the same
+    count of rows of diag(rho) W (singular_by_count's), at points with every contact state."""
     use_the_sparse_lane(monkeypatch)
     problem = load_cases()[name].problem.normalized()
     function = AlartCurnier(problem)
@@ -563,11 +563,11 @@ def test_the_compiled_sparse_jacobian_rows_are_the_numpy_rows(name, sigma, monke
     for _ in range(20):
         forces = rng.normal(size=problem.n_rows) * rng.choice([1e-3, 1.0, 1e3], size=problem.n_rows)
         y = function.residual(forces)[1]
-        rows, active, _ = function.jacobian(y)
+        rows, active, plain = function.jacobian(y)
         function.compiled_rows = False
-        expected, expected_active, _ = function.jacobian(y)
+        expected, expected_active, expected_plain = function.jacobian(y)
         function.compiled_rows = True
-        assert np.array_equal(active, expected_active)
+        assert np.array_equal(active, expected_active) and plain == expected_plain
         difference = np.abs(rows.toarray() - expected.toarray()).max(initial=0.0)
         assert difference <= 1e-13 * max(np.abs(expected.toarray()).max(initial=0.0), 1.0)
 
@@ -692,7 +692,7 @@ def pile_at_rest():
 def test_a_block_singular_by_its_count_of_sticking_rows_skips_the_failed_factorisation(
         pile_at_rest, monkeypatch):
     """At rest, plain Newton's active block has more rows of W than degrees of freedom: singular.
-    The Jacobian says so (not with a proximal weight, which makes it regular), and the direction
+    The count says so (not with a proximal weight: rows of W + sigma I), and the direction
     is the regularised one without SuperLU first failing on the block (at 12 800 grains that
     failure took 1.8 s against 0.17 s for the factorisation)."""
     import scipy.sparse.linalg as spla
@@ -704,10 +704,11 @@ def test_a_block_singular_by_its_count_of_sticking_rows_skips_the_failed_factori
     scaled = problem.normalized()
     function = AlartCurnier(scaled)
     phi, y, _ = function.residual(answer.forces / scaled.scaling.force)
-    J, active, singular = function.jacobian(y)
-    assert singular and function.rank_bound == problem.n_dof < active.sum() <= problem.n_rows
+    J, active, plain = function.jacobian(y)
+    assert function.singular_by_count(plain)
+    assert function.rank_bound == problem.n_dof < plain <= active.sum()
     function.set_proximal(1e-3 * function.typical, answer.forces / scaled.scaling.force)
-    assert not function.jacobian(function.residual(answer.forces / scaled.scaling.force)[1])[2]
+    assert not function.singular_by_count(plain)
     outcomes = []
     factorise = spla.splu
 
