@@ -625,6 +625,27 @@ def generalised_jacobian_2d(lower, upper, box, cone_n, cone_t, cone_mu, unilater
 
 
 @numba.njit(cache=True)
+def is_plain_row(i, first_col, first_val, second_col):
+    """Whether row ``i`` of ``G`` (:func:`generalised_jacobian_2d`'s arrays) is the identity's,
+    so that row ``i`` of ``J`` is a row of ``diag(rho) (W + sigma I)``: a box row inside its
+    bounds, a pushed normal row or a sticking tangential row."""
+    return first_col[i] == i and first_val[i] == 1.0 and second_col[i] < 0
+
+
+@numba.njit(cache=True)
+def plain_rows_2d(lower, upper, box, cone_n, cone_t, cone_mu, unilateral, y):
+    """How many rows of ``J`` at ``y`` are rows of ``diag(rho) (W + sigma I)`` (:func:`is_plain_row`),
+    without assembling them (the count of :func:`sparse_jacobian_rows_2d`)."""
+    rows, first_col, first_val, second_col, _ = generalised_jacobian_2d(
+        lower, upper, box, cone_n, cone_t, cone_mu, unilateral, y)
+    plain = 0
+    for i in rows:
+        if is_plain_row(i, first_col, first_val, second_col):
+            plain += 1
+    return plain
+
+
+@numba.njit(cache=True)
 def jacobian_rows_2d(W, rho, lower, upper, box, cone_n, cone_t, cone_mu, unilateral, sigma, y):
     """The rows of ``J = I - G + G diag(rho) (W + sigma I)`` where ``G`` is not zero, ``W``
     dense: ``(rows, J_A)``, the active rows' indices (m,) and their rows of ``J``, shape
@@ -653,8 +674,7 @@ def sparse_jacobian_rows_2d(indptr, indices, data, rho, lower, upper, box, cone_
     """:func:`jacobian_rows_2d` with ``W`` in CSR form (``indptr``, ``indices``, ``data``):
     ``(rows, J_indptr, J_indices, J_data, plain)``, the active rows (m,), the CSR arrays of
     their rows of ``J`` (m x n), columns unsorted in each row, and how many of them are rows of
-    ``diag(rho) (W + sigma I)`` (``G``'s row is the identity's: box rows inside their bounds,
-    pushed normal rows, sticking tangential rows). A row of ``J`` is ``e_i`` plus at most
+    ``diag(rho) (W + sigma I)`` (:func:`is_plain_row`). A row of ``J`` is ``e_i`` plus at most
     two rows of ``W`` scaled, so it is accumulated in a dense scratch row over the union of
     their patterns (an entry of ``G`` that is exactly 0, as on a sliding tangential row, adds
     nothing)."""
@@ -677,7 +697,7 @@ def sparse_jacobian_rows_2d(indptr, indices, data, rho, lower, upper, box, cone_
     count = plain = 0
     for a in range(m):
         i = rows[a]
-        if first_col[i] == i and first_val[i] == 1.0 and second_col[i] < 0:
+        if is_plain_row(i, first_col, first_val, second_col):
             plain += 1
         seen[i], scratch[i], pattern[0] = a, 1.0, i          # the identity's entry
         size = 1

@@ -553,7 +553,10 @@ def test_the_compiled_residual_jacobian_and_error_are_their_numpy_twins(name, si
 def test_the_compiled_sparse_jacobian_rows_are_the_numpy_rows(name, sigma, monkeypatch):
     """On the sparse lane (limits set to zero) a 2D problem's Jacobian rows are assembled by a
     compiled kernel: the same active rows and values as the numpy sparse product, and the same
-    count of rows of diag(rho) W (singular_by_count's), at points with every contact state."""
+    count of rows of diag(rho) W (singular_by_count's; also counted alone by plain_rows_2d), at
+    points with every contact state."""
+    from lubcontact.solvers.kernels import plain_rows_2d
+
     use_the_sparse_lane(monkeypatch)
     problem = load_cases()[name].problem.normalized()
     function = AlartCurnier(problem)
@@ -568,6 +571,9 @@ def test_the_compiled_sparse_jacobian_rows_are_the_numpy_rows(name, sigma, monke
         expected, expected_active, expected_plain = function.jacobian(y)
         function.compiled_rows = True
         assert np.array_equal(active, expected_active) and plain == expected_plain
+        assert plain_rows_2d(function.lower, function.upper, function.box, function.cone_n,
+                             function.tangent_rows, function.cone_mu, function.unilateral,
+                             y) == plain
         difference = np.abs(rows.toarray() - expected.toarray()).max(initial=0.0)
         assert difference <= 1e-13 * max(np.abs(expected.toarray()).max(initial=0.0), 1.0)
 
