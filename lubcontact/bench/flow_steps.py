@@ -262,8 +262,8 @@ def main(argv: list[str] | None = None) -> int:
                              "iterations inside one APGD run (0: none; default 0)")
     parser.add_argument("--no-cold", dest="cold", action="store_false",
                         help="do not solve a step from zero forces (its warm_cold column is left "
-                             "empty): newton-ac from zero on a 10^5-grain pile at rest had not "
-                             "ended after 10 minutes")
+                             "empty): newton-ac's solve from zero on a 10^5-grain pile at rest "
+                             "took 8 minutes")
     parser.add_argument("--json", type=pathlib.Path, help="write the rows to this JSON file")
     parser.add_argument("--figure", type=pathlib.Path,
                         help="draw s/step against grains (log-log, fitted exponents) to this PNG")
