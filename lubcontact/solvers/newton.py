@@ -360,13 +360,12 @@ class AlartCurnier:
             active[rows] = True
             return (sp.csr_matrix((data, indices, indptr), shape=(rows.size, self.n_rows)), active,
                     plain)
-        plain = 0                                       # rows of G that are the identity's
         rows, cols, vals = [], [], []
         box = np.flatnonzero(self.box & (y > self.lower) & (y < self.upper))
         rows.append(box)
         cols.append(box)
         vals.append(np.ones(box.size))
-        plain += box.size
+        plain = box.size                                # rows of G that are the identity's
         if self.cone_n.size:
             y_n, y_t = y[self.cone_n], y[self.cone_t]
             pushed = y_n > 0
@@ -619,7 +618,7 @@ def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = 5
             "newton_status": phase.status, "error": phase.error,
             "joint_iterations": joint_iterations}
     if joined_start and phase.status == CONVERGED and phase.error > JOINT_FINISH * tol \
-            and not function.hyperstatic(forces):
+            and not phase.hyperstatic and not function.hyperstatic(forces):
         finish = _proximal_newton(function, unshifted, forces, JOINT_FINISH * tol, POLISH_ITERATIONS,
                                   STRATEGIES[0])
         iterations += finish.iterations
@@ -695,7 +694,7 @@ def _strategies(function: AlartCurnier, unshifted: ConicProblem, forces: np.ndar
             break
     return _Phase(forces=best.forces, status=best.status, iterations=iterations, error=best.error,
                   history=np.asarray(history), gradient_steps=gradient_steps,
-                  proximal_steps=proximal_steps, strategies=tried)
+                  proximal_steps=proximal_steps, strategies=tried, hyperstatic=best.hyperstatic)
 
 
 def _proximal_newton(function: AlartCurnier, unshifted: ConicProblem, forces: np.ndarray,
@@ -763,18 +762,20 @@ def _proximal_newton(function: AlartCurnier, unshifted: ConicProblem, forces: np
         if inner.iterations == 0:
             status = FAILED
             break
+    hyperstatic = False
     if best[0] <= tol:
         status = CONVERGED
         # the proximal loop stops at tol; plain Newton is quadratic here, unless its block is singular
-        if scale > 0 and not function.hyperstatic(best[1]):
+        hyperstatic = scale > 0 and function.hyperstatic(best[1])
+        if scale > 0 and not hyperstatic:
             function.set_proximal(0.0, best[1])
             finish = _newton_phase(function, unshifted, best[1], 0.0, FINISH_ITERATIONS)
             iterations += finish.iterations
             history.extend(finish.history[1:])
             best = min(best, (finish.error, finish.forces), key=lambda pair: pair[0])
     return _Phase(forces=best[1], status=status, iterations=iterations, error=best[0],
-                  history=np.asarray(history),
-                  gradient_steps=gradient_steps, proximal_steps=proximal_steps)
+                  history=np.asarray(history), gradient_steps=gradient_steps,
+                  proximal_steps=proximal_steps, hyperstatic=hyperstatic)
 
 
 @dataclass
@@ -825,6 +826,9 @@ class _Phase:
     solved: bool = False
     last: np.ndarray | None = None
     last_error: float = np.inf
+    hyperstatic: bool = False
+    """Plain Newton's block at ``forces`` was found singular by its count
+    (:meth:`AlartCurnier.hyperstatic`), so no iteration went past tol from them."""
 
 
 def _newton_phase(function: AlartCurnier, unshifted: ConicProblem, forces: np.ndarray,
