@@ -42,22 +42,23 @@ import numpy as np
 from ..flow.run import FlowRun
 from ..io.files import save_npz, save_text
 from ..model.scene import Scene
-from ..problem.metrics import scaled_coulomb_error
+from ..problem.metrics import scaled_coulomb_error, velocity_error
 from ..problem.step import StepProblem
 from ..scenes import inclined
 from ..sim.simulation import Simulation
 from ..sim.state import SimulationState
-from ..solvers import SolveSettings
+from ..sim.trajectory import StepReport
+from ..solvers import SolveSettings, solver_info
 from ..solvers.coulomb import has_joint_phase
-from .harness import warm_up
+from .harness import reference_distrust, solve_reference, warm_up
 from .options import check_methods, names
 from .statistics import scaling_exponents
 from .tables import format_table
 
 COLUMNS = ("n_grains", "model", "friction", "method", "contacts", "s_per_step", "iterations",
            "per_product", "warm_cold",
-           "max_fclib_error", "contacts_pc", "assembly_pc", "solve_pc", "update_pc", "peak_mb",
-           "statuses")
+           "max_fclib_error", "v_err", "ref_s", "contacts_pc", "assembly_pc", "solve_pc", "update_pc",
+           "peak_mb", "statuses", "ref_statuses")
 """``contacts``: mean per step; ``s_per_step``: median time of the whole step (contacts,
 assembly, the exact-Coulomb solve, update); ``iterations``: median per step (Newton iterations
 for ``newton-ac``, sweeps for ``nsgs``, inner first-order iterations for the others);
@@ -65,11 +66,23 @@ for ``newton-ac``, sweeps for ``nsgs``, inner first-order iterations for the oth
 one scipy product ``W x`` on the last step's normalised ``W``;
 ``warm_cold``: iterations of the first timed step warm-started from the previous step (pair
 keys) over those of the same step started cold (1 where the first-order methods set aside a
-warm start worse than zero: :func:`lubcontact.solvers.dual_data.initial_point`; empty with
-``--no-cold``); ``*_pc``:
+warm start worse than zero: :func:`lubcontact.solvers.dual_data.initial_point`; not measured
+with ``--no-cold``); ``v_err``: with ``--reference K``, the largest relative velocity error
+(:func:`~lubcontact.problem.metrics.velocity_error`) of every K-th timed step against the
+reference's solve of the same problem (:func:`reference_settings`), ``ref_s`` the median time of
+those reference solves and ``ref_statuses`` their statuses (a reference not trusted,
+:func:`~lubcontact.bench.harness.reference_distrust`, is also said on its own line); ``*_pc``:
 percentage of the steps' total time in each phase
 (:attr:`~lubcontact.sim.trajectory.StepReport.timings`); ``peak_mb``: the process's peak
-resident memory so far (MB)."""
+resident memory so far (MB). A column that no row has is not printed (:func:`shown_columns`)."""
+
+
+
+
+def shown_columns(rows: list[dict[str, Any]]) -> list[str]:
+    """The columns of :data:`COLUMNS` that some row of ``rows`` has (``warm_cold`` and the
+    reference's are measured only on request)."""
+    return [column for column in COLUMNS if any(column in row for row in rows)]
 
 
 PHASES = ("contacts", "assembly", "solve", "update")
@@ -83,7 +96,23 @@ MIX_STEPS = 50
 """Steps run after widening a layer, before any timed step."""
 FRICTIONS = ("exact", "relaxation")
 """``exact``: Coulomb's law (``SolveSettings(exact_coulomb=True)``); ``relaxation``: its convex
-relaxation, one solve."""
+relaxation, one solve (not by a method that solves exact Coulomb itself, ``native_coulomb``: it
+has no relaxation)."""
+REFERENCE_TOL = 1e-9
+"""Tolerance of the reference solves (``--reference``): the inner solves and the fixed point on s."""
+
+
+def reference_settings(method: str, friction: str) -> SolveSettings:
+    """Settings of a reference solve (``method``, the registry's reference) of a step of
+    ``friction``: :data:`REFERENCE_TOL`, and for ``exact`` the fixed point on s."""
+    return SolveSettings(method=method, tol=REFERENCE_TOL, tol_fp=REFERENCE_TOL,
+                         exact_coulomb=friction == "exact")
+
+
+def measures(method: str, friction: str) -> bool:
+    """Whether ``method`` solves ``friction``: a method that solves exact Coulomb itself
+    (``native_coulomb``) has no relaxation."""
+    return friction == "exact" or not solver_info(method).native_coulomb
 
 
 def developed_flow(n_grains: int, model: str, angle: float, cache: pathlib.Path, *, seed: int = 1,
@@ -184,13 +213,15 @@ def product_time(problem: StepProblem, repeats: int = 20) -> float:
 
 
 def time_method(sim: Simulation, method: str, steps: int, tol: float,
-                friction: str = "exact", joint: int = 0, cold: bool = True) -> dict[str, Any]:
+                friction: str = "exact", joint: int = 0, cold: bool = True,
+                reference: int = 0) -> dict[str, Any]:
     """Solve ``steps`` steps of ``sim`` from its current state with ``method`` (``friction``:
     one of :data:`FRICTIONS`; ``joint`` > 0: exact Coulomb starting with the fixed point's joint
     phase, ``joint`` of :func:`~lubcontact.solvers.coulomb.solve_coulomb`, for the methods it
     applies to (:func:`~lubcontact.solvers.coulomb.has_joint_phase`), labelled
     ``method+jointN``; ``cold``: solve the first timed step from zero forces as well, for
-    ``warm_cold``); the state is kept."""
+    ``warm_cold``; ``reference`` > 0: every ``reference``-th timed step, the first included, also
+    solved untimed by the reference, for ``v_err``); the state is kept."""
     start = sim.state.copy()              # the steps below move sim.state in place
     exact = friction == "exact"
     joint = joint if exact and has_joint_phase(method) else 0
@@ -204,12 +235,14 @@ def time_method(sim: Simulation, method: str, steps: int, tol: float,
         warm = settings.solve(problem, guess, shift).iterations
         ratio["warm_cold"] = warm / max(from_zero, 1)
     times, iterations, errors, contacts, statuses = [], [], [], [], set()
-    per_iteration = []
+    per_iteration, checked = [], []
     phases = dict.fromkeys(PHASES, 0.0)
-    for _ in range(steps):
+    for k in range(steps):
         clock = time.perf_counter()
         report = sim.step(settings)
         times.append(time.perf_counter() - clock)
+        if reference and k % reference == 0:
+            checked.append(check_step(report, friction, k))
         iterations.append(report.result.iterations)
         per_iteration.append(report.timings["solve"] / max(report.result.iterations, 1))
         contacts.append(report.problem.n_contacts)
@@ -219,6 +252,10 @@ def time_method(sim: Simulation, method: str, steps: int, tol: float,
             phases[phase] += report.timings[phase]
     sim.restore(start)
     total = sum(times)
+    if checked:
+        errors_v, seconds, ref_statuses = zip(*checked)
+        ratio.update(v_err=float(max(errors_v)), ref_s=float(np.median(seconds)),
+                     ref_statuses=",".join(sorted(set(ref_statuses))))
     return {"friction": friction, "method": f"{method}+joint{joint}" if joint else method,
             "contacts": int(np.mean(contacts)),
             "s_per_step": float(np.median(times)),
@@ -228,6 +265,36 @@ def time_method(sim: Simulation, method: str, steps: int, tol: float,
             **{f"{phase}_pc": 100.0 * phases[phase] / total for phase in PHASES},
             "peak_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
             "statuses": ",".join(sorted(statuses))}
+
+
+def check_step(report: StepReport, friction: str, step: int) -> tuple[float, float, str]:
+    """The velocity error of a solved step against the reference's solve of its problem.
+
+    The reference starts from the step's forces and shift: the forces choose the first piece of
+    each UNION contact for its branch rule (a union of cones has a solution per consistent
+    choice of pieces), the shift starts its fixed point on s, which must still converge to
+    :data:`REFERENCE_TOL` from there. From all contacts pushed and a zero shift, Clarabel's
+    branch rule ended ``inaccurate`` on gluey 2 000-grain flows and its fixed point
+    ``max_iter`` (50 outer iterations) on dry 12 000-grain ones.
+
+    Returns
+    -------
+    (float, float, str)
+        :func:`~lubcontact.problem.metrics.velocity_error` (inf when the reference raised), the
+        reference's seconds, and its status; a reference not trusted
+        (:func:`~lubcontact.bench.harness.reference_distrust`) is said on its own line, naming
+        the timed ``step``.
+    """
+    _, timed = solve_reference(report.problem, lambda name: reference_settings(name, friction),
+                               warm_start=report.result.forces, shift=report.result.shift)
+    if timed.result is None:
+        print(f"# reference failed on timed step {step}: {timed.message}", flush=True)
+        return np.inf, timed.seconds, "raised"
+    distrust = reference_distrust(timed.result)
+    if distrust:
+        print(f"# reference NOT trusted on timed step {step}: {distrust}", flush=True)
+    error = velocity_error(report.problem, report.result.velocities, timed.result.velocities)
+    return error, timed.seconds, timed.result.status
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -261,9 +328,13 @@ def main(argv: list[str] | None = None) -> int:
                              "than 300 rows without UNION contacts), shift updated every JOINT "
                              "iterations inside one APGD run (0: none; default 0)")
     parser.add_argument("--no-cold", dest="cold", action="store_false",
-                        help="do not solve a step from zero forces (its warm_cold column is left "
-                             "empty): newton-ac's solve from zero on a 10^5-grain pile at rest "
+                        help="do not solve a step from zero forces (no warm_cold column): "
+                             "newton-ac's solve from zero on a 10^5-grain pile at rest "
                              "took 8 minutes")
+    parser.add_argument("--reference", type=int, default=0,
+                        help="every REFERENCE-th timed step (the first included) also solved, "
+                             "untimed, by the Clarabel reference at tol 1e-9, for the v_err "
+                             "column (0: none; default 0)")
     parser.add_argument("--json", type=pathlib.Path, help="write the rows to this JSON file")
     parser.add_argument("--figure", type=pathlib.Path,
                         help="draw s/step against grains (log-log, fitted exponents) to this PNG")
@@ -276,8 +347,9 @@ def main(argv: list[str] | None = None) -> int:
                         ("--settle-steps", args.settle_steps)):
         if value < 1:
             parser.error(f"argument {flag}: must be >= 1, got {value}")
-    if args.joint < 0:
-        parser.error(f"argument --joint: must be >= 0, got {args.joint}")
+    for flag, value in (("--joint", args.joint), ("--reference", args.reference)):
+        if value < 0:
+            parser.error(f"argument {flag}: must be >= 0, got {value}")
     if not args.tol > 0:
         parser.error(f"argument --tol: must be > 0, got {args.tol}")
     for model in args.models:
@@ -303,15 +375,19 @@ def main(argv: list[str] | None = None) -> int:
             warm_up(sim.next_problem()[2], args.methods)
             for friction in args.friction:
                 for method in args.methods:
+                    if not measures(method, friction):
+                        print(f"# {method}: no {friction} (it solves exact Coulomb itself), "
+                              "skipped", flush=True)
+                        continue
                     row = {"n_grains": n_grains, "model": model,
                            **time_method(sim, method, args.steps, args.tol, friction,
-                                         args.joint, args.cold)}
+                                         args.joint, args.cold, args.reference)}
                     rows.append(row)
-                    print(format_table([row], COLUMNS), flush=True)
+                    print(format_table([row], shown_columns([row])), flush=True)
                     if args.json:             # rewritten after each row: a stopped run keeps them
                         save_text(args.json, json.dumps(rows, indent=1))
     print()
-    print(format_table(rows, COLUMNS))
+    print(format_table(rows, shown_columns(rows)))
     for (model, friction, method), exponent in scaling_exponents(rows).items():
         print(f"# {model} {friction} {method}: s/step ~ N^{exponent:.2f}")
     if args.figure:

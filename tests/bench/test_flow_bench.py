@@ -8,6 +8,7 @@ from lubcontact.bench.statistics import power_law_exponent
 from lubcontact.flow.bed import initial_scene
 from lubcontact.flow.config import RunConfig
 from lubcontact.flow.run import FlowRun
+from lubcontact.problem.metrics import velocity_error
 
 
 def test_bench_flow_prints_a_row_per_method_and_reuses_its_cache(tmp_path, capsys):
@@ -15,8 +16,9 @@ def test_bench_flow_prints_a_row_per_method_and_reuses_its_cache(tmp_path, capsy
             "--settle-steps", "150", "--cache", str(tmp_path)]
     assert flow_steps.main(argv) == 0
     table = capsys.readouterr().out.splitlines()[-4:]
-    assert table[0].split() == list(flow_steps.COLUMNS)
-    rows = [dict(zip(flow_steps.COLUMNS, line.split(), strict=True)) for line in table[2:]]
+    columns = [name for name in flow_steps.COLUMNS if name not in ("v_err", "ref_s", "ref_statuses")]
+    assert table[0].split() == columns                # the reference's only with --reference
+    rows = [dict(zip(columns, line.split(), strict=True)) for line in table[2:]]
     assert [row["method"] for row in rows] == ["apgd-jacobi", "newton-ac"]
     for row in rows:
         assert int(row["contacts"]) > 20              # a bed: contacts, not falling grains
@@ -33,7 +35,8 @@ def test_bench_flow_prints_a_row_per_method_and_reuses_its_cache(tmp_path, capsy
 
 @pytest.mark.parametrize("bad, flag", [(["--sizes", "0"], "--sizes"), (["--methods", "nope"], "--methods"),
                                        (["--models", "wet"], "--models"), (["--tol", "0"], "--tol"),
-                                       (["--joint", "-1"], "--joint")])
+                                       (["--joint", "-1"], "--joint"),
+                                       (["--reference", "-2"], "--reference")])
 def test_bad_flags_are_one_line_errors(bad, flag, capsys):
     with pytest.raises(SystemExit) as exit_:
         flow_steps.main(bad)
@@ -95,6 +98,38 @@ def test_exact_rows_with_the_joint_phase_are_labelled_and_converge(tmp_path, mon
     assert (fixed_point["method"], newton_alone["method"]) == ("apgd-jacobi", "newton-ac")
     assert rows[0]["iterations"] < fixed_point["iterations"]
     assert rows[1]["iterations"] > newton_alone["iterations"]
+
+
+def test_sampled_steps_are_checked_against_the_reference_and_newton_has_no_relaxation(tmp_path,
+                                                                                    capsys):
+    """``--reference 1``: every timed step re-solved by Clarabel at tol 1e-9 (exact Coulomb by
+    its fixed point, the relaxation by one solve), each row's velocity error against it below
+    what the law's difference would give; ``newton-ac`` solves exact Coulomb only, so its
+    relaxation row is skipped with a note instead of timing exact Coulomb under that name."""
+    layer = tmp_path / "layer"
+    config = RunConfig(scene="inclined_flow", n_grains=24, width=12.0, model="dry", angle=24.0,
+                       steps=6, dt_fraction=0.05, settle_steps=0, checkpoint_every=6)
+    FlowRun(config, initial_scene(config, layer), layer).advance(6)
+    argv = ["--sizes", "24", "--layer", str(layer / "checkpoint.npz"), "--methods",
+            "apgd-jacobi,newton-ac", "--friction", "exact,relaxation", "--steps", "2",
+            "--reference", "1", "--no-cold", "--tol", "1e-8", "--cache", str(tmp_path),
+            "--json", str(tmp_path / "rows.json")]
+    assert flow_steps.main(argv) == 0
+    assert "# newton-ac: no relaxation (it solves exact Coulomb itself), skipped" in \
+        capsys.readouterr().out
+    rows = json.loads((tmp_path / "rows.json").read_text())
+    assert [(row["friction"], row["method"]) for row in rows] == [
+        ("exact", "apgd-jacobi"), ("exact", "newton-ac"), ("relaxation", "apgd-jacobi")]
+    for row in rows:
+        assert row["ref_statuses"] == "converged" and row["ref_s"] > 0
+        assert row["v_err"] <= 1e-6
+    relaxation = flow_steps.reference_settings("clarabel", "relaxation")
+    exact = flow_steps.reference_settings("clarabel", "exact")
+    _, sim = flow_steps.widened_flow(layer / "checkpoint.npz", 24, tmp_path)
+    report = sim.step(exact)
+    apart = velocity_error(report.problem, report.result.velocities,
+                                      relaxation.solve(report.problem).velocities)
+    assert apart > 1e3 * max(row["v_err"] for row in rows)     # the two laws, told apart
 
 
 def test_a_size_that_is_not_a_multiple_of_the_layer_is_a_one_line_error(tmp_path, capsys):
