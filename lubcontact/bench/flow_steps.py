@@ -48,7 +48,7 @@ from ..scenes import inclined
 from ..sim.simulation import Simulation
 from ..sim.state import SimulationState
 from ..sim.trajectory import StepReport
-from ..solvers import SolveSettings, solver_info
+from ..solvers import SolveSettings
 from ..solvers.coulomb import has_joint_phase
 from .harness import reference_distrust, solve_reference, warm_up
 from .options import check_methods, names
@@ -74,9 +74,9 @@ those reference solves and ``ref_statuses`` their statuses (a reference not trus
 :func:`~lubcontact.bench.harness.reference_distrust`, is also said on its own line); ``*_pc``:
 percentage of the steps' total time in each phase
 (:attr:`~lubcontact.sim.trajectory.StepReport.timings`); ``peak_mb``: the process's peak
-resident memory so far (MB). A column that no row has is not printed (:func:`shown_columns`)."""
-
-
+resident memory so far (MB; with ``--reference``, the reference's included, and the steps after
+a reference solve are slower for its use of the caches: compare times of runs without it). A
+column that no row has is not printed (:func:`shown_columns`)."""
 
 
 def shown_columns(rows: list[dict[str, Any]]) -> list[str]:
@@ -96,8 +96,8 @@ MIX_STEPS = 50
 """Steps run after widening a layer, before any timed step."""
 FRICTIONS = ("exact", "relaxation")
 """``exact``: Coulomb's law (``SolveSettings(exact_coulomb=True)``); ``relaxation``: its convex
-relaxation, one solve (not by a method that solves exact Coulomb itself, ``native_coulomb``: it
-has no relaxation)."""
+relaxation, one solve (not by a method that solves exact Coulomb itself: it has no
+relaxation)."""
 REFERENCE_TOL = 1e-9
 """Tolerance of the reference solves (``--reference``): the inner solves and the fixed point on s."""
 
@@ -107,12 +107,6 @@ def reference_settings(method: str, friction: str) -> SolveSettings:
     ``friction``: :data:`REFERENCE_TOL`, and for ``exact`` the fixed point on s."""
     return SolveSettings(method=method, tol=REFERENCE_TOL, tol_fp=REFERENCE_TOL,
                          exact_coulomb=friction == "exact")
-
-
-def measures(method: str, friction: str) -> bool:
-    """Whether ``method`` solves ``friction``: a method that solves exact Coulomb itself
-    (``native_coulomb``) has no relaxation."""
-    return friction == "exact" or not solver_info(method).native_coulomb
 
 
 def developed_flow(n_grains: int, model: str, angle: float, cache: pathlib.Path, *, seed: int = 1,
@@ -221,12 +215,21 @@ def time_method(sim: Simulation, method: str, steps: int, tol: float,
     applies to (:func:`~lubcontact.solvers.coulomb.has_joint_phase`), labelled
     ``method+jointN``; ``cold``: solve the first timed step from zero forces as well, for
     ``warm_cold``; ``reference`` > 0: every ``reference``-th timed step, the first included, also
-    solved untimed by the reference, for ``v_err``); the state is kept."""
+    solved untimed by the reference, for ``v_err``); the state is kept.
+
+    Raises
+    ------
+    ValueError
+        Naming ``--methods`` for the relaxation by a method that solves exact Coulomb itself
+        (:meth:`~lubcontact.solvers.SolveSettings.solves_exact_coulomb`).
+    """
     start = sim.state.copy()              # the steps below move sim.state in place
     exact = friction == "exact"
     joint = joint if exact and has_joint_phase(method) else 0
     settings = SolveSettings(method=method, tol=tol, exact_coulomb=exact,
                              options={"joint": joint} if joint else {})
+    if not exact and settings.solves_exact_coulomb(sim.next_problem()[2]):
+        raise ValueError(f"--methods: {method} solves exact Coulomb itself, it has no relaxation")
     sim.step(settings)                       # untimed: compilation, caches
     ratio = {}
     if cold:
@@ -254,8 +257,10 @@ def time_method(sim: Simulation, method: str, steps: int, tol: float,
     total = sum(times)
     if checked:
         errors_v, seconds, ref_statuses = zip(*checked)
-        ratio.update(v_err=float(max(errors_v)), ref_s=float(np.median(seconds)),
-                     ref_statuses=",".join(sorted(set(ref_statuses))))
+        ratio.update(ref_s=float(np.median(seconds)), ref_statuses=",".join(sorted(set(ref_statuses))))
+        trusted = [error for error in errors_v if error is not None]
+        if trusted:
+            ratio["v_err"] = float(max(trusted))
     return {"friction": friction, "method": f"{method}+joint{joint}" if joint else method,
             "contacts": int(np.mean(contacts)),
             "s_per_step": float(np.median(times)),
@@ -267,32 +272,43 @@ def time_method(sim: Simulation, method: str, steps: int, tol: float,
             "statuses": ",".join(sorted(statuses))}
 
 
-def check_step(report: StepReport, friction: str, step: int) -> tuple[float, float, str]:
+def check_step(report: StepReport, friction: str, step: int) -> tuple[float | None, float, str]:
     """The velocity error of a solved step against the reference's solve of its problem.
 
-    The reference starts from the step's forces and shift: the forces choose the first piece of
-    each UNION contact for its branch rule (a union of cones has a solution per consistent
-    choice of pieces), the shift starts its fixed point on s, which must still converge to
-    :data:`REFERENCE_TOL` from there. From all contacts pushed and a zero shift, Clarabel's
-    branch rule ended ``inaccurate`` on gluey 2 000-grain flows and its fixed point
-    ``max_iter`` (50 outer iterations) on dry 12 000-grain ones.
+    The reference starts from the step's forces: they choose the first piece of each UNION
+    contact for its branch rule (a union of cones has a solution per consistent choice of
+    pieces). For ``exact`` its fixed point on s starts from the step's shift and must still
+    converge to :data:`REFERENCE_TOL` from there (from a zero shift it ended ``max_iter``, 50
+    outer iterations, on dry 12 000-grain flows). Clarabel's relaxation of gluey steps still
+    ends ``inaccurate`` from the forces of ``apgd-jacobi`` (docs/records/benchmarks.md).
+
+    Parameters
+    ----------
+    report : StepReport
+        The solved step.
+    friction : str
+        One of :data:`FRICTIONS`: the law the step was solved with.
+    step : int
+        The step's index among the timed ones (from 0), for the messages.
 
     Returns
     -------
-    (float, float, str)
-        :func:`~lubcontact.problem.metrics.velocity_error` (inf when the reference raised), the
-        reference's seconds, and its status; a reference not trusted
-        (:func:`~lubcontact.bench.harness.reference_distrust`) is said on its own line, naming
-        the timed ``step``.
+    (float or None, float, str)
+        :func:`~lubcontact.problem.metrics.velocity_error` against a trusted reference (None
+        when the reference raised or is not trusted,
+        :func:`~lubcontact.bench.harness.reference_distrust`, which is then said on its own
+        line), the reference's seconds, and its status (``raised``, ``not trusted`` or the
+        result's status).
     """
     _, timed = solve_reference(report.problem, lambda name: reference_settings(name, friction),
                                warm_start=report.result.forces, shift=report.result.shift)
     if timed.result is None:
         print(f"# reference failed on timed step {step}: {timed.message}", flush=True)
-        return np.inf, timed.seconds, "raised"
+        return None, timed.seconds, "raised"
     distrust = reference_distrust(timed.result)
     if distrust:
         print(f"# reference NOT trusted on timed step {step}: {distrust}", flush=True)
+        return None, timed.seconds, "not trusted"
     error = velocity_error(report.problem, report.result.velocities, timed.result.velocities)
     return error, timed.seconds, timed.result.status
 
@@ -321,7 +337,8 @@ def main(argv: list[str] | None = None) -> int:
                              "(--models, --angle and --settle-steps are then not used)")
     parser.add_argument("--friction", type=names, default=["exact"],
                         help="comma list of exact (Coulomb's law), relaxation (its convex "
-                             "relaxation) (default: exact)")
+                             "relaxation; skipped for methods that solve exact Coulomb "
+                             "themselves) (default: exact)")
     parser.add_argument("--joint", type=int, default=0,
                         help="exact friction starting with the fixed point's joint phase (the "
                              "first-order methods and newton-ac, which runs it on steps of more "
@@ -333,8 +350,9 @@ def main(argv: list[str] | None = None) -> int:
                              "took 8 minutes")
     parser.add_argument("--reference", type=int, default=0,
                         help="every REFERENCE-th timed step (the first included) also solved, "
-                             "untimed, by the Clarabel reference at tol 1e-9, for the v_err "
-                             "column (0: none; default 0)")
+                             f"untimed, by the Clarabel reference at tol {REFERENCE_TOL:g}, for "
+                             "the v_err column (0: none; default 0); peak_mb then includes it, "
+                             "and the times are not those of a run without it")
     parser.add_argument("--json", type=pathlib.Path, help="write the rows to this JSON file")
     parser.add_argument("--figure", type=pathlib.Path,
                         help="draw s/step against grains (log-log, fitted exponents) to this PNG")
@@ -375,13 +393,13 @@ def main(argv: list[str] | None = None) -> int:
             warm_up(sim.next_problem()[2], args.methods)
             for friction in args.friction:
                 for method in args.methods:
-                    if not measures(method, friction):
-                        print(f"# {method}: no {friction} (it solves exact Coulomb itself), "
-                              "skipped", flush=True)
+                    try:
+                        measured = time_method(sim, method, args.steps, args.tol, friction,
+                                               args.joint, args.cold, args.reference)
+                    except ValueError as exc:
+                        print(f"# {friction} skipped: {exc}", flush=True)
                         continue
-                    row = {"n_grains": n_grains, "model": model,
-                           **time_method(sim, method, args.steps, args.tol, friction,
-                                         args.joint, args.cold, args.reference)}
+                    row = {"n_grains": n_grains, "model": model, **measured}
                     rows.append(row)
                     print(format_table([row], shown_columns([row])), flush=True)
                     if args.json:             # rewritten after each row: a stopped run keeps them

@@ -94,8 +94,8 @@ SPARSE_LU = dict(permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.1, panel_size=1
 """SuperLU's settings for the active block ``J_AA``, whose pattern is ``W_AA``'s (symmetric):
 a minimum-degree ordering of ``A^T + A`` with pivots preferred on the diagonal. On developed
 2000-grain flows its factors hold 2.6 times the block's entries against 3.9 with COLAMD, and a
-Newton step costs 15 % less (same iterations). Panels of one column (SuperLU's default is 10):
-the same factors, 21-22 ms instead of 28-30 for the 23 000-26 000-row blocks of 12 000-grain
+Newton step costs 15 % less (same iterations). Panels of one column (SuperLU's default is 20):
+the same factors, 21-22 ms instead of 27-30 for the 22 000-27 000-row blocks of 12 000-grain
 flows, whose supernodes are too small for wider panels to pay (docs/records/benchmarks.md)."""
 
 STALL_WINDOW = 60

@@ -1,5 +1,6 @@
 """``lubcontact bench flow``: a developed flow built once and cached, a row per method."""
 import json
+from dataclasses import replace
 
 import pytest
 
@@ -100,6 +101,7 @@ def test_exact_rows_with_the_joint_phase_are_labelled_and_converge(tmp_path, mon
     assert rows[1]["iterations"] > newton_alone["iterations"]
 
 
+@pytest.mark.filterwarnings("ignore::lubcontact.solvers.result.SolverWarning")  # tol 1e-2 steps
 def test_sampled_steps_are_checked_against_the_reference_and_newton_has_no_relaxation(tmp_path,
                                                                                     capsys):
     """``--reference 1``: every timed step re-solved by Clarabel at tol 1e-9 (exact Coulomb by
@@ -115,21 +117,44 @@ def test_sampled_steps_are_checked_against_the_reference_and_newton_has_no_relax
             "--reference", "1", "--no-cold", "--tol", "1e-8", "--cache", str(tmp_path),
             "--json", str(tmp_path / "rows.json")]
     assert flow_steps.main(argv) == 0
-    assert "# newton-ac: no relaxation (it solves exact Coulomb itself), skipped" in \
-        capsys.readouterr().out
+    assert "# relaxation skipped: --methods: newton-ac solves exact Coulomb itself, it has no " \
+        "relaxation" in capsys.readouterr().out
     rows = json.loads((tmp_path / "rows.json").read_text())
     assert [(row["friction"], row["method"]) for row in rows] == [
         ("exact", "apgd-jacobi"), ("exact", "newton-ac"), ("relaxation", "apgd-jacobi")]
     for row in rows:
         assert row["ref_statuses"] == "converged" and row["ref_s"] > 0
-        assert row["v_err"] <= 1e-6
+        assert 0 < row["v_err"] <= 1e-6
     relaxation = flow_steps.reference_settings("clarabel", "relaxation")
     exact = flow_steps.reference_settings("clarabel", "exact")
     _, sim = flow_steps.widened_flow(layer / "checkpoint.npz", 24, tmp_path)
     report = sim.step(exact)
     apart = velocity_error(report.problem, report.result.velocities,
-                                      relaxation.solve(report.problem).velocities)
+                           relaxation.solve(report.problem).velocities)
     assert apart > 1e3 * max(row["v_err"] for row in rows)     # the two laws, told apart
+    loose = argv[:argv.index("--tol")] + ["--tol", "1e-2"] + argv[argv.index("--tol") + 2:]
+    loose[loose.index("--methods") + 1] = "apgd-jacobi"
+    assert flow_steps.main(loose) == 0
+    assert all(row["v_err"] > 1e-6 for row in json.loads((tmp_path / "rows.json").read_text()))
+
+
+def test_a_reference_not_trusted_gives_no_velocity_error(tmp_path, capsys, monkeypatch):
+    """A reference stopped at its first iteration is not trusted: said on its own line, its
+    status in the row, and no ``v_err`` measured against it."""
+    layer = tmp_path / "layer"
+    config = RunConfig(scene="inclined_flow", n_grains=24, width=12.0, model="dry", angle=24.0,
+                       steps=6, dt_fraction=0.05, settle_steps=0, checkpoint_every=6)
+    FlowRun(config, initial_scene(config, layer), layer).advance(6)
+    settings = flow_steps.reference_settings
+    monkeypatch.setattr(flow_steps, "reference_settings",
+                        lambda method, friction: replace(settings(method, friction), max_iter=1))
+    argv = ["--sizes", "24", "--layer", str(layer / "checkpoint.npz"), "--methods", "apgd-jacobi",
+            "--friction", "relaxation", "--steps", "2", "--reference", "1", "--no-cold",
+            "--cache", str(tmp_path), "--json", str(tmp_path / "rows.json")]
+    assert flow_steps.main(argv) == 0
+    assert "# reference NOT trusted on timed step 1: reference status" in capsys.readouterr().out
+    (row,) = json.loads((tmp_path / "rows.json").read_text())
+    assert row["ref_statuses"] == "not trusted" and "v_err" not in row
 
 
 def test_a_size_that_is_not_a_multiple_of_the_layer_is_a_one_line_error(tmp_path, capsys):
