@@ -57,8 +57,8 @@ from .tables import format_table
 
 COLUMNS = ("n_grains", "model", "friction", "method", "contacts", "s_per_step", "iterations",
            "per_product", "warm_cold",
-           "max_fclib_error", "v_err", "ref_s", "contacts_pc", "assembly_pc", "solve_pc", "update_pc",
-           "peak_mb", "statuses", "ref_statuses")
+           "max_fclib_error", "v_err", "ref_s", "contacts_pc", "assembly_pc", "setup_pc", "iterations_pc",
+           "finish_pc", "update_pc", "peak_mb", "statuses", "ref_statuses")
 """``contacts``: mean per step; ``s_per_step``: median time of the whole step (contacts,
 assembly, the exact-Coulomb solve, update); ``iterations``: median per step (Newton iterations
 for ``newton-ac``, sweeps for ``nsgs``, inner first-order iterations for the others);
@@ -72,8 +72,7 @@ with ``--no-cold``); ``v_err``: with ``--reference K``, the largest relative vel
 reference's solve of the same problem (:func:`reference_settings`), ``ref_s`` the median time of
 those reference solves and ``ref_statuses`` their statuses (a reference not trusted,
 :func:`~lubcontact.bench.harness.reference_distrust`, is also said on its own line); ``*_pc``:
-percentage of the steps' total time in each phase
-(:attr:`~lubcontact.sim.trajectory.StepReport.timings`); ``peak_mb``: the process's peak
+percentage of the steps' total time in each phase (:func:`step_phases`); ``peak_mb``: the process's peak
 resident memory so far (MB; with ``--reference``, the reference's included, and the steps after
 a reference solve are slower for its use of the caches: compare times of runs without it). A
 column that no row has is not printed (:func:`shown_columns`)."""
@@ -85,8 +84,21 @@ def shown_columns(rows: list[dict[str, Any]]) -> list[str]:
     return [column for column in COLUMNS if any(column in row for row in rows)]
 
 
-PHASES = ("contacts", "assembly", "solve", "update")
-"""The phases of a step (:attr:`~lubcontact.sim.trajectory.StepReport.timings`)."""
+PHASES = ("contacts", "assembly", "setup", "iterations", "finish", "update")
+"""The phases of a step (:func:`step_phases`)."""
+
+
+def step_phases(report: StepReport) -> dict[str, float]:
+    """Seconds of each of :data:`PHASES` in a step: ``contacts``, ``assembly`` and ``update`` as
+    :attr:`~lubcontact.sim.trajectory.StepReport.timings` has them, and the solve split into
+    the method's ``setup`` and ``iterations`` (the result's ``setup_time`` and ``solve_time``,
+    summed over a fixed point's inner solves) and the rest, ``finish`` (the result's checks, the
+    fixed point's own work, and a first solve that a fallback replaced)."""
+    timings, result = report.timings, report.result
+    finish = max(timings["solve"] - result.setup_time - result.solve_time, 0.0)
+    return {"contacts": timings["contacts"], "assembly": timings["assembly"],
+            "setup": result.setup_time, "iterations": result.solve_time, "finish": finish,
+            "update": timings["update"]}
 
 DEVELOP_SOLVER = "newton-ac"
 """Solver of the flow steps before the timed ones (exact Coulomb): on a dense 1000-grain bed,
@@ -251,8 +263,8 @@ def time_method(sim: Simulation, method: str, steps: int, tol: float,
         contacts.append(report.problem.n_contacts)
         statuses.add(report.result.status)
         errors.append(scaled_coulomb_error(report.problem, report.result.forces))
-        for phase in PHASES:
-            phases[phase] += report.timings[phase]
+        for phase, seconds in step_phases(report).items():
+            phases[phase] += seconds
     sim.restore(start)
     total = sum(times)
     if checked:

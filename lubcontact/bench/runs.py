@@ -65,7 +65,7 @@ class Measurement:
     time_s, time_min_s, time_max_s : float
         Median, min and max wall-clock seconds of the repeats.
     setup_s, solve_s : float
-        The method's own split (medians; NaN for Coulomb problems).
+        The method's own split (medians; summed over the inner solves of Coulomb's fixed point).
     residual : float
         Natural-map residual (normalised units).
     velocity_error, fclib_error, min_gap, error : float
@@ -155,7 +155,6 @@ def measure(instance: Instance, variant: Variant, tol: float, reference: TimedSo
     velocity error unless the instance has exact velocities).
     """
     walls, setups, solves, signatures, first, message = [], [], [], [], None, ""
-    split = instance.mode != COULOMB   # the fixed point reports the last inner solve's split only
     for _ in range(repeats):
         timed = run_once(instance, variant.method, tol, variant.warm, max_iter)
         if timed.result is None:
@@ -164,8 +163,8 @@ def measure(instance: Instance, variant: Variant, tol: float, reference: TimedSo
         result = timed.result
         first = first or result
         walls.append(timed.seconds)
-        setups.append(result.setup_time if split else NAN)
-        solves.append(result.solve_time if split else NAN)
+        setups.append(result.setup_time)         # summed over a fixed point's inner solves
+        solves.append(result.solve_time)
         signatures.append((result.iterations, result.status, result.x.tobytes()))
         if result.status != CONVERGED:
             break   # a failure is penalised, not timed: no repeats

@@ -45,6 +45,8 @@ a local (FCLIB) problem, so the same formula covers both.
 """
 from __future__ import annotations
 
+import time
+
 import numpy as np
 
 from .. import checks
@@ -115,8 +117,10 @@ def solve_coulomb(problem: ConicProblem, method: str = "clarabel", *, tol: float
         iterations, last changes, branch flips); ``status`` is ``converged``
         only if the fixed point and the last inner solve converged
         (``max_iter`` when the outer loop ran out, the inner status when an
-        inner solve failed). The problem is normalised once: outer iterations
-        change only the shift of the prepared problem (``W`` is not rebuilt).
+        inner solve failed); ``setup_time`` and ``solve_time`` summed over the
+        inner solves (the joint phase in ``solve_time``). The problem is
+        normalised once: outer iterations change only the shift of the prepared
+        problem (``W`` is not rebuilt).
     """
     if solver_info(method).native_coulomb and problem.cones.has_friction:
         if joint and has_joint_phase(method):
@@ -136,13 +140,15 @@ def solve_coulomb(problem: ConicProblem, method: str = "clarabel", *, tol: float
     accelerator = _Anderson(anderson)
     branches = _Branches(problem, warm_start, threshold=max(1e3 * tol, 1e-7))
     forces, inner, history = warm_start, 0, []
-    joint_iterations = 0
+    joint_iterations, setup_time, solve_time = 0, 0.0, 0.0
     convex = branches.problem()
     if joint > 0 and joint_applies(convex.cones):
+        clock = time.perf_counter()
         scaled = branches.on(normalized).with_shift(branches.restrict(current) / length)
         joined, joint_iterations = joint_coulomb_apgd(
             scaled, None if forces is None else forces / force_unit, tol,
             JOINT_MAX_ITER if max_iter is None else max_iter, joint)
+        solve_time += time.perf_counter() - clock
         forces = joined * force_unit
         current = coulomb_shift(convex, forces)
         normalized.keep_matrices(scaled)
@@ -161,6 +167,7 @@ def solve_coulomb(problem: ConicProblem, method: str = "clarabel", *, tol: float
         # first-order methods of a large problem apply F^T F and never assemble W)
         normalized.keep_matrices(scaled)
         inner += result.iterations
+        setup_time, solve_time = setup_time + result.setup_time, solve_time + result.solve_time
         if forces is not None:
             force_change = _relative_change(result.forces / force_unit, forces / force_unit)
         forces = result.forces
@@ -177,7 +184,8 @@ def solve_coulomb(problem: ConicProblem, method: str = "clarabel", *, tol: float
         if flipped:
             accelerator.restart()
     status = CONVERGED if converged else (result.status if not result.success else MAX_ITER)
-    return CoulombResult(**{**vars(result), "status": status, "iterations": inner},
+    return CoulombResult(**{**vars(result), "status": status, "iterations": inner,
+                            "setup_time": setup_time, "solve_time": solve_time},
                          outer_iterations=outer, shift_change=shift_change,
                          force_change=force_change, inner_status=result.status,
                          fixed_point_converged=converged, shift_history=np.asarray(history),
@@ -211,7 +219,8 @@ def solve_native_coulomb(problem: ConicProblem, method: str, *, tol: float = 1e-
     -------
     CoulombResult
         ``converged`` only when the method converged, the check passed and no
-        contact was left to flip.
+        contact was left to flip; ``setup_time`` (normalising included) and ``solve_time``
+        summed over the method's calls.
     """
     info = solver_info(method)
     branches = _Branches(problem, warm_start, threshold=max(1e3 * tol, 1e-7))
@@ -219,8 +228,10 @@ def solve_native_coulomb(problem: ConicProblem, method: str, *, tol: float = 1e-
     if branches.union.any() and not native_union and not {ConeKind.COULOMB, ConeKind.NONPOS} <= info.cones:
         raise ValueError(f"method: {method!r} cannot solve this problem: UNION contacts need "
                          "both pieces (COULOMB and NONPOS contacts)")
+    clock = time.perf_counter()
     unshifted = problem.with_shift(np.zeros(problem.cones.count))   # a copy: no cache on the caller's problem
     scaled = unshifted.normalized()
+    setup_time, solve_time = time.perf_counter() - clock, 0.0
     force, length = scaled.scaling.force, scaled.scaling.length
     start = None
     if warm_start is not None:
@@ -230,7 +241,10 @@ def solve_native_coulomb(problem: ConicProblem, method: str, *, tol: float = 1e-
         kwargs["max_iter"] = max_iter
     iterations, settled = 0, False
     for outer in range(1, int(checks.positive("max_outer", max_outer, shape=())) + 1):  # noqa: B007
+        clock = time.perf_counter()
         out = info.function(scaled if native_union else branches.on(scaled), warm_start=start, **kwargs)
+        setup, solving = out.times(time.perf_counter() - clock)
+        setup_time, solve_time = setup_time + setup, solve_time + solving
         iterations += out.iterations
         shift = np.zeros(problem.cones.count)
         if out.status == FAILED or not np.isfinite(out.forces).all():
@@ -247,7 +261,8 @@ def solve_native_coulomb(problem: ConicProblem, method: str, *, tol: float = 1e-
     result = solve(convex.with_shift(shift), method, tol=tol, max_iter=max_iter,
                    normalized=branches.on(scaled).with_shift(shift / length), replay=out, **options)
     status = result.status if settled else MAX_ITER
-    return CoulombResult(**{**vars(result), "status": status, "iterations": iterations},
+    return CoulombResult(**{**vars(result), "status": status, "iterations": iterations,
+                            "setup_time": setup_time, "solve_time": solve_time},
                          outer_iterations=outer, shift_change=0.0, inner_status=result.status,
                          fixed_point_converged=status == CONVERGED, shift_history=np.zeros(outer),
                          pulled=branches.pulled_contacts, branch_flips=branches.flips,

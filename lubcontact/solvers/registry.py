@@ -262,9 +262,7 @@ def solve(problem: ConicProblem, method: str = "clarabel", *, tol: float = 1e-9,
     if out.velocities is not None and status != DIVERGED and np.isfinite(out.velocities).all():
         scaled_velocities = out.velocities
     velocities = scaled_velocities * scale.velocity
-    timed = out.setup_time is not None or out.solve_time is not None
-    setup_time = (out.setup_time or 0.0) if timed else 0.0
-    solve_time = (out.solve_time or 0.0) if timed else call_time
+    setup_time, solve_time = out.times(call_time)
     return SolveResult(x=physical, velocities=velocities, status=status,
                        iterations=out.iterations, residual=residual, method=method,
                        force_scale=scale.force, length_scale=scale.length,

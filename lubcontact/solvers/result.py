@@ -76,6 +76,13 @@ class MethodOutput:
     info: dict = field(default_factory=dict)
     velocities: np.ndarray | None = None
 
+    def times(self, call_time: float) -> tuple[float, float]:
+        """``(setup, solve)`` seconds: the method's own, or ``call_time`` (the whole call's, s)
+        as solve time when it left both at None."""
+        if self.setup_time is None and self.solve_time is None:
+            return 0.0, call_time
+        return self.setup_time or 0.0, self.solve_time or 0.0
+
 
 @dataclass
 class SolveResult:
@@ -146,9 +153,12 @@ class CoulombResult(SolveResult):
 
     The inherited fields describe the last inner solve (solved with ``shift``
     frozen), except ``status`` (``converged`` only if the fixed point and the
-    last inner solve converged) and ``iterations`` (all inner iterations, the
-    joint phase's included). A problem without friction, or the convex
-    relaxation, is one inner solve: ``outer_iterations = 1``.
+    last inner solve converged), ``iterations`` (all inner iterations, the
+    joint phase's included), and ``setup_time`` and ``solve_time`` (summed over
+    the inner solves, the joint phase's time in ``solve_time``; the rest of the
+    call, the fixed point's own work and the checks, is in neither). A problem
+    without friction, or the convex relaxation, is one inner solve:
+    ``outer_iterations = 1``.
 
     Attributes
     ----------

@@ -26,6 +26,7 @@ def test_bench_flow_prints_a_row_per_method_and_reuses_its_cache(tmp_path, capsy
         assert float(row["max_fclib_error"]) <= 1e-5 and row["statuses"] == "converged"
         shares = [float(row[f"{phase}_pc"]) for phase in flow_steps.PHASES]
         assert all(share >= 0 for share in shares) and 95.0 <= sum(shares) <= 100.0 + 1e-6
+        assert float(row["setup_pc"]) > 0 and float(row["iterations_pc"]) > 0
         assert 0 < float(row["warm_cold"]) and float(row["peak_mb"]) > 50
     cached = list(tmp_path.glob("flow-40-dry-*.npz"))
     assert len(cached) == 1

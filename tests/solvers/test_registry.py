@@ -142,6 +142,28 @@ def test_outer_iterations_share_the_delassus_matrix(matrix):
     assert len(seen) >= 2 and len(set(seen)) == 1
 
 
+def test_the_fixed_point_times_are_summed_over_its_inner_solves():
+    """A fixed point's ``setup_time`` and ``solve_time`` are its inner solves' together (they
+    were the last one's): a method that reports 0.25 s of set-up and 1.5 s of iterations per
+    call gives 1.5 s per outer iteration, and 0.25 s plus normalising per outer iteration."""
+    problem = _frictional_step()
+    apgd = solver_info("apgd").function
+
+    @register("test-timed", kind=FIRST_ORDER)
+    def _timed(scaled, **kwargs):
+        out = apgd(scaled, **kwargs)
+        out.setup_time, out.solve_time = 0.25, 1.5
+        return out
+
+    try:
+        result = SolveSettings(method="test-timed", tol=1e-8, tol_fp=1e-8).solve(problem)
+    finally:
+        unregister("test-timed")
+    assert result.success and result.outer_iterations >= 2
+    assert result.solve_time == pytest.approx(1.5 * result.outer_iterations, rel=1e-12)
+    assert 0.25 * result.outer_iterations <= result.setup_time < 0.25 * result.outer_iterations + 0.5
+
+
 def test_the_fixed_point_builds_only_the_operator_its_method_uses():
     """On a problem above the dense lane, a first-order method applies ``F^T (F x)``: the fixed
     point does not assemble ``W`` for it (0.17 s and more memory per 10^5-grain step), and
