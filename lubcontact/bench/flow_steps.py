@@ -92,13 +92,16 @@ def step_phases(report: StepReport) -> dict[str, float]:
     """Seconds of each of :data:`PHASES` in a step: ``contacts``, ``assembly`` and ``update`` as
     :attr:`~lubcontact.sim.trajectory.StepReport.timings` has them, and the solve split into
     the method's ``setup`` and ``iterations`` (the result's ``setup_time`` and ``solve_time``,
-    summed over a fixed point's inner solves) and the rest, ``finish`` (the result's checks, the
-    fixed point's own work, and a first solve that a fallback replaced)."""
+    summed over a fixed point's inner solves; with its joint phase, which builds the matrices the
+    inner solves then share, in ``iterations``) and the rest, ``finish`` (the result's checks,
+    the fixed point's own work, and a first solve that a fallback replaced). Not clipped: a
+    negative ``finish`` would be time counted twice."""
     timings, result = report.timings, report.result
-    finish = max(timings["solve"] - result.setup_time - result.solve_time, 0.0)
     return {"contacts": timings["contacts"], "assembly": timings["assembly"],
-            "setup": result.setup_time, "iterations": result.solve_time, "finish": finish,
+            "setup": result.setup_time, "iterations": result.solve_time,
+            "finish": timings["solve"] - result.setup_time - result.solve_time,
             "update": timings["update"]}
+
 
 DEVELOP_SOLVER = "newton-ac"
 """Solver of the flow steps before the timed ones (exact Coulomb): on a dense 1000-grain bed,

@@ -134,8 +134,9 @@ def report_text(problem_set: ProblemSet, rows: Sequence[Measurement],
               "![iterations against size](iterations.png)", ""]
     lines += [f"## Time split and feasibility (tol {headline:.0e}, medians over instances)", "",
               "Set-up (building the method's data, normalisation included) and solve (iterations) "
-              "as the method reports them; empty for Coulomb problems, whose fixed point only "
-              "has a wall time. `worst_gap`: the most negative gap after the step over all "
+              "as the method reports them, summed over the inner solves of Coulomb's fixed point "
+              "(its joint phase, which builds the matrices, counted as solve). `worst_gap`: the "
+              "most negative gap after the step over all "
               "instances, in units of dt V (for local problems: most negative normal velocity / V).",
               "", _block(format_table(summary_rows(rows, labels, headline),
                                       ["solver", "median_setup_s", "median_solve_s",

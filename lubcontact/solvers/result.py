@@ -53,9 +53,7 @@ class MethodOutput:
     iterations : int
         Iterations of the method.
     setup_time, solve_time : float, optional
-        Seconds spent building the method's data and iterating; when both
-        are left at None, :func:`~lubcontact.solvers.solve` times the whole
-        call as ``solve_time``.
+        Seconds spent building the method's data and iterating (both None: see :meth:`times`).
     residual_history : ndarray
         The residuals the method recorded, in order (may be empty): one per iteration, or one
         per check where a method tests its stop less often (``nsgs``; ``apgd`` and its
@@ -155,8 +153,9 @@ class CoulombResult(SolveResult):
     frozen), except ``status`` (``converged`` only if the fixed point and the
     last inner solve converged), ``iterations`` (all inner iterations, the
     joint phase's included), and ``setup_time`` and ``solve_time`` (summed over
-    the inner solves, the joint phase's time in ``solve_time``; the rest of the
-    call, the fixed point's own work and the checks, is in neither). A problem
+    the inner solves, normalising in ``setup_time``, the joint phase's time in
+    ``solve_time``; the rest of the call, the fixed point's own work and the
+    checks, a native method's included, is in neither). A problem
     without friction, or the convex relaxation, is one inner solve:
     ``outer_iterations = 1``.
 

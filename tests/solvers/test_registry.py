@@ -145,7 +145,8 @@ def test_outer_iterations_share_the_delassus_matrix(matrix):
 def test_the_fixed_point_times_are_summed_over_its_inner_solves():
     """A fixed point's ``setup_time`` and ``solve_time`` are its inner solves' together (they
     were the last one's): a method that reports 0.25 s of set-up and 1.5 s of iterations per
-    call gives 1.5 s per outer iteration, and 0.25 s plus normalising per outer iteration."""
+    call gives 1.5 s per outer iteration, and 0.25 s per outer iteration plus normalising; the
+    joint phase adds its time to ``solve_time``."""
     problem = _frictional_step()
     apgd = solver_info("apgd").function
 
@@ -157,11 +158,15 @@ def test_the_fixed_point_times_are_summed_over_its_inner_solves():
 
     try:
         result = SolveSettings(method="test-timed", tol=1e-8, tol_fp=1e-8).solve(problem)
+        joined = SolveSettings(method="test-timed", tol=1e-8, tol_fp=1e-8,
+                               options={"joint": 5}).solve(problem)
     finally:
         unregister("test-timed")
     assert result.success and result.outer_iterations >= 2
     assert result.solve_time == pytest.approx(1.5 * result.outer_iterations, rel=1e-12)
     assert 0.25 * result.outer_iterations <= result.setup_time < 0.25 * result.outer_iterations + 0.5
+    assert joined.success and joined.joint_iterations > 0
+    assert 1.5 * joined.outer_iterations < joined.solve_time < 1.5 * joined.outer_iterations + 0.5
 
 
 def test_the_fixed_point_builds_only_the_operator_its_method_uses():
