@@ -142,6 +142,17 @@ def test_outer_iterations_share_the_delassus_matrix(matrix):
     assert len(seen) >= 2 and len(set(seen)) == 1
 
 
+def test_a_method_that_reports_no_times_is_timed_whole_as_solve_time():
+    """``MethodOutput.times``: a method's own split where it gives one (a missing half is 0),
+    the whole call as solve time where it gives neither."""
+    out = MethodOutput(np.zeros(2), CONVERGED, 3)
+    assert out.times(0.3) == (0.0, 0.3)
+    out.setup_time = 0.1
+    assert out.times(0.3) == (0.1, 0.0)
+    out.solve_time = 0.2
+    assert out.times(0.3) == (0.1, 0.2)
+
+
 def test_the_fixed_point_times_are_summed_over_its_inner_solves():
     """A fixed point's ``setup_time`` and ``solve_time`` are its inner solves' together (they
     were the last one's): a method that reports 0.25 s of set-up and 1.5 s of iterations per
