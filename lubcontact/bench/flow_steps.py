@@ -56,12 +56,14 @@ from .statistics import scaling_exponents
 from .tables import format_table
 
 COLUMNS = ("n_grains", "model", "friction", "method", "contacts", "s_per_step", "iterations",
-           "per_product", "warm_cold",
+           "joint_iterations", "per_product", "warm_cold",
            "max_fclib_error", "v_err", "ref_s", "contacts_pc", "assembly_pc", "setup_pc", "iterations_pc",
            "finish_pc", "update_pc", "peak_mb", "statuses", "ref_statuses")
 """``contacts``: mean per step; ``s_per_step``: median time of the whole step (contacts,
 assembly, the exact-Coulomb solve, update); ``iterations``: median per step (Newton iterations
-for ``newton-ac``, sweeps for ``nsgs``, inner first-order iterations for the others);
+for ``newton-ac``, sweeps for ``nsgs``, inner first-order iterations for the others; the joint
+phase's APGD iterations included); ``joint_iterations``: with ``--joint``, the median of those
+of the joint phase (``newton-ac``'s Newton iterations are the difference);
 ``per_product``: the solve's time per iteration (set-up included; median over the steps) over
 one scipy product ``W x`` on the last step's normalised ``W``;
 ``warm_cold``: iterations of the first timed step warm-started from the previous step (pair
@@ -79,8 +81,8 @@ column that no row has is not printed (:func:`shown_columns`)."""
 
 
 def shown_columns(rows: list[dict[str, Any]]) -> list[str]:
-    """The columns of :data:`COLUMNS` that some row of ``rows`` has (``warm_cold`` and the
-    reference's are measured only on request)."""
+    """The columns of :data:`COLUMNS` that some row of ``rows`` has (``joint_iterations``,
+    ``warm_cold`` and the reference's are measured only on request)."""
     return [column for column in COLUMNS if any(column in row for row in rows)]
 
 
@@ -253,7 +255,7 @@ def time_method(sim: Simulation, method: str, steps: int, tol: float,
         warm = settings.solve(problem, guess, shift).iterations
         ratio["warm_cold"] = warm / max(from_zero, 1)
     times, iterations, errors, contacts, statuses = [], [], [], [], set()
-    per_iteration, checked = [], []
+    per_iteration, checked, joint_iterations = [], [], []
     phases = dict.fromkeys(PHASES, 0.0)
     for k in range(steps):
         clock = time.perf_counter()
@@ -262,6 +264,7 @@ def time_method(sim: Simulation, method: str, steps: int, tol: float,
         if reference and k % reference == 0:
             checked.append(check_step(report, friction, k))
         iterations.append(report.result.iterations)
+        joint_iterations.append(report.result.joint_iterations)
         per_iteration.append(report.timings["solve"] / max(report.result.iterations, 1))
         contacts.append(report.problem.n_contacts)
         statuses.add(report.result.status)
@@ -280,6 +283,7 @@ def time_method(sim: Simulation, method: str, steps: int, tol: float,
             "contacts": int(np.mean(contacts)),
             "s_per_step": float(np.median(times)),
             "iterations": float(np.median(iterations)), **ratio,
+            **({"joint_iterations": float(np.median(joint_iterations))} if joint else {}),
             "per_product": float(np.median(per_iteration)) / product_time(report.problem),
             "max_fclib_error": float(max(errors)),
             **{f"{phase}_pc": 100.0 * phases[phase] / total for phase in PHASES},

@@ -17,8 +17,9 @@ def test_bench_flow_prints_a_row_per_method_and_reuses_its_cache(tmp_path, capsy
             "--settle-steps", "150", "--cache", str(tmp_path)]
     assert flow_steps.main(argv) == 0
     table = capsys.readouterr().out.splitlines()[-4:]
-    columns = [name for name in flow_steps.COLUMNS if name not in ("v_err", "ref_s", "ref_statuses")]
-    assert table[0].split() == columns                # the reference's only with --reference
+    columns = [name for name in flow_steps.COLUMNS
+               if name not in ("joint_iterations", "v_err", "ref_s", "ref_statuses")]
+    assert table[0].split() == columns                # those only with --joint, --reference
     rows = [dict(zip(columns, line.split(), strict=True)) for line in table[2:]]
     assert [row["method"] for row in rows] == ["apgd-jacobi", "newton-ac"]
     for row in rows:
@@ -93,11 +94,13 @@ def test_exact_rows_with_the_joint_phase_are_labelled_and_converge(tmp_path, mon
     assert [row["method"] for row in rows] == ["apgd-jacobi+joint5", "newton-ac+joint5"]
     for row in rows:
         assert row["statuses"] == "converged" and row["max_fclib_error"] <= 1e-5
+        assert 0 < row["joint_iterations"] <= row["iterations"]
     plain = argv[:argv.index("--joint")] + argv[argv.index("--joint") + 2:]
     plain[plain.index("--json") + 1] = str(tmp_path / "plain.json")
     assert flow_steps.main(plain) == 0
     fixed_point, newton_alone = json.loads((tmp_path / "plain.json").read_text())
     assert (fixed_point["method"], newton_alone["method"]) == ("apgd-jacobi", "newton-ac")
+    assert "joint_iterations" not in fixed_point and "joint_iterations" not in newton_alone
     assert rows[0]["iterations"] < fixed_point["iterations"]
     assert rows[1]["iterations"] > newton_alone["iterations"]
 
