@@ -202,7 +202,10 @@ stops just below ``tol``, and on 6 of 40 steps of a developed dry 2 000-grain fl
 plain Newton iterations after it did not lower its FCLIB error (5e-7 to 8e-7), leaving
 velocities 2e-5 to 8e-5 from the exact ones (from the warm start Newton's iterates end at
 round-off). None where plain Newton's block at those forces is singular by its count (a pile
-at rest: :meth:`AlartCurnier.hyperstatic`)."""
+at rest: :meth:`AlartCurnier.hyperstatic`). That polish stops at its target: no plain finishing
+iterations past it (:data:`FINISH_ITERATIONS`, which took the answer on to round-off for 13 % of
+a 12 000-grain dry step), so an answer from the joint phase is at FCLIB error ``JOINT_FINISH
+tol`` or below, not always at round-off."""
 JOINT_START_ITERATIONS = 2000
 """Cap on the iterations of the joint phase before the Newton phases (``joint``)."""
 
@@ -622,7 +625,7 @@ def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = 5
     if joined_start and phase.status == CONVERGED and phase.error > JOINT_FINISH * tol \
             and not phase.hyperstatic and not function.hyperstatic(forces):
         finish = _proximal_newton(function, unshifted, forces, JOINT_FINISH * tol, POLISH_ITERATIONS,
-                                  STRATEGIES[0])
+                                  STRATEGIES[0], finish=False)
         iterations += finish.iterations
         info["newton_iterations"] += finish.iterations
         history = np.concatenate([history, finish.history[1:]])
@@ -700,7 +703,7 @@ def _strategies(function: AlartCurnier, unshifted: ConicProblem, forces: np.ndar
 
 
 def _proximal_newton(function: AlartCurnier, unshifted: ConicProblem, forces: np.ndarray,
-                     tol: float, max_iter: int, sigma: float) -> _Phase:
+                     tol: float, max_iter: int, sigma: float, finish: bool = True) -> _Phase:
     """Proximal-point iterations, each solved by Newton, until the FCLIB error is below ``tol``.
 
     Each outer iteration solves (approximately: ``|phi_sigma|`` down by
@@ -722,6 +725,11 @@ def _proximal_newton(function: AlartCurnier, unshifted: ConicProblem, forces: np
     nothing and a smaller one not solved in :data:`INNER_CAP` iterations until
     the phase stalled (docs/records/benchmarks.md, "creeping beds"). The best
     iterate is what the phase returns. The phase stalls by :class:`_StallRule`.
+    With ``finish``, a phase that converged with a positive weight ends with
+    :data:`FINISH_ITERATIONS` plain Newton iterations, quadratic there (unless the block is
+    singular by its count, :meth:`AlartCurnier.hyperstatic`): from ``tol`` to round-off for two
+    factorisations. Without, it stops at ``tol`` (the polish to :data:`JOINT_FINISH` ``tol``,
+    whose target that is).
     """
     scale = sigma * function.typical
     q_norm = 1.0 + float(np.linalg.norm(function.q))
@@ -768,13 +776,13 @@ def _proximal_newton(function: AlartCurnier, unshifted: ConicProblem, forces: np
     if best[0] <= tol:
         status = CONVERGED
         # the proximal loop stops at tol; plain Newton is quadratic here, unless its block is singular
-        hyperstatic = scale > 0 and function.hyperstatic(best[1])
-        if scale > 0 and not hyperstatic:
+        hyperstatic = finish and scale > 0 and function.hyperstatic(best[1])
+        if finish and scale > 0 and not hyperstatic:
             function.set_proximal(0.0, best[1])
-            finish = _newton_phase(function, unshifted, best[1], 0.0, FINISH_ITERATIONS)
-            iterations += finish.iterations
-            history.extend(finish.history[1:])
-            best = min(best, (finish.error, finish.forces), key=lambda pair: pair[0])
+            plain = _newton_phase(function, unshifted, best[1], 0.0, FINISH_ITERATIONS)
+            iterations += plain.iterations
+            history.extend(plain.history[1:])
+            best = min(best, (plain.error, plain.forces), key=lambda pair: pair[0])
     return _Phase(forces=best[1], status=status, iterations=iterations, error=best[0],
                   history=np.asarray(history), gradient_steps=gradient_steps,
                   proximal_steps=proximal_steps, hyperstatic=hyperstatic)
