@@ -169,6 +169,10 @@ FINISH_ITERATIONS = 2
 """Plain Newton iterations after the proximal loop converged (kept where they lower the error):
 quadratic convergence takes a solution at ``tol`` to round-off where the Jacobian is regular
 (none on the sparse lane where it is singular by its count: :meth:`AlartCurnier.hyperstatic`)."""
+ROUND_OFF = 1e-14
+"""FCLIB error at which those plain iterations stop: round-off. The first of them took the
+answer there on most steps of small piles and of developed flows, and the second factorised
+again for nothing (one Newton iteration of 4-6 on small piles; docs/records/benchmarks.md)."""
 
 FALLBACKS_2D = ("nsgs", "apgd-jacobi")
 FALLBACKS_UNION = ("nsgs",)
@@ -725,10 +729,11 @@ def _proximal_newton(function: AlartCurnier, unshifted: ConicProblem, forces: np
     nothing and a smaller one not solved in :data:`INNER_CAP` iterations until
     the phase stalled (docs/records/benchmarks.md, "creeping beds"). The best
     iterate is what the phase returns. The phase stalls by :class:`_StallRule`.
-    With ``finish``, a phase that converged with a positive weight ends with
+    With ``finish``, a phase that converged with a positive weight ends with at most
     :data:`FINISH_ITERATIONS` plain Newton iterations, quadratic there (unless the block is
-    singular by its count, :meth:`AlartCurnier.hyperstatic`): from ``tol`` to round-off for two
-    factorisations. Without, it stops at ``tol`` (the polish to :data:`JOINT_FINISH` ``tol``,
+    singular by its count, :meth:`AlartCurnier.hyperstatic`): from ``tol`` to round-off
+    (:data:`ROUND_OFF`) in one or two factorisations. Without, it stops at ``tol`` (the
+    polish to :data:`JOINT_FINISH` ``tol``,
     whose target that is).
     """
     scale = sigma * function.typical
@@ -779,7 +784,7 @@ def _proximal_newton(function: AlartCurnier, unshifted: ConicProblem, forces: np
         hyperstatic = finish and scale > 0 and function.hyperstatic(best[1])
         if finish and scale > 0 and not hyperstatic:
             function.set_proximal(0.0, best[1])
-            plain = _newton_phase(function, unshifted, best[1], 0.0, FINISH_ITERATIONS)
+            plain = _newton_phase(function, unshifted, best[1], ROUND_OFF, FINISH_ITERATIONS)
             iterations += plain.iterations
             history.extend(plain.history[1:])
             best = min(best, (plain.error, plain.forces), key=lambda pair: pair[0])

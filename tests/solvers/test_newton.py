@@ -881,8 +881,35 @@ def test_the_polish_to_joint_finish_tol_stops_at_its_target(settling_step, monke
     result = solve_coulomb(problem, "newton-ac", tol=1e-6, joint=5)
     polish = newton.JOINT_FINISH * 1e-6
     assert result.success and polish in targets
-    assert 0.0 not in targets[targets.index(polish):]        # no plain finish after the polish
+    assert newton.ROUND_OFF not in targets[targets.index(polish):]   # no plain finish after it
     assert coulomb_error(problem.normalized(), result.forces / result.force_scale) <= polish
+    assert velocity_error(problem, result.velocities, reference.velocities) <= 1e-8
+
+
+@pytest.mark.parametrize("lane", ["compiled", "sparse"])
+def test_the_plain_finish_stops_at_round_off(settling_step, lane, monkeypatch):
+    """The plain Newton iterations after the proximal loop (FINISH_ITERATIONS) stop once the
+    FCLIB error is at ROUND_OFF: the first takes the answer there on this step, and a second
+    factorised again for nothing (it cost one Newton iteration of 4-6 on small piles)."""
+    problem, reference = settling_step
+    if lane == "sparse":
+        use_the_sparse_lane(monkeypatch)
+    finishes = []
+    phase = newton._newton_phase
+
+    def spy(function, unshifted, forces, tol, max_iter, inner_tol=0.0):
+        out = phase(function, unshifted, forces, tol, max_iter, inner_tol)
+        if function.sigma == 0.0 and max_iter == newton.FINISH_ITERATIONS:
+            finishes.append(out)
+        return out
+
+    monkeypatch.setattr(newton, "_newton_phase", spy)
+    result = solve_coulomb(problem, "newton-ac", tol=1e-6,
+                           warm_start=reference.forces * (1.0 + 1e-3))
+    assert result.success and len(finishes) == 1
+    assert finishes[0].iterations == 1 < newton.FINISH_ITERATIONS
+    assert finishes[0].history[0] > newton.ROUND_OFF >= finishes[0].history[-1]
+    assert coulomb_error(problem.normalized(), result.forces / result.force_scale) <= newton.ROUND_OFF
     assert velocity_error(problem, result.velocities, reference.velocities) <= 1e-8
 
 
