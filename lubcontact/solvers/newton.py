@@ -98,6 +98,14 @@ Newton step costs 15 % less (same iterations). Panels of one column (SuperLU's d
 the same factors, 21-22 ms instead of 27-30 for the 22 000-27 000-row blocks of 12 000-grain
 flows, whose supernodes are too small for wider panels to pay (docs/records/benchmarks.md)."""
 
+ORDERED_LU = {**SPARSE_LU, "permc_spec": "NATURAL"}
+"""SuperLU's settings for an active block already permuted by an ordering carried over from an
+earlier block (:class:`_Factorisations`): no ordering of its own."""
+
+NEW_ROWS_LIMIT = 0.01
+"""An active block whose rows are all but this fraction rows of the block last ordered by SuperLU
+is factorised in that block's elimination order (:class:`_Factorisations`), not ordered again."""
+
 STALL_WINDOW = 60
 STALL_FACTOR = 0.5
 """Newton has stalled when its best FCLIB error did not fall by this factor over the last
@@ -287,7 +295,7 @@ class AlartCurnier:
         self.typical = 1.0 if nc == 0 else float(ordered[middle]) if nc % 2 else \
             float(0.5 * (ordered[middle - 1] + ordered[middle]))
         self.sigma, self.center = 0.0, np.zeros(self.n_rows)
-        self.factorisations = _Factorisations()
+        self.factorisations = _Factorisations(carry=self.planar)
         # on the sparse lane, a 2D problem's Jacobian rows are assembled compiled (a numpy
         # sparse product G W and sum cost as much as the LU on developed 2000-grain flows)
         self.compiled_rows = self.planar and not self.dense
@@ -462,28 +470,78 @@ class AlartCurnier:
 class _Factorisations:
     """SuperLU's factorisations of the :data:`KEPT_FACTORISATIONS` active blocks used last,
     reused for a block equal to one of them entry for entry (the same factors, so the same
-    direction).
+    direction), and the elimination order of the last block SuperLU ordered, carried over.
 
     In 2D the generalised Jacobian is constant on each piece of the Alart-Curnier function: on
     the hard steps of developed flows most Newton iterations after the first twenty keep the
     active block of the one before, or of the one before that (the iterates cycling between
     two pieces), and the factorisation was two thirds of their time.
+
+    The minimum-degree ordering is a third of a factorisation (8 of 22 ms on the 23 000-row
+    blocks of 12 000-grain gluey flows), and late Newton iterations change a few rows of the
+    block. A block whose rows are all but :data:`NEW_ROWS_LIMIT` of them rows of the last
+    ordered block is permuted by that block's order, each new row placed just before the first
+    of its neighbours in it, and factorised without ordering (:data:`ORDERED_LU`): 14-16 ms,
+    with 0-13 % more fill (docs/records/benchmarks.md). Only where ``carry`` is set (2D
+    problems, whose blocks have ``W``'s symmetric pattern): on a 3D Siconos file the carried
+    orders' solves were ten times less accurate and Newton took 392 iterations instead of 154.
     """
 
-    def __init__(self):
-        self.kept: list[tuple[sp.csc_matrix, spla.SuperLU]] = []
+    def __init__(self, carry: bool = True):
+        self.kept: list[tuple[sp.csc_matrix, spla.SuperLU, np.ndarray | None]] = []
         self.reused = 0
+        self.carry = carry
+        self.carried = 0
+        self.ordered_rows: np.ndarray | None = None        # sorted
+        self.positions: np.ndarray | None = None           # their places in the order
 
-    def solve(self, matrix: sp.csc_matrix, rhs: np.ndarray) -> np.ndarray:
-        """``matrix^-1 rhs``, factorising ``matrix`` unless it is kept."""
-        for position, (kept, factors) in enumerate(self.kept):
+    def solve(self, matrix: sp.csc_matrix, rhs: np.ndarray, rows: np.ndarray) -> np.ndarray:
+        """``matrix^-1 rhs``, factorising ``matrix`` unless it is kept; ``rows``: the rows of
+        the system the block's rows are, sorted."""
+        for position, (kept, factors, order) in enumerate(self.kept):
             if _same_matrix(kept, matrix):
                 self.reused += 1
                 self.kept.insert(0, self.kept.pop(position))      # the most recently used first
-                return factors.solve(rhs)
-        factors = spla.splu(matrix, **SPARSE_LU)
-        self.kept = [(matrix, factors), *self.kept][:KEPT_FACTORISATIONS]
+                return _ordered_solve(factors, order, rhs)
+        order = self._carried_order(matrix, rows)
+        if order is None:
+            factors = spla.splu(matrix, **SPARSE_LU)
+            self.ordered_rows, self.positions = rows, factors.perm_c
+        else:
+            self.carried += 1
+            factors = spla.splu(matrix[order][:, order].tocsc(), **ORDERED_LU)
+        self.kept = [(matrix, factors, order), *self.kept][:KEPT_FACTORISATIONS]
+        return _ordered_solve(factors, order, rhs)
+
+    def _carried_order(self, matrix: sp.csc_matrix, rows: np.ndarray) -> np.ndarray | None:
+        """The last ordered block's elimination order for ``matrix`` (a permutation of its
+        rows), or None when more than :data:`NEW_ROWS_LIMIT` of ``rows`` are new to it."""
+        if not self.carry or self.ordered_rows is None:
+            return None
+        found = np.minimum(np.searchsorted(self.ordered_rows, rows), self.ordered_rows.size - 1)
+        old = self.ordered_rows[found] == rows
+        if rows.size - np.count_nonzero(old) > NEW_ROWS_LIMIT * rows.size:
+            return None
+        place = np.where(old, self.positions[found], np.inf)
+        new = np.flatnonzero(~old)
+        counts = np.diff(matrix.indptr)[new]
+        new, counts = new[counts > 0], counts[counts > 0]
+        if new.size:                    # a new row's neighbours: its column's rows (W's pattern)
+            starts = np.cumsum(counts) - counts
+            entries = np.repeat(matrix.indptr[new] - starts, counts) + np.arange(counts.sum())
+            first = np.minimum.reduceat(place[matrix.indices[entries]], starts)
+            place[new] = first - 0.5    # just before it; a row with no old neighbour goes last
+        return np.argsort(place, kind="stable")
+
+
+def _ordered_solve(factors: spla.SuperLU, order: np.ndarray | None, rhs: np.ndarray) -> np.ndarray:
+    """The solution of ``A x = rhs`` from the factors of ``A`` (``order`` None) or of
+    ``A[order][:, order]``."""
+    if order is None:
         return factors.solve(rhs)
+    solved = np.empty_like(rhs)
+    solved[order] = factors.solve(rhs[order])
+    return solved
 
 
 def _same_matrix(first: sp.csc_matrix, second: sp.csc_matrix) -> bool:
@@ -531,7 +589,7 @@ def _newton_direction(J: sp.csr_matrix | np.ndarray, active: np.ndarray,
                 else:
                     matrix = block if delta == 0 else \
                         (block + delta * sp.identity(rows.size, format="csc")).tocsc()
-                    solved = factorisations.solve(matrix, rhs)
+                    solved = factorisations.solve(matrix, rhs, rows)
         except (RuntimeError, spla.MatrixRankWarning):
             continue
         if np.isfinite(solved).all():
@@ -597,7 +655,8 @@ def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = 5
         ``info``: ``joint_iterations`` (the joint phase's, with ``joint``),
         ``newton_iterations`` (each one LU, more where a
         singular block is regularised), ``reused_factorisations`` (the sparse lane's LUs
-        saved by a block met again: :class:`_Factorisations`), ``gradient_steps``
+        saved by a block met again: :class:`_Factorisations`), ``carried_orderings`` (its LUs
+        in the elimination order of an earlier block, not ordered again), ``gradient_steps``
         (steepest-descent steps taken where the Newton direction failed),
         ``proximal_steps`` and ``strategies`` (the starting weights tried, each with
         its start, ``"warm"`` or ``"cold"``),
@@ -660,6 +719,7 @@ def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = 5
         if status == CONVERGED or kept and best_error <= FALLBACK_GAP * tol:
             break
     info["reused_factorisations"] = function.factorisations.reused     # the polishes' too
+    info["carried_orderings"] = function.factorisations.carried
     return MethodOutput(forces, status, iterations, setup_time=setup_time,
                         solve_time=time.perf_counter() - start - setup_time,
                         residual_history=history, info=info)

@@ -680,6 +680,35 @@ def test_an_active_block_met_again_is_solved_with_its_kept_factors():
     assert kept.reused == 1
 
 
+def test_an_active_block_with_few_new_rows_is_factorised_in_the_carried_order():
+    """A block whose rows are all but NEW_ROWS_LIMIT of them rows of the last block SuperLU
+    ordered is factorised in that block's elimination order (no ordering of its own): the same
+    direction as a block ordered afresh; a block with more new rows is ordered afresh."""
+    import scipy.sparse as sp
+
+    n = newton.DENSE_LIMIT + 100
+    extra = sp.random(n, n, density=0.01, random_state=4, format="csr")
+    system = (sp.identity(n, format="csr") * 4.0 + extra + extra.T).tocsr()  # W's pattern
+    phi = np.random.default_rng(4).normal(size=n)
+
+    def direction(active, kept):
+        return newton._newton_direction(system[np.flatnonzero(active)], active, phi, kept)
+
+    most, all_rows, fewer = (np.arange(n) >= k for k in (2, 0, n // 4))
+    kept = newton._Factorisations()
+    direction(most, kept)
+    assert kept.carried == 0 and kept.ordered_rows.size == n - 2
+    carried = direction(all_rows, kept)                     # 2 new rows of 400
+    assert kept.carried == 1
+    fresh = direction(all_rows, newton._Factorisations())
+    assert np.allclose(carried, fresh, rtol=0, atol=1e-12 * np.abs(fresh).max())
+    assert np.abs(system @ carried + phi).max() <= 1e-12 * np.abs(phi).max()
+    kept = newton._Factorisations()
+    direction(fewer, kept)
+    direction(all_rows, kept)                               # a quarter of the rows new
+    assert kept.carried == 0 and kept.ordered_rows.size == n
+
+
 @pytest.fixture(scope="module")
 def pile_at_rest():
     """The step after 160 steps of a 30-grain frictional settling pile (mu = 0.3), at rest:
@@ -804,17 +833,19 @@ def test_a_singular_active_block_is_regularised_alike_when_compiled():
 
 @pytest.mark.parametrize("name", COMPILED_CASES)
 def test_the_reused_factorisations_count_the_polish_after_a_fallback(name, monkeypatch):
-    """``info["reused_factorisations"]`` counts every reuse of the solve, the polishing Newton
-    iterations after a fallback included (``newton_iterations`` counts those iterations)."""
+    """``info["reused_factorisations"]`` and ``info["carried_orderings"]`` count every reuse
+    and carried order of the solve, the polishing Newton iterations after a fallback included
+    (``newton_iterations`` counts those iterations)."""
     use_the_sparse_lane(monkeypatch)                       # with its kept LUs
     made = []
     init = newton._Factorisations.__init__
     monkeypatch.setattr(newton._Factorisations, "__init__",
-                        lambda self: (init(self), made.append(self))[0])
+                        lambda self, carry=True: (init(self, carry), made.append(self))[0])
     problem = load_cases()[name].problem.normalized()
     out = newton_alart_curnier(problem, tol=1e-12, max_iter=2)     # runs out: a fallback, a polish
     assert out.info.get("fallbacks")
     assert out.info["reused_factorisations"] == made[-1].reused
+    assert out.info["carried_orderings"] == made[-1].carried
 
 
 @pytest.mark.parametrize("name", ["mu_ten", "dt_large_friction"])
