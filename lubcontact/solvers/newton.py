@@ -106,6 +106,10 @@ NEW_ROWS_LIMIT = 0.01
 """An active block whose rows are all but this fraction rows of the block last ordered by SuperLU
 is factorised in that block's elimination order (:class:`_Factorisations`), not ordered again."""
 
+FILL_GROWTH = 1.25
+"""A factorisation in a carried order whose factors hold more than this many times the ordered
+block's, per entry of its block, ends the carrying: the next block is ordered afresh."""
+
 STALL_WINDOW = 60
 STALL_FACTOR = 0.5
 """Newton has stalled when its best FCLIB error did not fall by this factor over the last
@@ -174,9 +178,10 @@ KEPT_FACTORISATIONS = 2
 that cycle between two pieces."""
 
 FINISH_ITERATIONS = 2
-"""Plain Newton iterations after the proximal loop converged (kept where they lower the error):
-quadratic convergence takes a solution at ``tol`` to round-off where the Jacobian is regular
-(none on the sparse lane where it is singular by its count: :meth:`AlartCurnier.hyperstatic`)."""
+"""Plain Newton iterations, at most, after the proximal loop converged (kept where they lower
+the error; they stop at :data:`ROUND_OFF`): quadratic convergence takes a solution at ``tol`` to
+round-off where the Jacobian is regular (none on the sparse lane where it is singular by its
+count: :meth:`AlartCurnier.hyperstatic`)."""
 ROUND_OFF = 1e-14
 """FCLIB error at which those plain iterations stop: round-off. The first of them took the
 answer there on most steps of small piles and of developed flows, and the second factorised
@@ -215,8 +220,8 @@ plain Newton iterations after it did not lower its FCLIB error (5e-7 to 8e-7), l
 velocities 2e-5 to 8e-5 from the exact ones (from the warm start Newton's iterates end at
 round-off). None where plain Newton's block at those forces is singular by its count (a pile
 at rest: :meth:`AlartCurnier.hyperstatic`). That polish stops at its target: no plain finishing
-iterations past it (:data:`FINISH_ITERATIONS`, which took the answer on to round-off for 13 % of
-a 12 000-grain dry step), so an answer from the joint phase is at FCLIB error ``JOINT_FINISH
+iterations past it (:data:`FINISH_ITERATIONS`: two factorisations, 13 % of a 12 000-grain dry
+step when they always ran), so an answer from the joint phase is at FCLIB error ``JOINT_FINISH
 tol`` or below, not always at round-off."""
 JOINT_START_ITERATIONS = 2000
 """Cap on the iterations of the joint phase before the Newton phases (``joint``)."""
@@ -480,20 +485,24 @@ class _Factorisations:
     The minimum-degree ordering is a third of a factorisation (8 of 22 ms on the 23 000-row
     blocks of 12 000-grain gluey flows), and late Newton iterations change a few rows of the
     block. A block whose rows are all but :data:`NEW_ROWS_LIMIT` of them rows of the last
-    ordered block is permuted by that block's order, each new row placed just before the first
-    of its neighbours in it, and factorised without ordering (:data:`ORDERED_LU`): 14-16 ms,
-    with 0-13 % more fill (docs/records/benchmarks.md). Only where ``carry`` is set (2D
+    ordered block is permuted by that block's order, each new row placed just after the last
+    of its neighbours in it, and factorised without ordering (:data:`ORDERED_LU`): 14-16 ms
+    with 0-10 % more fill on those blocks (docs/records/benchmarks.md). Rows of the ordered
+    block that the new one lacks are left out of the order. Where the carried order's fill grows
+    past :data:`FILL_GROWTH` times the ordered block's (on a 1 600-row grid pattern with 1 % of
+    its rows new: 2.4 times), the next block is ordered afresh. Only where ``carry`` is set (2D
     problems, whose blocks have ``W``'s symmetric pattern): on a 3D Siconos file the carried
     orders' solves were ten times less accurate and Newton took 392 iterations instead of 154.
     """
 
-    def __init__(self, carry: bool = True):
+    def __init__(self, carry: bool = False):
         self.kept: list[tuple[sp.csc_matrix, spla.SuperLU, np.ndarray | None]] = []
         self.reused = 0
         self.carry = carry
         self.carried = 0
         self.ordered_rows: np.ndarray | None = None        # sorted
         self.positions: np.ndarray | None = None           # their places in the order
+        self.fill = 0.0                                    # its factors' entries per entry
 
     def solve(self, matrix: sp.csc_matrix, rhs: np.ndarray, rows: np.ndarray) -> np.ndarray:
         """``matrix^-1 rhs``, factorising ``matrix`` unless it is kept; ``rows``: the rows of
@@ -507,9 +516,12 @@ class _Factorisations:
         if order is None:
             factors = spla.splu(matrix, **SPARSE_LU)
             self.ordered_rows, self.positions = rows, factors.perm_c
+            self.fill = factors.nnz / matrix.nnz
         else:
-            self.carried += 1
             factors = spla.splu(matrix[order][:, order].tocsc(), **ORDERED_LU)
+            self.carried += 1
+            if factors.nnz > FILL_GROWTH * self.fill * matrix.nnz:
+                self.ordered_rows = None            # the order no longer fits: order afresh
         self.kept = [(matrix, factors, order), *self.kept][:KEPT_FACTORISATIONS]
         return _ordered_solve(factors, order, rhs)
 
@@ -529,8 +541,10 @@ class _Factorisations:
         if new.size:                    # a new row's neighbours: its column's rows (W's pattern)
             starts = np.cumsum(counts) - counts
             entries = np.repeat(matrix.indptr[new] - starts, counts) + np.arange(counts.sum())
-            first = np.minimum.reduceat(place[matrix.indices[entries]], starts)
-            place[new] = first - 0.5    # just before it; a row with no old neighbour goes last
+            neighbours = place[matrix.indices[entries]]
+            last = np.maximum.reduceat(np.where(np.isinf(neighbours), -np.inf, neighbours), starts)
+            # just after it (before it took up to 30 % more fill); with no old neighbour, last
+            place[new] = np.where(np.isfinite(last), last + 0.5, np.inf)
         return np.argsort(place, kind="stable")
 
 
@@ -793,8 +807,7 @@ def _proximal_newton(function: AlartCurnier, unshifted: ConicProblem, forces: np
     :data:`FINISH_ITERATIONS` plain Newton iterations, quadratic there (unless the block is
     singular by its count, :meth:`AlartCurnier.hyperstatic`): from ``tol`` to round-off
     (:data:`ROUND_OFF`) in one or two factorisations. Without, it stops at ``tol`` (the
-    polish to :data:`JOINT_FINISH` ``tol``,
-    whose target that is).
+    polish to :data:`JOINT_FINISH` ``tol``, whose target that is).
     """
     scale = sigma * function.typical
     q_norm = 1.0 + float(np.linalg.norm(function.q))
