@@ -732,6 +732,21 @@ def test_an_active_block_with_few_new_rows_is_factorised_in_the_carried_order():
     assert newton._Factorisations().carry is False
 
 
+def test_a_block_permuted_for_its_carried_order_is_scipys_permutation_with_sorted_indices():
+    """``_permuted`` gives ``matrix[order][:, order]`` entry for entry, its indices sorted (so
+    that SuperLU's call does not sort them again)."""
+    import scipy.sparse as sp
+
+    matrix = sp.random(500, 500, density=0.02, random_state=6, format="csc")
+    order = np.random.default_rng(6).permutation(500)
+    permuted = newton._permuted(matrix, order)
+    expected = matrix[order][:, order].tocsc()
+    expected.sort_indices()
+    assert permuted.has_sorted_indices
+    for name in ("indptr", "indices", "data"):
+        assert np.array_equal(getattr(permuted, name), getattr(expected, name))
+
+
 @pytest.fixture(scope="module")
 def pile_at_rest():
     """The step after 160 steps of a 30-grain frictional settling pile (mu = 0.3), at rest:
