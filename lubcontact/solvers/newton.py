@@ -543,7 +543,7 @@ class _Factorisations:
             entries = np.repeat(matrix.indptr[new] - starts, counts) + np.arange(counts.sum())
             neighbours = place[matrix.indices[entries]]
             last = np.maximum.reduceat(np.where(np.isinf(neighbours), -np.inf, neighbours), starts)
-            # just after it (before it took up to 30 % more fill); with no old neighbour, last
+            # just after it (just before the first took up to 30 % more fill); else at the end
             place[new] = np.where(np.isfinite(last), last + 0.5, np.inf)
         return np.argsort(place, kind="stable")
 
