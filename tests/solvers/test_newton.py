@@ -719,8 +719,8 @@ def test_an_active_block_with_few_new_rows_is_factorised_in_the_carried_order():
     assert np.allclose(carried, fresh, rtol=0, atol=1e-12 * np.abs(fresh).max())
     assert np.abs(system @ carried + phi).max() <= 1e-12 * np.abs(phi).max()
     assert np.array_equal(direction(everything, kept), carried) and kept.reused == 1
-    scattered = everything.copy()
-    scattered[rng.choice(n, size=n // 100, replace=False)] = False    # 1 %, inside: 2.4 x fill
+    scattered = everything.copy()                # as many new rows as the limit lets in, inside
+    scattered[rng.choice(n, size=int(newton.NEW_ROWS_LIMIT * n), replace=False)] = False
     kept = newton._Factorisations(carry=True)
     direction(scattered, kept)
     direction(everything, kept)
@@ -730,6 +730,28 @@ def test_an_active_block_with_few_new_rows_is_factorised_in_the_carried_order():
     direction(everything, kept)                                      # a quarter of the rows new
     assert kept.carried == 0 and kept.ordered_rows.size == n
     assert newton._Factorisations().carry is False
+
+
+def test_a_new_row_of_a_carried_order_goes_just_after_its_last_old_neighbour(monkeypatch):
+    """On a path (each row coupled to the next) ordered backwards, a new row goes just after the
+    last of its neighbours in the carried order, and a new row with no old neighbour at the end
+    (the limit on new rows raised for this 13-row block)."""
+    import scipy.sparse as sp
+
+    monkeypatch.setattr(newton, "NEW_ROWS_LIMIT", 0.5)
+    n = 12
+    path = sp.diags([np.ones(n - 1), 4.0 * np.ones(n), np.ones(n - 1)], [-1, 0, 1],
+                    shape=(n, n), format="csc")
+    isolated = sp.block_diag([path, sp.identity(1)], format="csc")      # row 12: no neighbour
+    kept = newton._Factorisations(carry=True)
+    kept.ordered_rows = np.array([0, 1, 2, 3, 5, 6, 7, 8, 9, 10, 11])   # rows 4 and 12 new
+    kept.positions = np.array([10, 9, 8, 7, 6, 5, 4, 3, 2, 1, 0])      # eliminated backwards
+    order = kept._carried_order(isolated, np.arange(n + 1))
+    assert order is not None and order.size == n + 1
+    place = np.empty(n + 1, dtype=int)
+    place[order] = np.arange(n + 1)
+    # row 4's old neighbours 3 and 5 sit at places 7 and 6: it goes just after row 3's
+    assert place[3] + 1 == place[4] and place[12] == n
 
 
 def test_a_block_permuted_for_its_carried_order_is_scipys_permutation_with_sorted_indices():
@@ -878,7 +900,8 @@ def test_the_reused_factorisations_count_the_polish_after_a_fallback(name, monke
     made = []
     init = newton._Factorisations.__init__
     monkeypatch.setattr(newton._Factorisations, "__init__",
-                        lambda self, carry=True: (init(self, carry), made.append(self))[0])
+                        lambda self, *args, **kwargs: (init(self, *args, **kwargs),
+                                                       made.append(self))[0])
     problem = load_cases()[name].problem.normalized()
     out = newton_alart_curnier(problem, tol=1e-12, max_iter=2)     # runs out: a fallback, a polish
     assert out.info.get("fallbacks")
