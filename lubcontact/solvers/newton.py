@@ -41,7 +41,9 @@ update is ``-phi`` and they are eliminated, so the sparse LU factorisation
 (SuperLU) is of the active rows only. A 2D problem of up to ``DENSE_LIMIT`` rows runs
 each Newton phase in one compiled call on the dense ``W``
 (:func:`~lubcontact.solvers.kernels.newton_phase_2d`, the numpy phase's twin); on a larger 2D
-problem the Jacobian's rows are assembled compiled.
+problem the Newton system is assembled compiled, without its sliding tangential rows: in 2D
+``I - t t^T`` vanishes, so such a row says ``d_T = mu t d_n`` plus a constant, and its unknown
+folds into its normal row's (:meth:`AlartCurnier.newton_direction`).
 
 Globalisation: a non-monotone Armijo line search on ``psi = |phi|^2 / 2``
 (the reference value is the largest of the last few); when the Newton
@@ -253,8 +255,8 @@ class AlartCurnier:
         is bilateral (UNION: a box row with no bounds).
     planar, compiled, compiled_rows : bool
         A 2D problem (its FCLIB error compiled); one whose Newton phases run compiled on the
-        dense ``W`` (at most ``DENSE_LIMIT`` rows); one on the sparse lane whose Jacobian rows
-        are assembled compiled (:mod:`~lubcontact.solvers.kernels`).
+        dense ``W`` (at most ``DENSE_LIMIT`` rows); one on the sparse lane whose Newton systems
+        and Jacobian rows are assembled compiled (:mod:`~lubcontact.solvers.kernels`).
     tangent_rows : ndarray of int, shape (nf,)
         ``cone_t``'s one column (planar problems only).
     q_scale : float
@@ -301,8 +303,9 @@ class AlartCurnier:
             float(0.5 * (ordered[middle - 1] + ordered[middle]))
         self.sigma, self.center = 0.0, np.zeros(self.n_rows)
         self.factorisations = _Factorisations(carry=self.planar)
-        # on the sparse lane, a 2D problem's Jacobian rows are assembled compiled (a numpy
-        # sparse product G W and sum cost as much as the LU on developed 2000-grain flows)
+        # on the sparse lane, a 2D problem's Newton systems and Jacobian rows are assembled
+        # compiled (a numpy sparse product G W and sum cost as much as the LU on developed
+        # 2000-grain flows)
         self.compiled_rows = self.planar and not self.dense
         if self.planar:             # one tangential row per contact; the FCLIB error compiled
             self.tangent_rows = np.ascontiguousarray(self.cone_t[:, 0])
@@ -436,6 +439,38 @@ class AlartCurnier:
             J = J + diagonal_scaled(G, columns=self.sigma * self.rho)
         return J.tocsr(), active, plain
 
+    def newton_direction(self, y: np.ndarray, phi: np.ndarray) -> np.ndarray | None:
+        """The Newton direction at ``y`` (``phi`` the residual there; :func:`_newton_direction`),
+        or None where every regularisation of the active block fails.
+
+        On the sparse lane of a 2D problem (``compiled_rows``) the system is reduced to its
+        plain rows first (:func:`~lubcontact.solvers.kernels.reduced_newton_system_2d`): a
+        sliding tangential row's unknown is its normal row's times ``mu s`` plus a constant,
+        so the factorised block loses those rows (on 12 000-grain gluey flows a tenth to a
+        fifth of the active rows), and it is assembled in CSC form directly, without the
+        rows of ``J``.
+        """
+        if not self.compiled_rows:
+            J, active, plain = self.jacobian(y)
+            return _newton_direction(J, active, phi, self.factorisations, self.singular_by_count(plain))
+        from .kernels import reduced_newton_system_2d  # numba, imported on first use
+
+        kept, indptr, indices, data, rhs, direction, sliding, normal, slope = \
+            reduced_newton_system_2d(self.W.indptr, self.W.indices, self.W.data, self.rho,
+                                     self.lower, self.upper, self.box, self.cone_n,
+                                     self.tangent_rows, self.cone_mu, self.unilateral,
+                                     self.sigma, y, phi)
+        if kept.size:
+            block = sp.csc_matrix((data, indices, indptr), shape=(kept.size, kept.size))
+            block.has_sorted_indices = True
+            solved = _block_solve(block, rhs, kept, self.factorisations,
+                                  self.singular_by_count(kept.size))
+            if solved is None:
+                return None
+            direction[kept] = solved
+        direction[sliding] += slope * direction[normal]
+        return direction
+
     def hyperstatic(self, forces: np.ndarray) -> bool:
         """Whether plain Newton's active block at ``forces`` is singular by its count of sticking
         rows (:meth:`singular_by_count`), as on a pile at rest, on the sparse lane (False on the
@@ -468,7 +503,7 @@ class AlartCurnier:
         degrees of freedom of a step problem), as at the sticking contacts of a hyperstatic pile
         at rest. SuperLU takes about ten times a factorisation's time to find such a block
         singular (43 200 active rows of a 12 800-grain deposited layer: 1.8 s against 0.17 s),
-        so it is regularised at once (:func:`_newton_direction`)."""
+        so it is regularised at once (:func:`_block_solve`)."""
         return self.sigma == 0.0 and plain > self.rank_bound
 
 
@@ -585,27 +620,39 @@ def _newton_direction(J: sp.csr_matrix | np.ndarray, active: np.ndarray,
                       phi: np.ndarray, factorisations: _Factorisations | None = None,
                       singular: bool = False) -> np.ndarray | None:
     """Solve ``J d = -phi`` with the identity rows eliminated (``J``: the active rows, as
-    :meth:`AlartCurnier.jacobian` returns them).
-
-    The active block is factorised by a dense LU (LAPACK) up to :data:`DENSE_LIMIT` rows,
-    by SuperLU above (:data:`SPARSE_LU`; through ``factorisations``, which reuses the factors
-    of a block met again: a fresh one when not given).
-
-    A singular active block (``W`` rank deficient: more sticking rows than
-    degrees of freedom) is regularised, ``J_AA + delta I`` with ``delta`` from
-    :data:`REGULARISATIONS` in turn (a proximal step, as in Siconos' PROX), from the first
-    positive one where the block is ``singular`` by a count (:meth:`AlartCurnier.singular_by_count`);
-    None when every one fails.
-    """
+    :meth:`AlartCurnier.jacobian` returns them), the active block by :func:`_block_solve`
+    (``factorisations``: a fresh one when not given); None where it fails."""
     direction = -phi.copy()
     rows = np.flatnonzero(active)
     if rows.size == 0:
         return direction
-    factorisations = _Factorisations() if factorisations is None else factorisations
     rhs = -phi[rows] - J @ np.where(active, 0.0, direction)
+    block = J[:, rows] if isinstance(J, np.ndarray) else J[:, rows].tocsc()
+    solved = _block_solve(block, rhs, rows, _Factorisations() if factorisations is None
+                          else factorisations, singular)
+    if solved is None:
+        return None
+    direction[rows] = solved
+    return direction
+
+
+def _block_solve(block: sp.csc_matrix | np.ndarray, rhs: np.ndarray, rows: np.ndarray,
+                 factorisations: _Factorisations, singular: bool = False) -> np.ndarray | None:
+    """``block^-1 rhs`` for the active block of a Newton system (``rows``: the system's rows it
+    holds, sorted), or None when every regularisation fails.
+
+    The block is factorised by a dense LU (LAPACK) up to :data:`DENSE_LIMIT` rows,
+    by SuperLU above (:data:`SPARSE_LU`; through ``factorisations``, which reuses the factors
+    of a block met again).
+
+    A singular active block (``W`` rank deficient: more sticking rows than
+    degrees of freedom) is regularised, ``block + delta I`` with ``delta`` from
+    :data:`REGULARISATIONS` in turn (a proximal step, as in Siconos' PROX), from the first
+    positive one where the block is ``singular`` by a count (:meth:`AlartCurnier.singular_by_count`).
+    """
     dense = rows.size <= DENSE_LIMIT
-    block = J[:, rows] if isinstance(J, np.ndarray) else \
-        J[:, rows].toarray() if dense else J[:, rows].tocsc()
+    if dense and not isinstance(block, np.ndarray):
+        block = block.toarray()
     for delta in (delta for delta in REGULARISATIONS if delta > 0 or not singular):
         try:
             with warnings.catch_warnings():
@@ -622,8 +669,7 @@ def _newton_direction(J: sp.csr_matrix | np.ndarray, active: np.ndarray,
         except (RuntimeError, spla.MatrixRankWarning):
             continue
         if np.isfinite(solved).all():
-            direction[rows] = solved
-            return direction
+            return solved
     return None
 
 
@@ -951,13 +997,12 @@ def _newton_phase(function: AlartCurnier, unshifted: ConicProblem, forces: np.nd
     status = MAX_ITER
     while error > tol and iterations < max_iter and np.sqrt(2.0 * merit) > inner_tol:
         iterations += 1
-        J, active, plain = function.jacobian(y)
-        newton = _newton_direction(J, active, phi, function.factorisations,
-                                   function.singular_by_count(plain))
+        newton = function.newton_direction(y, phi)
         step = None
         if newton is not None:
             step = _line_search(function, forces, velocity, newton, 2.0 * merit, max(recent))
         if step is None:                   # J^T phi, J's inactive rows being the identity's
+            J, active, _ = function.jacobian(y)
             gradient = np.where(active, 0.0, phi) + J.T @ phi[active]
             step = _line_search(function, forces, velocity, -gradient, float(gradient @ gradient),
                                 max(recent))

@@ -5,6 +5,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import scipy.sparse as sp
 
 from lubcontact.bench.cases.reference import CASES as REFERENCE_CASES
 from lubcontact.bench.cases.reference import load as load_reference
@@ -578,6 +579,43 @@ def test_the_compiled_sparse_jacobian_rows_are_the_numpy_rows(name, sigma, monke
         assert difference <= 1e-13 * max(np.abs(expected.toarray()).max(initial=0.0), 1.0)
 
 
+@pytest.mark.parametrize("name", [name for name in COMPILED_CASES if name != "mu_zero_friction"])
+@pytest.mark.parametrize("sigma", [1e-4, 1e-2])
+def test_the_sparse_lane_solves_the_newton_system_without_its_sliding_rows(name, sigma, monkeypatch):
+    """On the sparse lane a 2D Newton system is reduced to its rows of diag(rho) (W + sigma I)
+    (kernels.reduced_newton_system_2d: a sliding tangential row's unknown follows its normal
+    row's): a block of that many rows, with sorted row indices in each column, and a direction
+    that solves the whole system J d = -phi as the unreduced block's (_newton_direction) does, at
+    points with every contact state (the cases with friction, where contacts slide)."""
+    from lubcontact.solvers.kernels import reduced_newton_system_2d
+
+    use_the_sparse_lane(monkeypatch)
+    problem = load_cases()[name].problem.normalized()
+    function = AlartCurnier(problem)
+    assert function.compiled_rows
+    rng = np.random.default_rng(5)
+    function.set_proximal(sigma, rng.normal(size=problem.n_rows))
+    eliminated = 0
+    for _ in range(20):
+        forces = rng.normal(size=problem.n_rows) * rng.choice([1e-3, 1.0, 1e3], size=problem.n_rows)
+        phi, y, _ = function.residual(forces)
+        J, active, plain = function.jacobian(y)
+        kept, indptr, indices, data, *_, sliding, _, _ = reduced_newton_system_2d(
+            function.W.indptr, function.W.indices, function.W.data, function.rho, function.lower,
+            function.upper, function.box, function.cone_n, function.tangent_rows,
+            function.cone_mu, function.unilateral, function.sigma, y, phi)
+        assert kept.size == plain and sliding.size == np.count_nonzero(active) - plain
+        assert sp.csc_matrix((data, indices, indptr), shape=(kept.size, kept.size)).has_canonical_format
+        eliminated += sliding.size
+        direction = function.newton_direction(y, phi)
+        expected = newton._newton_direction(J, active, phi)
+        assert np.array_equal(direction[~active], -phi[~active])
+        scale = np.abs(phi).max()
+        assert np.abs(J @ direction + phi[active]).max() <= 1e-12 * scale
+        assert np.abs(direction - expected).max() <= 1e-10 * np.abs(expected).max()
+    assert eliminated > 0
+
+
 @pytest.mark.parametrize("name", COMPILED_CASES)
 @pytest.mark.parametrize("start", ["cold", "perturbed"])
 def test_the_compiled_newton_phase_takes_the_numpy_phase_steps(name, start):
@@ -656,8 +694,6 @@ def test_an_active_block_met_again_is_solved_with_its_kept_factors():
     """The sparse lane keeps the factors of the last two active blocks: a block equal entry for
     entry to one of them is not factorised again and gives the same direction, bit for bit; a
     block that differs in one entry, or a third block, is factorised."""
-    import scipy.sparse as sp
-
     rng = np.random.default_rng(3)
     n = newton.DENSE_LIMIT + 50                    # above the dense limit: SuperLU
     def rows_of_J(seed):
@@ -686,8 +722,6 @@ def test_an_active_block_with_few_new_rows_is_factorised_in_the_carried_order():
     direction as a block ordered afresh, the same fill where no row is new, its factors reused
     when the block comes again; a block with more new rows, or after a carried order whose fill
     grew past FILL_GROWTH, is ordered afresh."""
-    import scipy.sparse as sp
-
     side = 40                                     # a grid's pattern, symmetric like W's
     n = side * side
     grid = sp.diags([np.ones(n - 1), np.ones(n - side)], [1, side], shape=(n, n))
@@ -736,8 +770,6 @@ def test_a_new_row_of_a_carried_order_goes_just_after_its_last_old_neighbour(mon
     """On a path (each row coupled to the next) ordered backwards, a new row goes just after the
     last of its neighbours in the carried order, and a new row with no old neighbour at the end
     (the limit on new rows raised for this 13-row block)."""
-    import scipy.sparse as sp
-
     monkeypatch.setattr(newton, "NEW_ROWS_LIMIT", 0.5)
     n = 12
     path = sp.diags([np.ones(n - 1), 4.0 * np.ones(n), np.ones(n - 1)], [-1, 0, 1],
@@ -757,8 +789,6 @@ def test_a_new_row_of_a_carried_order_goes_just_after_its_last_old_neighbour(mon
 def test_a_block_permuted_for_its_carried_order_is_scipys_permutation_with_sorted_indices():
     """``_permuted`` gives ``matrix[order][:, order]`` entry for entry, its indices sorted (so
     that SuperLU's call does not sort them again)."""
-    import scipy.sparse as sp
-
     matrix = sp.random(500, 500, density=0.02, random_state=6, format="csc")
     order = np.random.default_rng(6).permutation(500)
     permuted = newton._permuted(matrix, order)
