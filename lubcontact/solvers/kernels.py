@@ -735,8 +735,11 @@ def reduced_newton_system_2d(indptr, indices, data, rho, lower, upper, box, cone
     0 at ``(t, t)`` and ``mu s`` (``s`` the sliding sign) at ``(t, n)``; its normal row is plain
     (pushed, or bilateral), so ``J_t - mu s J_n = e_t - mu s e_n`` and ``d_t = mu s d_n + c_t``
     with ``c_t = -phi_t + mu s phi_n``: its column folds into the normal's. Every remaining row
-    is ``rho_i (W + sigma I)_i``, so the block keeps ``W``'s pattern, with fewer rows (on
-    developed 2000-grain gluey flows a fifth of the active rows slide).
+    is ``rho_i (W + sigma I)_i``: the block has ``W``'s entries on the kept rows, each folded
+    column adding its sliding partner's (a contact's two rows of ``W`` share a pattern), and
+    its diagonal always stored. In 2D every active row that is not plain
+    (:func:`is_plain_row`) is a sliding tangential row, and its normal row is plain: one that
+    is not could not be folded, and raises ``ValueError``.
 
     Returns
     -------
@@ -756,7 +759,7 @@ def reduced_newton_system_2d(indptr, indices, data, rho, lower, upper, box, cone
     normal_of = np.full(n, -1)              # a sliding row's normal row, or -1
     n_kept = n_sliding = 0
     for i in rows:
-        if second_col[i] >= 0:
+        if not is_plain_row(i, first_col, first_val, second_col):
             normal_of[i] = second_col[i]
             base[i] = -phi[i] + second_val[i] * phi[second_col[i]]
             n_sliding += 1
@@ -772,6 +775,8 @@ def reduced_newton_system_2d(indptr, indices, data, rho, lower, upper, box, cone
         if position[i] >= 0:
             kept[position[i]] = i
         else:
+            if position[normal_of[i]] < 0:        # a sliding contact's normal row is plain
+                raise ValueError("a sliding tangential row's normal row is not plain")
             sliding[b], normal[b], slope[b] = i, normal_of[i], second_val[i]
             b += 1
     # the block's rows (CSR, accumulated in a scratch row), then transposed to CSC
@@ -790,7 +795,7 @@ def reduced_newton_system_2d(indptr, indices, data, rho, lower, upper, box, cone
         i = kept[a]
         seen[a], scratch[a], pattern[0] = a, sigma, a          # the diagonal, always stored
         size = 1
-        outside = 0.0                                          # W_i on the rows not kept
+        outside = 0.0                           # W_i base on the columns not kept
         for k in range(indptr[i], indptr[i + 1]):
             j = indices[k]
             column = position[j]

@@ -37,8 +37,8 @@ generalised Jacobian at ``y`` (block diagonal per contact: 0 or 1 on box rows,
 ``(R/|y_T|) (I - t t^T)`` and the column ``mu t`` on a sliding one, ``t =
 y_T/|y_T|``), the Jacobian of ``phi`` is ``J = I - G + G diag(rho) W``. Rows
 where ``G`` vanishes (open contacts, zero-forced rows) are identity rows: their
-update is ``-phi`` and they are eliminated, so the sparse LU factorisation
-(SuperLU) is of the active rows only. A 2D problem of up to ``DENSE_LIMIT`` rows runs
+update is ``-phi`` and they are eliminated, so the LU factorisation (SuperLU on the
+sparse lane) is of the active rows only. A 2D problem of up to ``DENSE_LIMIT`` rows runs
 each Newton phase in one compiled call on the dense ``W``
 (:func:`~lubcontact.solvers.kernels.newton_phase_2d`, the numpy phase's twin); on a larger 2D
 problem the Newton system is assembled compiled, without its sliding tangential rows: in 2D
@@ -89,11 +89,13 @@ ARMIJO = 1e-4
 """Sufficient decrease factor of the line search."""
 
 REGULARISATIONS = (0.0, 1e-10, 1e-8, 1e-6, 1e-4)
-"""Diagonal shifts tried in turn when the active block of the Jacobian is singular."""
+"""Diagonal shifts tried in turn when the factorised block of a Newton system is singular
+(:func:`_block_solve`)."""
 
 SPARSE_LU = dict(permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.1, panel_size=1,
                  options=dict(SymmetricMode=True))
-"""SuperLU's settings for the active block ``J_AA``, whose pattern is ``W_AA``'s (symmetric):
+"""SuperLU's settings for the factorised block, whose pattern is ``W_AA``'s (symmetric; on the
+2D sparse lane structurally so, the sliding rows eliminated):
 a minimum-degree ordering of ``A^T + A`` with pivots preferred on the diagonal. On developed
 2000-grain flows its factors hold 2.6 times the block's entries against 3.9 with COLAMD, and a
 Newton step costs 15 % less (same iterations). Panels of one column (SuperLU's default is 20):
@@ -446,9 +448,9 @@ class AlartCurnier:
         On the sparse lane of a 2D problem (``compiled_rows``) the system is reduced to its
         plain rows first (:func:`~lubcontact.solvers.kernels.reduced_newton_system_2d`): a
         sliding tangential row's unknown is its normal row's times ``mu s`` plus a constant,
-        so the factorised block loses those rows (on 12 000-grain gluey flows a tenth to a
-        fifth of the active rows), and it is assembled in CSC form directly, without the
-        rows of ``J``.
+        so the factorised block loses those rows (on developed 2D flows a ninth to a fifth of
+        the active rows: docs/records/benchmarks.md, "the sliding rows eliminated"), and it is
+        assembled in CSC form directly, without the rows of ``J``.
         """
         if not self.compiled_rows:
             J, active, plain = self.jacobian(y)
@@ -527,8 +529,8 @@ class _Factorisations:
     past :data:`FILL_GROWTH` times the ordered block's (on a 1 600-row grid pattern with 1 % of
     its rows new, scattered: 2.0 times, 2.4 times a fresh ordering's), the next block is
     ordered afresh. Only where ``carry`` is set (2D problems, whose blocks have ``W``'s
-    symmetric pattern): on a 3D Siconos file the carried orders' solves were ten times less
-    accurate and Newton took 392 iterations instead of 154.
+    symmetric pattern, structurally): on a 3D Siconos file the carried orders' solves were ten
+    times less accurate and Newton took 392 iterations instead of 154.
     """
 
     def __init__(self, carry: bool = False):
@@ -649,6 +651,9 @@ def _block_solve(block: sp.csc_matrix | np.ndarray, rhs: np.ndarray, rows: np.nd
     degrees of freedom) is regularised, ``block + delta I`` with ``delta`` from
     :data:`REGULARISATIONS` in turn (a proximal step, as in Siconos' PROX), from the first
     positive one where the block is ``singular`` by a count (:meth:`AlartCurnier.singular_by_count`).
+    On the 2D sparse lane the block is the reduced one (:meth:`AlartCurnier.newton_direction`),
+    so only its rows are shifted, not the eliminated sliding rows: the regularised direction
+    differs from that of the whole active block's by about ``delta`` (relative).
     """
     dense = rows.size <= DENSE_LIMIT
     if dense and not isinstance(block, np.ndarray):
@@ -686,9 +691,9 @@ def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = 5
     tol : float
         Stop when the FCLIB error is below it.
     max_iter : int
-        Cap on Newton iterations (one LU each: dense up to :data:`DENSE_LIMIT` active rows,
-        sparse above); the joint phase (``joint``) has its own cap,
-        :data:`JOINT_START_ITERATIONS`.
+        Cap on Newton iterations (one LU each, of the active rows, less the sliding ones on
+        the 2D sparse lane: dense up to :data:`DENSE_LIMIT` rows, sparse above); the joint
+        phase (``joint``) has its own cap, :data:`JOINT_START_ITERATIONS`.
     warm_start : ndarray, shape (n_rows,), optional
         Initial forces (scaled); zero otherwise.
     fallback : str or None

@@ -579,25 +579,18 @@ def test_the_compiled_sparse_jacobian_rows_are_the_numpy_rows(name, sigma, monke
         assert difference <= 1e-13 * max(np.abs(expected.toarray()).max(initial=0.0), 1.0)
 
 
-@pytest.mark.parametrize("name", [name for name in COMPILED_CASES if name != "mu_zero_friction"])
-@pytest.mark.parametrize("sigma", [1e-4, 1e-2])
-def test_the_sparse_lane_solves_the_newton_system_without_its_sliding_rows(name, sigma, monkeypatch):
-    """On the sparse lane a 2D Newton system is reduced to its rows of diag(rho) (W + sigma I)
-    (kernels.reduced_newton_system_2d: a sliding tangential row's unknown follows its normal
-    row's): a block of that many rows, with sorted row indices in each column, and a direction
-    that solves the whole system J d = -phi as the unreduced block's (_newton_direction) does, at
-    points with every contact state (the cases with friction, where contacts slide)."""
+def eliminated_sliding_rows(function, points):
+    """Check the sparse lane's reduced Newton system (kernels.reduced_newton_system_2d) of
+    ``function`` at each of ``points`` (forces): a block of as many rows as J has rows of
+    diag(rho) (W + sigma I), with sorted row indices in each column, and a direction that solves
+    the whole system J d = -phi as the unreduced block's (_newton_direction) does. Returns the
+    sliding rows eliminated at each point, and whether any of them has an entry of W in a kept
+    row (its column folded into its normal's)."""
     from lubcontact.solvers.kernels import reduced_newton_system_2d
 
-    use_the_sparse_lane(monkeypatch)
-    problem = load_cases()[name].problem.normalized()
-    function = AlartCurnier(problem)
     assert function.compiled_rows
-    rng = np.random.default_rng(5)
-    function.set_proximal(sigma, rng.normal(size=problem.n_rows))
-    eliminated = 0
-    for _ in range(20):
-        forces = rng.normal(size=problem.n_rows) * rng.choice([1e-3, 1.0, 1e3], size=problem.n_rows)
+    eliminated, folded = [], False
+    for forces in points:
         phi, y, _ = function.residual(forces)
         J, active, plain = function.jacobian(y)
         kept, indptr, indices, data, *_, sliding, _, _ = reduced_newton_system_2d(
@@ -605,15 +598,59 @@ def test_the_sparse_lane_solves_the_newton_system_without_its_sliding_rows(name,
             function.upper, function.box, function.cone_n, function.tangent_rows,
             function.cone_mu, function.unilateral, function.sigma, y, phi)
         assert kept.size == plain and sliding.size == np.count_nonzero(active) - plain
-        assert sp.csc_matrix((data, indices, indptr), shape=(kept.size, kept.size)).has_canonical_format
-        eliminated += sliding.size
+        block = sp.csc_matrix((data, indices, indptr), shape=(kept.size, kept.size))
+        assert block.has_canonical_format
+        assert np.count_nonzero(block.diagonal()) == kept.size or function.sigma == 0
+        eliminated.append(sliding)
+        folded = folded or function.W[kept][:, sliding].nnz > 0
         direction = function.newton_direction(y, phi)
         expected = newton._newton_direction(J, active, phi)
         assert np.array_equal(direction[~active], -phi[~active])
-        scale = np.abs(phi).max()
-        assert np.abs(J @ direction + phi[active]).max() <= 1e-12 * scale
+        scale = abs(J).max() * np.abs(direction).max()          # a backward error: 7e-15
+        assert np.abs(J @ direction + phi[active]).max() <= 1e-13 * scale
         assert np.abs(direction - expected).max() <= 1e-10 * np.abs(expected).max()
-    assert eliminated > 0
+    return eliminated, folded
+
+
+@pytest.mark.parametrize("name", [name for name in COMPILED_CASES if name != "mu_zero_friction"])
+@pytest.mark.parametrize("sigma", [1e-4, 1e-2])
+def test_the_sparse_lane_solves_the_newton_system_without_its_sliding_rows(name, sigma, monkeypatch):
+    """On the sparse lane a 2D Newton system is reduced to its rows of diag(rho) (W + sigma I)
+    (a sliding tangential row's unknown follows its normal row's): checked at points with every
+    contact state, on the hard cases with friction, where contacts slide."""
+    use_the_sparse_lane(monkeypatch)
+    problem = load_cases()[name].problem.normalized()
+    function = AlartCurnier(problem)
+    rng = np.random.default_rng(5)
+    function.set_proximal(sigma, rng.normal(size=problem.n_rows))
+    n = problem.n_rows
+    eliminated, _ = eliminated_sliding_rows(
+        function, [rng.normal(size=n) * rng.choice([1e-3, 1.0, 1e3], size=n) for _ in range(20)])
+    assert sum(rows.size for rows in eliminated) > 0
+
+
+@pytest.mark.parametrize("sigma", [1e-3, 1e-5])
+@pytest.mark.parametrize("dense_limit", [None, 1000])
+def test_the_sliding_rows_of_union_contacts_fold_into_their_bilateral_normal_rows(
+        sigma, dense_limit, monkeypatch):
+    """A gluey + friction flow step (1 635 rows: the sparse lane) at its warm start and near it:
+    the sliding rows eliminated are UNION contacts' (pushed, bilateral normal rows) coupled to
+    kept rows, and the reduced system gives the whole system's direction; also where the
+    reduced block (some 700 rows) is at most DENSE_LIMIT rows, factorised dense."""
+    if dense_limit is not None:
+        monkeypatch.setattr(newton, "DENSE_LIMIT", dense_limit)
+    with np.load(Path(__file__).parents[1] / "flow" / "data" / "gluey-flow-step.npz") as data:
+        problem = StepProblem.from_arrays(data).normalized()
+        start = data["warm_start"] / problem.scaling.force
+    function = AlartCurnier(problem)
+    function.set_proximal(sigma * function.typical, start)
+    rng = np.random.default_rng(6)
+    points = [start] + [start * (1 + 0.3 * rng.normal(size=start.size)) for _ in range(4)]
+    eliminated, folded = eliminated_sliding_rows(function, points)
+    union_normal = function.cone_n[~function.unilateral]
+    assert all(rows.size for rows in eliminated) and folded
+    assert np.isin(function.cone_n[np.searchsorted(function.tangent_rows, eliminated[0])],
+                   union_normal).all()
 
 
 @pytest.mark.parametrize("name", COMPILED_CASES)
@@ -819,7 +856,8 @@ def test_a_block_singular_by_its_count_of_sticking_rows_skips_the_failed_factori
     """At rest, plain Newton's active block has more rows of W than degrees of freedom: singular.
     The count says so (not with a proximal weight: rows of W + sigma I), and the direction
     is the regularised one without SuperLU first failing on the block (at 12 800 grains that
-    failure took 1.8 s against 0.17 s for the factorisation)."""
+    failure took 1.8 s against 0.17 s for the factorisation); on the 2D sparse lane's reduced
+    system too (AlartCurnier.newton_direction)."""
     import scipy.sparse.linalg as spla
 
     problem, guess = pile_at_rest
@@ -852,6 +890,12 @@ def test_a_block_singular_by_its_count_of_sticking_rows_skips_the_failed_factori
     outcomes.clear()
     assert np.array_equal(newton._newton_direction(J, active, phi, singular=True), tried)
     assert outcomes == ["factorised"]
+    outcomes.clear()                    # the sparse lane's reduced system counts alike
+    function.set_proximal(0.0, answer.forces / scaled.scaling.force)
+    direction = function.newton_direction(y, phi)
+    assert outcomes == ["factorised"] and np.isfinite(direction).all()
+    # the same regularised direction but for the sliding rows' shift (delta 1e-10 here): 9e-8
+    assert np.abs(direction - tried).max() <= 1e-6 * np.abs(tried).max()
 
 
 def test_no_newton_iterations_past_tol_where_the_block_is_singular_by_its_count(
