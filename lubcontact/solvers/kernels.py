@@ -833,6 +833,87 @@ def reduced_newton_system_2d(indptr, indices, data, rho, lower, upper, box, cone
 
 
 @numba.njit(cache=True)
+def carried_order(indptr, indices, rows, ordered_rows, positions, limit):
+    """The elimination order of ``newton._Factorisations`` carried to a block (CSC pattern
+    ``indptr``, ``indices``, symmetric; its rows ``rows`` of the system, sorted) from an ordered
+    block (its rows ``ordered_rows``, sorted, at ``positions`` in its order): the old rows in
+    their order, each new row just after the last of its old neighbours, one with none at the
+    end, ties by row. ``(order, True)``, ``order`` a permutation of the block's rows (m,); or
+    ``(empty, False)`` when more than ``limit`` rows are new. By a counting sort on the keys
+    ``2 p`` (an old row at ``p``) and ``2 p + 1`` (a new row after it): no comparison sort."""
+    m, size = rows.size, ordered_rows.size
+    key = np.empty(m, dtype=np.int64)
+    new = 0
+    k = 0
+    for a in range(m):                          # both sorted: one merge
+        while k < size and ordered_rows[k] < rows[a]:
+            k += 1
+        if k < size and ordered_rows[k] == rows[a]:
+            key[a] = 2 * positions[k]
+        else:
+            key[a] = -1
+            new += 1
+    if new > limit:
+        return np.empty(0, dtype=np.int64), False
+    end = 2 * size
+    old_key = key.copy()
+    for a in range(m):
+        if old_key[a] < 0:
+            last = -1
+            for e in range(indptr[a], indptr[a + 1]):
+                last = max(last, old_key[indices[e]])
+            key[a] = last + 1 if last >= 0 else end
+    start = np.zeros(end + 2, dtype=np.int64)
+    for a in range(m):
+        start[key[a] + 1] += 1
+    for b in range(end + 1):
+        start[b + 1] += start[b]
+    order = np.empty(m, dtype=np.int64)
+    for a in range(m):                          # in row order: stable
+        order[start[key[a]]] = a
+        start[key[a]] += 1
+    return order, True
+
+
+@numba.njit(cache=True)
+def permuted_csc(indptr, indices, data, order):
+    """``A[order][:, order]`` of a CSC matrix ``A`` (``indptr``, ``indices``, ``data``; ``order`` a
+    permutation of its rows) as CSC arrays with sorted row indices, 32-bit (SuperLU's). Two
+    counting sorts, by new row then by new column, each reading its input in order (gathering
+    the columns in the new order and sorting each took three times as long: their reads jump
+    about memory)."""
+    m, nnz = order.size, indptr[order.size]
+    renumber = np.empty(m, dtype=np.int64)
+    for c in range(m):
+        renumber[order[c]] = c
+    row_ptr = np.zeros(m + 1, dtype=np.int64)              # the permuted matrix's rows
+    for e in range(nnz):
+        row_ptr[renumber[indices[e]] + 1] += 1
+    for r in range(m):
+        row_ptr[r + 1] += row_ptr[r]
+    filled = row_ptr[:-1].copy()
+    row_col = np.empty(nnz, dtype=np.int64)
+    row_val = np.empty(nnz)
+    for j in range(m):
+        for e in range(indptr[j], indptr[j + 1]):
+            r = renumber[indices[e]]
+            row_col[filled[r]], row_val[filled[r]] = renumber[j], data[e]
+            filled[r] += 1
+    p_indptr = np.zeros(m + 1, dtype=np.int32)              # then its columns, rows in order
+    for c in range(m):
+        p_indptr[c + 1] = p_indptr[c] + indptr[order[c] + 1] - indptr[order[c]]
+    filled = p_indptr[:-1].astype(np.int64)
+    p_indices = np.empty(nnz, dtype=np.int32)
+    p_data = np.empty(nnz)
+    for r in range(m):
+        for e in range(row_ptr[r], row_ptr[r + 1]):
+            c = row_col[e]
+            p_indices[filled[c]], p_data[filled[c]] = r, row_val[e]
+            filled[c] += 1
+    return p_indptr, p_indices, p_data
+
+
+@numba.njit(cache=True)
 def lu_solve(transposed, rhs):
     """``A x = rhs`` by LAPACK's LU with partial pivoting (``gesv``), given ``transposed`` =
     ``A^T`` in C order (``A`` in LAPACK's column order), which it may overwrite; ``(x, ok)`` with

@@ -565,39 +565,30 @@ class _Factorisations:
 
     def _carried_order(self, matrix: sp.csc_matrix, rows: np.ndarray) -> np.ndarray | None:
         """The last ordered block's elimination order for ``matrix`` (a permutation of its
-        rows), or None when more than :data:`NEW_ROWS_LIMIT` of ``rows`` are new to it."""
+        rows: :func:`~lubcontact.solvers.kernels.carried_order`, each new row just after the
+        last of its old neighbours, its column's rows in ``W``'s symmetric pattern; before the
+        first gave +0-13 % fill against +0-10 % on the carried 12 000-grain blocks), or None
+        when more than :data:`NEW_ROWS_LIMIT` of ``rows`` are new to it."""
         if not self.carry or self.ordered_rows is None:
             return None
-        found = np.minimum(np.searchsorted(self.ordered_rows, rows), self.ordered_rows.size - 1)
-        old = self.ordered_rows[found] == rows
-        if rows.size - np.count_nonzero(old) > NEW_ROWS_LIMIT * rows.size:
-            return None
-        place = np.where(old, self.positions[found], np.inf)
-        new = np.flatnonzero(~old)
-        counts = np.diff(matrix.indptr)[new]
-        new, counts = new[counts > 0], counts[counts > 0]
-        if new.size:                    # a new row's neighbours: its column's rows (W's pattern)
-            starts = np.cumsum(counts) - counts
-            entries = np.repeat(matrix.indptr[new] - starts, counts) + np.arange(counts.sum())
-            neighbours = place[matrix.indices[entries]]
-            last = np.maximum.reduceat(np.where(np.isinf(neighbours), -np.inf, neighbours), starts)
-            # just after its last old neighbour (before the first: +0-13 % fill against +0-10 %
-            # on the carried 12 000-grain blocks); with none, at the end
-            place[new] = np.where(np.isfinite(last), last + 0.5, np.inf)
-        return np.argsort(place, kind="stable")
+        from .kernels import carried_order  # numba, imported on first use
+
+        order, carried = carried_order(matrix.indptr, matrix.indices, rows, self.ordered_rows,
+                                       self.positions, NEW_ROWS_LIMIT * rows.size)
+        return order if carried else None
 
 
 def _permuted(matrix: sp.csc_matrix, order: np.ndarray) -> sp.csc_matrix:
-    """``matrix[order][:, order]`` (``order``: a permutation of its rows) with sorted indices,
-    as SuperLU takes it: the columns gathered, the rows renumbered, then sorted by two
-    conversions, which on the 23 000-row blocks of 12 000-grain flows cost less than scipy's
-    double indexing and the sort SuperLU's call then made (docs/records/benchmarks.md)."""
-    gathered = matrix[:, order]
-    renumber = np.empty(order.size, dtype=gathered.indices.dtype)
-    renumber[order] = np.arange(order.size, dtype=gathered.indices.dtype)
-    unsorted = sp.csc_matrix((gathered.data, renumber[gathered.indices], gathered.indptr),
-                             shape=matrix.shape)
-    return unsorted.tocsr().tocsc()
+    """``matrix[order][:, order]`` (``order``: a permutation of its rows) with sorted 32-bit
+    indices, as SuperLU takes it (:func:`~lubcontact.solvers.kernels.permuted_csc`; scipy's
+    double indexing, then the sort SuperLU's call made, cost several times more on the
+    23 000-row blocks of 12 000-grain flows: docs/records/benchmarks.md)."""
+    from .kernels import permuted_csc  # numba, imported on first use
+
+    indptr, indices, data = permuted_csc(matrix.indptr, matrix.indices, matrix.data, order)
+    permuted = sp.csc_matrix((data, indices, indptr), shape=matrix.shape)
+    permuted.has_sorted_indices = True
+    return permuted
 
 
 def _ordered_solve(factors: spla.SuperLU, order: np.ndarray | None, rhs: np.ndarray) -> np.ndarray:

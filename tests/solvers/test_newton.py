@@ -823,6 +823,35 @@ def test_a_new_row_of_a_carried_order_goes_just_after_its_last_old_neighbour(mon
     assert place[3] + 1 == place[4] and place[12] == n
 
 
+@pytest.mark.parametrize("seed", range(5))
+def test_the_carried_order_is_a_stable_sort_of_the_places(seed):
+    """kernels.carried_order's counting sort gives the stable sort of the places: an old row at
+    its place in the ordered block, a new row half a place after its last old neighbour, one
+    with none last, ties by row (on random symmetric patterns with rows kept, dropped and new)."""
+    from lubcontact.solvers.kernels import carried_order
+
+    rng = np.random.default_rng(seed)
+    pattern = sp.random(300, 300, density=0.01, random_state=seed, format="csc")
+    pattern = (pattern + pattern.T + sp.identity(300)).tocsc()
+    rows = np.sort(rng.choice(1000, size=300, replace=False))
+    old = rng.random(300) < 0.9
+    dropped = np.setdiff1d(rng.choice(1000, size=40, replace=False), rows)
+    ordered_rows = np.sort(np.concatenate([rows[old], dropped]))
+    positions = rng.permutation(ordered_rows.size)
+    order, carried = carried_order(pattern.indptr, pattern.indices, rows, ordered_rows, positions,
+                                   0.5 * rows.size)
+    place = np.full(rows.size, np.inf)
+    place[old] = positions[np.searchsorted(ordered_rows, rows[old])]
+    old_place = place.copy()
+    for a in np.flatnonzero(~old):
+        neighbours = old_place[pattern.indices[pattern.indptr[a]:pattern.indptr[a + 1]]]
+        if np.isfinite(neighbours).any():
+            place[a] = neighbours[np.isfinite(neighbours)].max() + 0.5
+    assert carried and np.array_equal(order, np.argsort(place, kind="stable"))
+    assert not carried_order(pattern.indptr, pattern.indices, rows, ordered_rows, positions,
+                             0.05 * rows.size)[1]              # about 30 new rows: not carried
+
+
 def test_a_block_permuted_for_its_carried_order_is_scipys_permutation_with_sorted_indices():
     """``_permuted`` gives ``matrix[order][:, order]`` entry for entry, its indices sorted (so
     that SuperLU's call does not sort them again)."""
