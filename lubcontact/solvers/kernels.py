@@ -836,11 +836,13 @@ def reduced_newton_system_2d(indptr, indices, data, rho, lower, upper, box, cone
 def carried_order(indptr, indices, rows, ordered_rows, positions, limit):
     """The elimination order of ``newton._Factorisations`` carried to a block (CSC pattern
     ``indptr``, ``indices``, symmetric; its rows ``rows`` of the system, sorted) from an ordered
-    block (its rows ``ordered_rows``, sorted, at ``positions`` in its order): the old rows in
-    their order, each new row just after the last of its old neighbours, one with none at the
-    end, ties by row. ``(order, True)``, ``order`` a permutation of the block's rows (m,); or
-    ``(empty, False)`` when more than ``limit`` rows are new. By a counting sort on the keys
-    ``2 p`` (an old row at ``p``) and ``2 p + 1`` (a new row after it): no comparison sort."""
+    block (its rows ``ordered_rows``, sorted, at ``positions`` in its order: a permutation of
+    ``0 .. ordered_rows.size - 1``, SuperLU's ``perm_c``; a place beyond would write past the
+    keys' counts, unchecked): the old rows in their order, each new row just after the last of
+    its old neighbours, one with none at the end, ties by row. ``(order, True)``, ``order`` a
+    permutation of ``0 .. m - 1`` (the block's rows); or ``(empty, False)`` when more than
+    ``limit`` rows are new. By a counting sort on the keys ``2 p`` (an old row at ``p``) and
+    ``2 p + 1`` (a new row after it): no comparison sort."""
     m, size = rows.size, ordered_rows.size
     key = np.empty(m, dtype=np.int64)
     new = 0

@@ -850,17 +850,30 @@ def test_the_carried_order_is_a_stable_sort_of_the_places(seed):
     assert carried and np.array_equal(order, np.argsort(place, kind="stable"))
     assert not carried_order(pattern.indptr, pattern.indices, rows, ordered_rows, positions,
                              0.05 * rows.size)[1]              # about 30 new rows: not carried
+    # a new row (1) whose one old neighbour (0) is first in the order, two (3, 4) with none
+    small = sp.csc_matrix(np.array([[1, 1, 0, 0, 0], [1, 1, 0, 0, 0], [0, 0, 1, 0, 0],
+                                    [0, 0, 0, 1, 0], [0, 0, 0, 0, 1]], dtype=float))
+    order, carried = carried_order(small.indptr, small.indices, np.arange(5), np.array([0, 2]),
+                                   np.array([0, 1]), 5.0)
+    assert carried and np.array_equal(order, [0, 1, 2, 3, 4])
 
 
 def test_a_block_permuted_for_its_carried_order_is_scipys_permutation_with_sorted_indices():
     """``_permuted`` gives ``matrix[order][:, order]`` entry for entry, its indices sorted (so
-    that SuperLU's call does not sort them again)."""
+    that SuperLU's call does not sort them again) and 32-bit (SuperLU's), also from a matrix
+    whose indices are not sorted."""
     matrix = sp.random(500, 500, density=0.02, random_state=6, format="csc")
-    order = np.random.default_rng(6).permutation(500)
-    permuted = newton._permuted(matrix, order)
+    rng = np.random.default_rng(6)
+    order = rng.permutation(500)
     expected = matrix[order][:, order].tocsc()
     expected.sort_indices()
-    assert permuted.has_sorted_indices
+    for column in range(0, 500, 7):          # unsorted input indices give the same block
+        start, end = matrix.indptr[column], matrix.indptr[column + 1]
+        shuffle = start + rng.permutation(end - start)
+        matrix.indices[start:end], matrix.data[start:end] = \
+            matrix.indices[shuffle].copy(), matrix.data[shuffle].copy()
+    permuted = newton._permuted(matrix, order)
+    assert permuted.indices.dtype == permuted.indptr.dtype == np.int32
     for name in ("indptr", "indices", "data"):
         assert np.array_equal(getattr(permuted, name), getattr(expected, name))
 
