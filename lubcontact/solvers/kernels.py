@@ -726,6 +726,28 @@ def sparse_jacobian_rows_2d(indptr, indices, data, rho, lower, upper, box, cone_
 
 
 @numba.njit(cache=True)
+def compressed_transpose(size, pointers, indices, values):
+    """The transpose of a square sparse matrix of ``size`` rows in compressed arrays
+    (``pointers``, ``indices``, ``values``: CSR gives CSC, and back), by a counting sort, the
+    indices of each new row sorted and 32-bit (SuperLU's): ``(pointers, indices, values)``."""
+    count = pointers[size]
+    new_pointers = np.zeros(size + 1, dtype=np.int32)
+    for k in range(count):
+        new_pointers[indices[k] + 1] += 1
+    for a in range(size):
+        new_pointers[a + 1] += new_pointers[a]
+    filled = new_pointers[:-1].astype(np.int64)
+    new_indices = np.empty(count, dtype=np.int32)
+    new_values = np.empty(count)
+    for a in range(size):                       # in order: each new row's indices sorted
+        for k in range(pointers[a], pointers[a + 1]):
+            place = filled[indices[k]]
+            new_indices[place], new_values[place] = a, values[k]
+            filled[indices[k]] += 1
+    return new_pointers, new_indices, new_values
+
+
+@numba.njit(cache=True)
 def reduced_newton_system_2d(indptr, indices, data, rho, lower, upper, box, cone_n, cone_t,
                              cone_mu, unilateral, sigma, y, phi):
     """The Newton system ``J d = -phi`` at ``y`` with ``W`` in CSR form, reduced to its plain
@@ -746,10 +768,11 @@ def reduced_newton_system_2d(indptr, indices, data, rho, lower, upper, box, cone
     tuple
         ``(kept, B_indptr, B_indices, B_data, rhs, base, sliding, normal, slope)``: the plain
         rows (m,), sorted; the block ``B`` (m x m) of their equations in CSC arrays with sorted
-        row indices in each column; ``rhs`` (m,); the direction on the other rows (n,): ``-phi``
-        on identity rows, ``c_t`` on the sliding rows ``sliding``, whose normal rows are
-        ``normal`` and whose folded coefficients ``mu s`` are ``slope``. With ``B x = rhs``
-        solved, ``d = base``, ``d[kept] = x``, then ``d[sliding] += slope * d[normal]``.
+        32-bit row indices in each column (:func:`compressed_transpose` of its rows); ``rhs``
+        (m,); the direction on the other rows (n,): ``-phi`` on identity rows, ``c_t`` on the
+        sliding rows ``sliding``, whose normal rows are ``normal`` and whose folded
+        coefficients ``mu s`` are ``slope``. With ``B x = rhs`` solved, ``d = base``,
+        ``d[kept] = x``, then ``d[sliding] += slope * d[normal]``.
     """
     rows, first_col, first_val, second_col, second_val = generalised_jacobian_2d(
         lower, upper, box, cone_n, cone_t, cone_mu, unilateral, y)
@@ -816,19 +839,7 @@ def reduced_newton_system_2d(indptr, indices, data, rho, lower, upper, box, cone
             row_val[count + k] = rho[i] * scratch[pattern[k]]
         count += size
         row_ptr[a + 1] = count
-    B_indptr = np.zeros(n_kept + 1, dtype=np.int64)
-    for k in range(count):
-        B_indptr[row_col[k] + 1] += 1
-    for a in range(n_kept):
-        B_indptr[a + 1] += B_indptr[a]
-    filled = B_indptr[:-1].copy()
-    B_indices = np.empty(count, dtype=np.int64)
-    B_data = np.empty(count)
-    for a in range(n_kept):                                    # rows in order: sorted columns
-        for k in range(row_ptr[a], row_ptr[a + 1]):
-            place = filled[row_col[k]]
-            B_indices[place], B_data[place] = a, row_val[k]
-            filled[row_col[k]] += 1
+    B_indptr, B_indices, B_data = compressed_transpose(n_kept, row_ptr, row_col, row_val)
     return kept, B_indptr, B_indices, B_data, rhs, base, sliding, normal, slope
 
 
@@ -901,18 +912,7 @@ def permuted_csc(indptr, indices, data, order):
             r = renumber[indices[e]]
             row_col[filled[r]], row_val[filled[r]] = renumber[j], data[e]
             filled[r] += 1
-    p_indptr = np.zeros(m + 1, dtype=np.int32)              # then its columns, rows in order
-    for c in range(m):
-        p_indptr[c + 1] = p_indptr[c] + indptr[order[c] + 1] - indptr[order[c]]
-    filled = p_indptr[:-1].astype(np.int64)
-    p_indices = np.empty(nnz, dtype=np.int32)
-    p_data = np.empty(nnz)
-    for r in range(m):
-        for e in range(row_ptr[r], row_ptr[r + 1]):
-            c = row_col[e]
-            p_indices[filled[c]], p_data[filled[c]] = r, row_val[e]
-            filled[c] += 1
-    return p_indptr, p_indices, p_data
+    return compressed_transpose(m, row_ptr, row_col, row_val)   # then its columns
 
 
 @numba.njit(cache=True)
