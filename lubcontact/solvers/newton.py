@@ -137,6 +137,17 @@ granular file (measured on Siconos' and FCLIB's test problems). With a warm star
 weight is also tried from zero forces, second: in the first steps of a flow the previous step's
 forces can be a start from which every weight stalls where a cold start converges (two of three
 such gluey steps of the demo's flow)."""
+PLAIN_TRY = 5
+"""Plain Newton iterations (no proximal weight), at most, tried first from a warm start on a
+small problem (the dense lanes) without friction cones, unless plain Newton's block is singular
+by its count there (:func:`_strategies`); :data:`STRATEGIES` follow from the warm start where
+they did not reach ``tol``. From the previous step's forces of a small frictionless pile the
+proximal loop spends an iteration per weight (1e-3, 1e-4, ..., then the finish), where plain
+Newton converges quadratically: on 300 steps of 20- and 40-grain settling piles, in 1-5
+iterations (1 on most) against 1-7. Not with friction cones: with exact Coulomb it converged
+within 5 iterations on 88 of the 20-grain pile's 300 steps and stalled on 92, and plain Newton
+first took 1.5-3.2 times the iterations on developed 2 000-grain flows
+(docs/records/benchmarks.md, "the plain try")."""
 STRATEGY_GAP = 100.0
 """The next strategy is tried only while the best FCLIB error is above this many ``tol``: a
 phase that stalled within two decades of ``tol`` goes to the fallbacks, whose Gauss-Seidel
@@ -485,11 +496,17 @@ class AlartCurnier:
         count is taken without assembling the rows
         (:func:`~lubcontact.solvers.kernels.plain_rows_2d`: 1.9 ms a call against 10 ms with
         the rows, a 12 800-grain pile at rest)."""
-        if self.dense:
+        return not self.dense and self.singular_at(forces)
+
+    def singular_at(self, forces: np.ndarray) -> bool:
+        """Whether plain Newton's active block at ``forces`` is singular by its count of sticking
+        rows (:meth:`singular_by_count`), on any lane; not counted where ``W`` has no more rows
+        than its rank bound."""
+        if self.n_rows <= self.rank_bound:
             return False
         self.set_proximal(0.0, forces)
         y = self.residual(forces)[1]
-        if self.compiled_rows:
+        if self.planar:
             from .kernels import plain_rows_2d  # numba, imported on first use
 
             plain = plain_rows_2d(self.lower, self.upper, self.box, self.cone_n, self.tangent_rows,
@@ -816,14 +833,22 @@ def _strategies(function: AlartCurnier, unshifted: ConicProblem, forces: np.ndar
     ``forces`` (a strategy's stalled iterate is a worse start than the warm start, measured),
     the first also from zero forces when ``forces`` is not zero, until one converges, the best
     error is within :data:`STRATEGY_GAP` of ``tol`` or ``max_iter`` Newton iterations are
-    spent; the best phase is returned."""
+    spent; the best phase is returned. First, on a small problem without friction cones, from a
+    warm start at which plain Newton's block is not singular by its count
+    (:meth:`AlartCurnier.singular_at`), the plain try: at most :data:`PLAIN_TRY` plain Newton
+    iterations from ``forces``."""
     best, history, tried = None, [], []
     iterations = gradient_steps = proximal_steps = 0
     warm = bool(forces.any())
-    starts = [(STRATEGIES[0], forces)] + ([(STRATEGIES[0], np.zeros_like(forces))] if warm else []) \
-        + [(sigma, forces) for sigma in STRATEGIES[1:]]
-    for sigma, start in starts:
-        phase = _proximal_newton(function, unshifted, start, tol, max_iter - iterations, sigma)
+    plain = [(0.0, forces, PLAIN_TRY)] if PLAIN_TRY > 0 and warm and function.dense \
+        and not function.cone_n.size and not function.singular_at(forces) else []
+    starts = [*plain, (STRATEGIES[0], forces, None)] \
+        + ([(STRATEGIES[0], np.zeros_like(forces), None)] if warm else []) \
+        + [(sigma, forces, None) for sigma in STRATEGIES[1:]]
+    for sigma, start, cap in starts:                    # cap: the plain try's, else none
+        budget = max_iter - iterations if cap is None else min(cap, max_iter - iterations)
+        phase = _proximal_newton(function, unshifted, start, tol, budget, sigma,
+                                 finish=sigma > 0 or cap is not None)
         tried.append((sigma, "warm" if start is forces and warm else "cold"))
         iterations += phase.iterations
         gradient_steps += phase.gradient_steps
@@ -831,7 +856,8 @@ def _strategies(function: AlartCurnier, unshifted: ConicProblem, forces: np.ndar
         history.extend(phase.history if not history else phase.history[1:])
         if best is None or phase.error < best.error:
             best = phase
-        if phase.status == CONVERGED or iterations >= max_iter or best.error <= STRATEGY_GAP * tol:
+        if phase.status == CONVERGED or iterations >= max_iter \
+                or (cap is None and best.error <= STRATEGY_GAP * tol):
             break
     return _Phase(forces=best.forces, status=best.status, iterations=iterations, error=best.error,
                   history=np.asarray(history), gradient_steps=gradient_steps,
@@ -861,10 +887,13 @@ def _proximal_newton(function: AlartCurnier, unshifted: ConicProblem, forces: np
     nothing and a smaller one not solved in :data:`INNER_CAP` iterations until
     the phase stalled (docs/records/benchmarks.md, "creeping beds"). The best
     iterate is what the phase returns. The phase stalls by :class:`_StallRule`.
-    With ``finish``, a phase that converged with a positive weight ends with at most
-    :data:`FINISH_ITERATIONS` plain Newton iterations, quadratic there (unless the block is
-    singular by its count, :meth:`AlartCurnier.hyperstatic`): from ``tol`` to round-off
-    (:data:`ROUND_OFF`) in one or two factorisations. Without, it stops at ``tol`` (the
+    With ``finish``, a phase that converged ends with at most :data:`FINISH_ITERATIONS` plain
+    Newton iterations, quadratic there (unless the block is singular by its count,
+    :meth:`AlartCurnier.hyperstatic`): from ``tol`` to round-off (:data:`ROUND_OFF`) in one or
+    two factorisations. :func:`_strategies` asks for it after a proximal loop and after the
+    plain try (whose answer at round-off left the next step of a small pile at rest without an
+    iteration to do), not after plain Newton as a strategy (on two hard cases its iterations
+    did not reach round-off). Without, it stops at ``tol`` (the
     polish to :data:`JOINT_FINISH` ``tol``, whose target that is).
     """
     scale = sigma * function.typical
@@ -911,9 +940,9 @@ def _proximal_newton(function: AlartCurnier, unshifted: ConicProblem, forces: np
     hyperstatic = False
     if best[0] <= tol:
         status = CONVERGED
-        # the proximal loop stops at tol; plain Newton is quadratic here, unless its block is singular
-        hyperstatic = finish and scale > 0 and function.hyperstatic(best[1])
-        if finish and scale > 0 and not hyperstatic:
+        # the loop stops at tol; plain Newton is quadratic here, unless its block is singular
+        hyperstatic = finish and function.hyperstatic(best[1])
+        if finish and not hyperstatic and best[0] > ROUND_OFF:
             function.set_proximal(0.0, best[1])
             plain = _newton_phase(function, unshifted, best[1], ROUND_OFF, FINISH_ITERATIONS)
             iterations += plain.iterations

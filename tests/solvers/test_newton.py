@@ -27,6 +27,7 @@ from lubcontact.solvers import (
     MAX_ITER,
     SolveSettings,
     newton,
+    solve,
     solve_coulomb,
     solver_info,
 )
@@ -1119,6 +1120,69 @@ def test_the_plain_finish_stops_at_round_off(settling_step, lane, monkeypatch):
     assert finishes[0].history[0] > newton.ROUND_OFF >= finishes[0].history[-1]
     assert coulomb_error(problem.normalized(), result.forces / result.force_scale) <= newton.ROUND_OFF
     assert velocity_error(problem, result.velocities, reference.velocities) <= 1e-8
+
+
+def plain_try_strategies(problem, warm_start, compiled=True):
+    """:func:`newton._strategies` on the normalised ``problem`` from ``warm_start`` (scaled) at
+    tol 1e-8, its Newton phases compiled or numpy."""
+    unshifted = problem.with_shift(np.zeros(problem.n_contacts))
+    function = AlartCurnier(problem)
+    function.compiled = compiled
+    return newton._strategies(function, unshifted, warm_start, 1e-8, 200)
+
+
+def test_a_small_frictionless_problem_near_its_warm_start_is_solved_by_the_plain_try(
+        settling_step, monkeypatch):
+    """From a warm start near the solution of a small frictionless problem, plain Newton (the
+    plain try, PLAIN_TRY) takes the answer to round-off in one iteration, where the proximal
+    loop spends one iteration per weight (1e-3, 1e-4, ..., then the finish); from a warm start
+    already at tol, the finish takes it there. No plain try on the sparse lane, with friction
+    cones, or where the block at the warm start is singular by its count (the jammed hexagonal
+    box)."""
+    original = load_cases()["glued_chain_anchored"].problem
+    chain = original.normalized()
+    solution = plain_try_strategies(chain, np.zeros(chain.n_rows)).forces
+    near = solution * (1.0 + 1e-3)
+    plain = plain_try_strategies(chain, near)
+    assert plain.status == CONVERGED and plain.strategies == [(0.0, "warm")]
+    assert plain.iterations == 1 and plain.error <= newton.ROUND_OFF
+    function = AlartCurnier(chain)                     # a warm start already at tol: the finish
+    loose = newton._strategies(function, chain.with_shift(np.zeros(chain.n_contacts)), near, 1e-2, 200)
+    assert loose.history[0] <= 1e-2 and loose.strategies == [(0.0, "warm")]
+    assert loose.iterations == 1 and loose.error <= newton.ROUND_OFF
+    monkeypatch.setattr(newton, "PLAIN_TRY", 0)
+    proximal = plain_try_strategies(chain, near)
+    assert proximal.status == CONVERGED and proximal.strategies == [(1e-3, "warm")]
+    assert proximal.iterations >= 3
+    monkeypatch.undo()
+    jammed = load_cases()["hex_box_jammed"].problem.normalized()
+    assert AlartCurnier(jammed).singular_at(np.ones(jammed.n_rows))
+    assert plain_try_strategies(jammed, np.ones(jammed.n_rows)).strategies[0] == (1e-3, "warm")
+    problem, reference = settling_step                     # friction cones
+    frictional = solve_coulomb(problem, "newton-ac", tol=1e-6, warm_start=reference.forces * (1.0 + 1e-3))
+    assert frictional.success and frictional.info["strategies"] == [(1e-3, "warm")]
+    use_the_sparse_lane(monkeypatch)
+    sparse = solve(original, "newton-ac", tol=1e-8, warm_start=near * chain.scaling.force)
+    assert sparse.success and sparse.info["strategies"] == [(1e-3, "warm")]
+
+
+@pytest.mark.parametrize("compiled", [True, False])
+def test_a_failed_plain_try_hands_over_to_the_strategies_from_the_warm_start(compiled, monkeypatch):
+    """From a random warm start of the jammed hexagonal box, not singular by its count there,
+    plain Newton does not converge in PLAIN_TRY iterations: the first strategy then starts from
+    the warm start, not from the plain try's iterate, and takes the same iterations to the same
+    answer as without the plain try (PLAIN_TRY iterations more in all), on both dense lanes."""
+    jammed = load_cases()["hex_box_jammed"].problem.normalized()
+    warm_start = np.random.default_rng(0).normal(size=jammed.n_rows)
+    assert not AlartCurnier(jammed).singular_at(warm_start)
+    tried, cap = plain_try_strategies(jammed, warm_start, compiled), newton.PLAIN_TRY
+    monkeypatch.setattr(newton, "PLAIN_TRY", 0)
+    untried = plain_try_strategies(jammed, warm_start, compiled)
+    assert tried.strategies == [(0.0, "warm"), (1e-3, "warm")] and untried.strategies == [(1e-3, "warm")]
+    assert tried.status == untried.status == CONVERGED
+    assert tried.iterations == untried.iterations + cap > cap
+    assert tried.error == untried.error <= 1e-8
+    assert np.array_equal(tried.forces, untried.forces)
 
 
 def test_a_joint_phase_worse_than_the_warm_start_does_not_start_newton(settling_step, monkeypatch):
