@@ -54,7 +54,9 @@ Newton system is singular at sticking contacts; a proximal-point outer loop
 (as in Siconos' PROX) makes each subproblem well posed: solve with ``W + sigma
 I`` and ``q - sigma r_k``, centre ``r_k`` at the result, shrink ``sigma`` after
 each subproblem solved (:func:`_proximal_newton`). The starting ``sigma`` values of
-:data:`STRATEGIES` are tried in turn while one stalls far from ``tol``. Stopping: the FCLIB
+:data:`STRATEGIES` are tried in turn while one stalls far from ``tol``, after a few plain
+Newton iterations on small frictionless problems with a warm start (:data:`PLAIN_TRY`).
+Stopping: the FCLIB
 error (:func:`~lubcontact.problem.metrics.coulomb_error`, the measure every
 report uses) below ``tol``. When every strategy stalls, the best iterate goes
 to fallbacks in turn (``fallback``; in 2D Gauss-Seidel, then apgd-jacobi's fixed
@@ -139,11 +141,12 @@ forces can be a start from which every weight stalls where a cold start converge
 such gluey steps of the demo's flow)."""
 PLAIN_TRY = 5
 """Plain Newton iterations (no proximal weight), at most, tried first from a warm start on a
-small problem (the dense lanes) without friction cones, unless plain Newton's block is singular
-by its count there (:func:`_strategies`); :data:`STRATEGIES` follow from the warm start where
-they did not reach ``tol``. From the previous step's forces of a small frictionless pile the
-proximal loop spends an iteration per weight (1e-3, 1e-4, ..., then the finish), where plain
-Newton converges quadratically: on 300 steps of 20- and 40-grain settling piles, in 1-5
+small 2D problem (the dense lane) without friction cones, unless plain Newton's block is
+singular by its count there (the plain try, :func:`_strategies`; then at most
+:data:`FINISH_ITERATIONS` more to round-off); :data:`STRATEGIES` follow from the warm start
+where they did not reach ``tol``. From the previous step's forces of a small frictionless pile
+the proximal loop spends an iteration per weight (1e-3, 1e-4, ..., then the finish), where plain
+Newton converges fast: on 300 steps of 20- and 40-grain settling piles, in 1-5
 iterations (1 on most) against 1-7. Not with friction cones: with exact Coulomb it converged
 within 5 iterations on 88 of the 20-grain pile's 300 steps and stalled on 92, and plain Newton
 first took 1.5-3.2 times the iterations on developed 2 000-grain flows
@@ -193,10 +196,12 @@ KEPT_FACTORISATIONS = 2
 that cycle between two pieces."""
 
 FINISH_ITERATIONS = 2
-"""Plain Newton iterations, at most, after the proximal loop converged (kept where they lower
-the error; they stop at :data:`ROUND_OFF`): quadratic convergence takes a solution at ``tol`` to
-round-off where the Jacobian is regular (none on the sparse lane where it is singular by its
-count: :meth:`AlartCurnier.hyperstatic`)."""
+"""Plain Newton iterations, at most, after the proximal loop or the plain try converged (kept
+where they lower the error; they stop at :data:`ROUND_OFF`): quadratic convergence takes a
+solution at ``tol`` to round-off where the Jacobian is regular (none on the sparse lane where
+it is singular by its count: :meth:`AlartCurnier.hyperstatic`). Where the error's floor is above
+``ROUND_OFF`` both run for nothing: on ``heavy_on_light_stack`` from near its solution the plain
+try takes 3 iterations where plain Newton alone takes 1, to the same FCLIB error near 1e-12."""
 ROUND_OFF = 1e-14
 """FCLIB error at which those plain iterations stop: round-off. The first of them took the
 answer there on most steps of small piles and of developed flows, and the second factorised
@@ -491,17 +496,16 @@ class AlartCurnier:
         iterations past ``tol`` do not converge quadratically:
         on a deposited 400-grain layer ten of them took the FCLIB error from 1.3e-7 to 1.0e-7,
         and at 12 800 grains each cost three times the whole joint phase
-        (docs/records/benchmarks.md, "newton-ac on piles at rest"). On the sparse lane it
-        leaves the proximal weight at 0 (plain Newton, centred at ``forces``). A 2D problem's
-        count is taken without assembling the rows
-        (:func:`~lubcontact.solvers.kernels.plain_rows_2d`: 1.9 ms a call against 10 ms with
-        the rows, a 12 800-grain pile at rest)."""
+        (docs/records/benchmarks.md, "newton-ac on piles at rest")."""
         return not self.dense and self.singular_at(forces)
 
     def singular_at(self, forces: np.ndarray) -> bool:
         """Whether plain Newton's active block at ``forces`` is singular by its count of sticking
         rows (:meth:`singular_by_count`), on any lane; not counted where ``W`` has no more rows
-        than its rank bound."""
+        than its rank bound (the counted rows are some of its rows). Where it counts, it leaves
+        the proximal weight at 0 (plain Newton, centred at ``forces``); a 2D problem's count is
+        taken without assembling the rows (:func:`~lubcontact.solvers.kernels.plain_rows_2d`:
+        1.9 ms a call against 10 ms with the rows, a 12 800-grain pile at rest)."""
         if self.n_rows <= self.rank_bound:
             return False
         self.set_proximal(0.0, forces)
@@ -833,22 +837,29 @@ def _strategies(function: AlartCurnier, unshifted: ConicProblem, forces: np.ndar
     ``forces`` (a strategy's stalled iterate is a worse start than the warm start, measured),
     the first also from zero forces when ``forces`` is not zero, until one converges, the best
     error is within :data:`STRATEGY_GAP` of ``tol`` or ``max_iter`` Newton iterations are
-    spent; the best phase is returned. First, on a small problem without friction cones, from a
-    warm start at which plain Newton's block is not singular by its count
-    (:meth:`AlartCurnier.singular_at`), the plain try: at most :data:`PLAIN_TRY` plain Newton
-    iterations from ``forces``."""
+    spent; the best phase is returned (the plain try's, if best, as stalled where it stopped
+    short of ``tol``; its error counts in the test against :data:`STRATEGY_GAP`).
+
+    First, on a small 2D problem without friction cones, from a warm start at which plain
+    Newton's block is not singular by its count (:meth:`AlartCurnier.singular_at`), and where
+    ``max_iter`` leaves the strategies room (more than twice :data:`PLAIN_TRY`), the plain try:
+    at most :data:`PLAIN_TRY` plain Newton iterations from ``forces``, finished to round-off as a
+    proximal loop is; plain Newton as a strategy has no finish."""
     best, history, tried = None, [], []
     iterations = gradient_steps = proximal_steps = 0
     warm = bool(forces.any())
-    plain = [(0.0, forces, PLAIN_TRY)] if PLAIN_TRY > 0 and warm and function.dense \
-        and not function.cone_n.size and not function.singular_at(forces) else []
-    starts = [*plain, (STRATEGIES[0], forces, None)] \
-        + ([(STRATEGIES[0], np.zeros_like(forces), None)] if warm else []) \
-        + [(sigma, forces, None) for sigma in STRATEGIES[1:]]
-    for sigma, start, cap in starts:                    # cap: the plain try's, else none
-        budget = max_iter - iterations if cap is None else min(cap, max_iter - iterations)
+    plain_try = PLAIN_TRY > 0 and max_iter > 2 * PLAIN_TRY and warm and function.dense \
+        and function.planar and not function.cone_n.size and not function.singular_at(forces)
+    starts = [(0.0, forces, True)] if plain_try else []
+    starts += [(STRATEGIES[0], forces, False)] \
+        + ([(STRATEGIES[0], np.zeros_like(forces), False)] if warm else []) \
+        + [(sigma, forces, False) for sigma in STRATEGIES[1:]]
+    for sigma, start, is_plain_try in starts:
+        budget = PLAIN_TRY if is_plain_try else max_iter - iterations
         phase = _proximal_newton(function, unshifted, start, tol, budget, sigma,
-                                 finish=sigma > 0 or cap is not None)
+                                 finish=sigma > 0 or is_plain_try)
+        if is_plain_try and phase.status != CONVERGED:
+            phase.status = STALLED                  # its cap, not the solve's max_iter
         tried.append((sigma, "warm" if start is forces and warm else "cold"))
         iterations += phase.iterations
         gradient_steps += phase.gradient_steps
@@ -857,7 +868,7 @@ def _strategies(function: AlartCurnier, unshifted: ConicProblem, forces: np.ndar
         if best is None or phase.error < best.error:
             best = phase
         if phase.status == CONVERGED or iterations >= max_iter \
-                or (cap is None and best.error <= STRATEGY_GAP * tol):
+                or (not is_plain_try and best.error <= STRATEGY_GAP * tol):
             break
     return _Phase(forces=best.forces, status=best.status, iterations=iterations, error=best.error,
                   history=np.asarray(history), gradient_steps=gradient_steps,

@@ -1161,9 +1161,39 @@ def test_a_small_frictionless_problem_near_its_warm_start_is_solved_by_the_plain
     problem, reference = settling_step                     # friction cones
     frictional = solve_coulomb(problem, "newton-ac", tol=1e-6, warm_start=reference.forces * (1.0 + 1e-3))
     assert frictional.success and frictional.info["strategies"] == [(1e-3, "warm")]
+    cold = plain_try_strategies(chain, np.zeros(chain.n_rows))
+    assert cold.status == CONVERGED and cold.strategies[0] == (1e-3, "cold")
+    stack = load_cases()["heavy_on_light_stack"].problem.normalized()    # max_iter too small
+    unshifted = stack.with_shift(np.zeros(stack.n_contacts))
+    tight = newton._strategies(AlartCurnier(stack), unshifted, np.random.default_rng(0).normal(
+        size=stack.n_rows), 1e-8, 2 * newton.PLAIN_TRY)
+    assert tight.status == CONVERGED and tight.strategies[0] == (1e-3, "warm")
     use_the_sparse_lane(monkeypatch)
     sparse = solve(original, "newton-ac", tol=1e-8, warm_start=near * chain.scaling.force)
     assert sparse.success and sparse.info["strategies"] == [(1e-3, "warm")]
+
+
+def test_plain_newton_as_a_strategy_has_no_finish():
+    """The mass-ratio sandwich stalls at weight 1e-3 and converges by plain Newton, the second
+    strategy, in one iteration; its FCLIB error's floor is 7.6e-13, so a finish to round-off
+    would spend two iterations for nothing."""
+    result = solve(load_cases()["mass_ratio_1e6_sandwich"].problem, "newton-ac", tol=1e-8)
+    assert result.status == CONVERGED and result.info["strategies"] == [(1e-3, "cold"), (0.0, "cold")]
+    assert result.iterations == 2 and result.info["error"] > newton.ROUND_OFF
+
+
+def test_a_best_plain_try_short_of_tol_is_reported_stalled():
+    """An infeasible glued contact from near Newton's best point: no phase reaches tol, and
+    the plain try's iterate is the best. It stopped at its own cap, not the solve's
+    ``max_iter``: the phase is stalled and the solve inaccurate, as before the plain try."""
+    problem = load_cases()["glued_infeasible"].problem
+    scaled = problem.normalized()
+    best = plain_try_strategies(scaled, np.zeros(scaled.n_rows)).forces
+    result = solve(problem, "newton-ac", tol=1e-8, max_iter=1000, fallback=None,
+                   warm_start=best * (1.0 + 1e-3) * scaled.scaling.force)
+    assert result.info["strategies"][0] == (0.0, "warm")
+    assert result.status == INACCURATE and result.info["newton_status"] == newton.STALLED
+    assert result.iterations < 1000
 
 
 @pytest.mark.parametrize("compiled", [True, False])
@@ -1171,7 +1201,8 @@ def test_a_failed_plain_try_hands_over_to_the_strategies_from_the_warm_start(com
     """From a random warm start of the jammed hexagonal box, not singular by its count there,
     plain Newton does not converge in PLAIN_TRY iterations: the first strategy then starts from
     the warm start, not from the plain try's iterate, and takes the same iterations to the same
-    answer as without the plain try (PLAIN_TRY iterations more in all), on both dense lanes."""
+    answer as without the plain try (PLAIN_TRY iterations more in all), with the Newton phases
+    compiled and in numpy."""
     jammed = load_cases()["hex_box_jammed"].problem.normalized()
     warm_start = np.random.default_rng(0).normal(size=jammed.n_rows)
     assert not AlartCurnier(jammed).singular_at(warm_start)
