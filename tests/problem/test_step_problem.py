@@ -1,4 +1,6 @@
 """StepProblem's matrices: the scaled copies by value, the Delassus factor with duplicate entries."""
+from dataclasses import replace
+
 import numpy as np
 import pytest
 import scipy.sparse as sp
@@ -101,6 +103,29 @@ def test_a_normalised_problem_on_the_dense_lane_never_builds_its_sparse_jacobian
     assert np.array_equal(touched, np.unique(problem.jacobian.indices))
     assert np.array_equal(block, sparse.jacobian.toarray()[:, touched])
     assert touched.size <= problem.jacobian.nnz and (n_dof == 30 or 10 * touched.size < n_dof)
+
+
+def test_the_dense_forms_sum_entries_stored_twice_and_weight_the_columns():
+    """A Jacobian with each entry stored twice, as two halves: the dense block holds their sums
+    (as the sparse ``H`` does), and the dense ``W`` of the problem in physical units (columns
+    weighted by ``dt M^-1/2``), summed over each column's nonzeros, is the sparse ``W`` to
+    rounding and exactly symmetric."""
+    problem = _frictional_problem(5, n_dof=40)
+    source = problem.jacobian
+    counts = np.diff(source.indptr)
+    rows = np.repeat(np.arange(source.shape[0]), counts)
+    order = np.argsort(np.concatenate([rows, rows]), kind="stable")
+    twice = sp.csr_matrix((np.concatenate([source.data, source.data])[order] / 2.0,
+                           np.concatenate([source.indices, source.indices])[order],
+                           np.concatenate([[0], np.cumsum(2 * counts)])), shape=source.shape)
+    assert twice.nnz == 2 * source.nnz and not twice.has_canonical_format
+    doubled = replace(problem, jacobian=twice)
+    columns, block = doubled.dense_jacobian
+    assert np.array_equal(columns, np.unique(source.indices))
+    assert np.array_equal(block, source.toarray()[:, columns])
+    dense, sparse = doubled.dense_delassus, problem.delassus.toarray()
+    assert np.array_equal(dense, dense.T)
+    assert np.allclose(dense, sparse, rtol=1e-14, atol=1e-14 * np.abs(sparse).max())
 
 
 def test_a_problem_without_rows_has_an_empty_dense_lane():
