@@ -916,6 +916,124 @@ def permuted_csc(indptr, indices, data, order):
 
 
 @numba.njit(cache=True)
+def elimination_tree(indptr, indices):
+    """The elimination tree of a structurally symmetric matrix in compressed arrays (``indptr``,
+    ``indices``; only the entries above the diagonal are read): ``parent`` (n,), -1 at a root
+    (Liu's algorithm with path compression)."""
+    n = indptr.size - 1
+    parent = np.full(n, -1, dtype=np.int64)
+    ancestor = np.full(n, -1, dtype=np.int64)
+    for k in range(n):
+        for e in range(indptr[k], indptr[k + 1]):
+            i = indices[e]
+            while i != -1 and i < k:
+                above = ancestor[i]
+                ancestor[i] = k
+                if above == -1:
+                    parent[i] = k
+                i = above
+    return parent
+
+
+@numba.njit(cache=True)
+def static_pattern(indptr, indices):
+    """The patterns of ``L`` and ``U`` in ``A = L U`` without pivoting, ``A`` structurally
+    symmetric in compressed arrays: ``L``'s is the Cholesky factor's of the pattern (row ``k``
+    of ``L``: the subtree of the elimination tree that ``A``'s column ``k`` reaches), ``U``'s its
+    transpose. Returns ``(L_indptr, L_indices, U_indptr, U_indices)``, CSC, each column's rows
+    sorted: ``L``'s diagonal first, ``U``'s last."""
+    n = indptr.size - 1
+    parent = elimination_tree(indptr, indices)
+    mark = np.full(n, -1, dtype=np.int64)
+    counts = np.ones(n, dtype=np.int64)                 # the diagonal
+    for k in range(n):
+        mark[k] = k
+        for e in range(indptr[k], indptr[k + 1]):
+            i = indices[e]
+            while i < k and mark[i] != k:
+                counts[i] += 1
+                mark[i] = k
+                i = parent[i]
+    lower_ptr = np.zeros(n + 1, dtype=np.int64)
+    for j in range(n):
+        lower_ptr[j + 1] = lower_ptr[j] + counts[j]
+    lower_idx = np.empty(lower_ptr[n], dtype=np.int64)
+    filled = lower_ptr[:-1].copy()
+    for j in range(n):
+        lower_idx[filled[j]] = j
+        filled[j] += 1
+    mark[:] = -1
+    for k in range(n):                                  # rows in order: each column sorted
+        mark[k] = k
+        for e in range(indptr[k], indptr[k + 1]):
+            i = indices[e]
+            while i < k and mark[i] != k:
+                lower_idx[filled[i]] = k
+                filled[i] += 1
+                mark[i] = k
+                i = parent[i]
+    upper_ptr, upper_idx, _ = compressed_transpose(n, lower_ptr, lower_idx, np.zeros(lower_idx.size))
+    return lower_ptr, lower_idx, upper_ptr, upper_idx
+
+
+@numba.njit(cache=True)
+def static_lu(indptr, indices, data, lower_ptr, lower_idx, upper_ptr, upper_idx):
+    """``A = L U`` without pivoting on the patterns of :func:`static_pattern` (left-looking:
+    column ``j`` of ``U`` by the triangular solve with the columns of ``L`` before it, in
+    increasing order). Returns ``(L_values, U_values, failed)``: ``failed`` is the first column
+    whose pivot is below ``1e-14`` times ``A``'s largest entry in magnitude, or -1."""
+    n = indptr.size - 1
+    lower_val = np.empty(lower_idx.size)
+    upper_val = np.empty(upper_idx.size)
+    work = np.zeros(n)
+    largest = 0.0
+    for e in range(indptr[n]):
+        largest = max(largest, abs(data[e]))
+    for j in range(n):
+        for e in range(indptr[j], indptr[j + 1]):
+            work[indices[e]] = data[e]
+        for e in range(upper_ptr[j], upper_ptr[j + 1]):
+            k = upper_idx[e]
+            value = work[k]
+            upper_val[e] = value
+            if k == j:
+                break
+            for q in range(lower_ptr[k] + 1, lower_ptr[k + 1]):
+                work[lower_idx[q]] -= lower_val[q] * value
+        pivot = work[j]
+        if not abs(pivot) > 1e-14 * largest:
+            return lower_val, upper_val, j
+        lower_val[lower_ptr[j]] = 1.0
+        for q in range(lower_ptr[j] + 1, lower_ptr[j + 1]):
+            lower_val[q] = work[lower_idx[q]] / pivot
+            work[lower_idx[q]] = 0.0
+        for e in range(upper_ptr[j], upper_ptr[j + 1]):
+            work[upper_idx[e]] = 0.0
+    return lower_val, upper_val, -1
+
+
+@numba.njit(cache=True)
+def static_lu_solve(lower_ptr, lower_idx, lower_val, upper_ptr, upper_idx, upper_val, rhs):
+    """``x`` with ``L U x = rhs`` from :func:`static_lu`'s factors (``L`` unit lower, its
+    diagonal first in each column; ``U``'s diagonal last)."""
+    n = rhs.size
+    x = rhs.copy()
+    for j in range(n):
+        value = x[j]
+        if value != 0.0:
+            for q in range(lower_ptr[j] + 1, lower_ptr[j + 1]):
+                x[lower_idx[q]] -= lower_val[q] * value
+    for j in range(n - 1, -1, -1):
+        last = upper_ptr[j + 1] - 1
+        x[j] /= upper_val[last]
+        value = x[j]
+        if value != 0.0:
+            for e in range(upper_ptr[j], last):
+                x[upper_idx[e]] -= upper_val[e] * value
+    return x
+
+
+@numba.njit(cache=True)
 def lu_solve(transposed, rhs):
     """``A x = rhs`` by LAPACK's LU with partial pivoting (``gesv``), given ``transposed`` =
     ``A^T`` in C order (``A`` in LAPACK's column order), which it may overwrite; ``(x, ok)`` with

@@ -6,6 +6,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import scipy.sparse as sp
+import scipy.sparse.linalg as spla
 
 from lubcontact.bench.cases.reference import CASES as REFERENCE_CASES
 from lubcontact.bench.cases.reference import load as load_reference
@@ -804,6 +805,62 @@ def test_an_active_block_with_few_new_rows_is_factorised_in_the_carried_order():
     assert newton._Factorisations().carry is False
 
 
+def test_the_static_lu_has_the_fill_of_symbolic_elimination_and_solves():
+    """On a structurally symmetric matrix (a grid's pattern, random values, randomly ordered) the
+    patterns of kernels.static_pattern are those of elimination without pivoting (row ``i``
+    reaches column ``j`` through every earlier pivot they share, done on booleans), L U is the
+    matrix to rounding, and the solve's residual is at rounding."""
+    from lubcontact.solvers import kernels
+
+    side = 9
+    n = side * side
+    grid = sp.diags([np.ones(n - 1), np.ones(n - side)], [1, side], shape=(n, n))
+    rng = np.random.default_rng(8)
+    order = rng.permutation(n)
+    matrix = (grid + grid.T + sp.identity(n)).tocsc()[order][:, order].tocsc()
+    matrix.data = rng.uniform(-1.0, 1.0, size=matrix.nnz) + 10.0 * (matrix.tocoo().row == matrix.tocoo().col)
+    matrix = matrix.tocsc()
+    matrix.sort_indices()
+    lower_ptr, lower_idx, upper_ptr, upper_idx = kernels.static_pattern(matrix.indptr, matrix.indices)
+    filled = matrix.toarray() != 0
+    for k in range(n):                           # symbolic elimination, on booleans
+        below = np.flatnonzero(filled[k + 1:, k]) + k + 1
+        right = np.flatnonzero(filled[k, k + 1:]) + k + 1
+        filled[np.ix_(below, right)] = True
+    lower = sp.csc_matrix((np.ones(lower_idx.size), lower_idx, lower_ptr), shape=(n, n)).toarray() != 0
+    upper = sp.csc_matrix((np.ones(upper_idx.size), upper_idx, upper_ptr), shape=(n, n)).toarray() != 0
+    assert np.array_equal(lower, np.tril(filled)) and np.array_equal(upper, np.triu(filled))
+    lower_val, upper_val, failed = kernels.static_lu(matrix.indptr, matrix.indices, matrix.data,
+                                                     lower_ptr, lower_idx, upper_ptr, upper_idx)
+    assert failed == -1
+    L = sp.csc_matrix((lower_val, lower_idx, lower_ptr), shape=(n, n))
+    U = sp.csc_matrix((upper_val, upper_idx, upper_ptr), shape=(n, n))
+    assert np.allclose((L @ U).toarray(), matrix.toarray(), rtol=0, atol=1e-13)
+    rhs = rng.normal(size=n)
+    solved = kernels.static_lu_solve(lower_ptr, lower_idx, lower_val, upper_ptr, upper_idx, upper_val, rhs)
+    assert np.abs(matrix @ solved - rhs).max() <= 1e-13 * np.abs(rhs).max()
+
+
+def test_a_carried_block_without_a_stable_static_lu_is_factorised_by_superlu():
+    """A carried block is factorised without pivoting (newton._StaticLU) where that is stable; a
+    zero pivot, or a tiny one whose solve misses STATIC_LU_RESIDUAL (1e-12 on a symmetric 2 x 2's
+    diagonal: a relative residual of 6e-5), hands it to SuperLU, which pivots: the direction is
+    then at rounding."""
+    assert newton._StaticLU.factorise(sp.csc_matrix(np.array([[0.0, 1.0], [1.0, 0.0]]))) is None
+    rows, rhs = np.arange(2), np.array([1.0, 1.0])
+    kept = newton._Factorisations(carry=True)
+    kept.solve(sp.csc_matrix(np.array([[2.0, 1.0], [1.0, 3.0]])), rhs, rows)      # ordered
+    stable = sp.csc_matrix(np.array([[4.0, 1.0], [1.0, 5.0]]))
+    kept.solve(stable, rhs, rows)
+    assert kept.carried == 1 and isinstance(kept.kept[0][1], newton._StaticLU)
+    tiny = sp.csc_matrix(np.array([[1e-12, 1.0], [1.0, 1e-12]]))
+    static = newton._StaticLU.factorise(tiny)
+    assert static is not None and not static.accurate(static.solve(rhs), rhs)
+    solved = kept.solve(tiny, rhs, rows)
+    assert kept.carried == 2 and isinstance(kept.kept[0][1], spla.SuperLU)
+    assert np.abs(tiny @ solved - rhs).max() <= 1e-15
+
+
 def test_a_new_row_of_a_carried_order_goes_just_after_its_last_old_neighbour(monkeypatch):
     """On a path (each row coupled to the next) ordered backwards, a new row goes just after the
     last of its neighbours in the carried order, and a new row with no old neighbour at the end
@@ -901,8 +958,6 @@ def test_a_block_singular_by_its_count_of_sticking_rows_skips_the_failed_factori
     is the regularised one without SuperLU first failing on the block (at 12 800 grains that
     failure took 1.8 s against 0.17 s for the factorisation); on the 2D sparse lane's reduced
     system too (AlartCurnier.newton_direction)."""
-    import scipy.sparse.linalg as spla
-
     problem, guess = pile_at_rest
     use_the_sparse_lane(monkeypatch)
     answer = solve_coulomb(problem, "newton-ac", tol=1e-8, warm_start=guess)
