@@ -758,7 +758,9 @@ def reduced_newton_system_2d(indptr, indices, data, rho, lower, upper, box, cone
     (pushed, or bilateral), so ``J_t - mu s J_n = e_t - mu s e_n`` and ``d_t = mu s d_n + c_t``
     with ``c_t = -phi_t + mu s phi_n``: its column folds into the normal's. Every remaining row
     is ``rho_i (W + sigma I)_i``: the block has ``W``'s entries on the kept rows, each folded
-    column adding its sliding partner's (a contact's two rows of ``W`` share a pattern), and
+    column adding its sliding partner's (a contact's two rows of ``W`` share a pattern, but
+    for entries that the product forming ``W`` left out as exact zeros: contacts at right
+    angles on one grain), and
     its diagonal always stored. In 2D every active row that is not plain
     (:func:`is_plain_row`) is a sliding tangential row, and its normal row is plain: one that
     is not could not be folded, and raises ``ValueError``.
@@ -917,7 +919,7 @@ def permuted_csc(indptr, indices, data, order):
 
 @numba.njit(cache=True)
 def elimination_tree(indptr, indices):
-    """The elimination tree of a structurally symmetric matrix in compressed arrays (``indptr``,
+    """The elimination tree of a symmetric pattern in compressed arrays (``indptr``,
     ``indices``; only the entries above the diagonal are read): ``parent`` (n,), -1 at a root
     (Liu's algorithm with path compression)."""
     n = indptr.size - 1
@@ -936,20 +938,52 @@ def elimination_tree(indptr, indices):
 
 
 @numba.njit(cache=True)
-def static_pattern(indptr, indices):
-    """The patterns of ``L`` and ``U`` in ``A = L U`` without pivoting, ``A`` structurally
-    symmetric in compressed arrays: ``L``'s is the Cholesky factor's of the pattern (row ``k``
-    of ``L``: the subtree of the elimination tree that ``A``'s column ``k`` reaches), ``U``'s its
-    transpose. Returns ``(L_indptr, L_indices, U_indptr, U_indices)``, CSC, each column's rows
-    sorted: ``L``'s diagonal first, ``U``'s last."""
+def symmetrised_pattern(indptr, indices):
+    """The part above the diagonal of ``A + A^T``'s pattern, ``A`` square in compressed arrays:
+    column ``k`` holds the rows ``i < k`` of ``A``'s column ``k`` and of its row ``k``, once each
+    (what the elimination tree and the row subtrees read)."""
     n = indptr.size - 1
-    parent = elimination_tree(indptr, indices)
+    row_ptr, row_idx, _ = compressed_transpose(n, indptr, indices, np.zeros(indices.size))
+    mark = np.full(n, -1, dtype=np.int64)
+    pointers = np.zeros(n + 1, dtype=np.int64)
+    rows = np.empty(indices.size, dtype=np.int64)      # at most every entry of A once
+    count = 0
+    for k in range(n):
+        for e in range(indptr[k], indptr[k + 1]):
+            i = indices[e]
+            if i < k and mark[i] != k:
+                mark[i] = k
+                rows[count] = i
+                count += 1
+        for e in range(row_ptr[k], row_ptr[k + 1]):
+            i = row_idx[e]
+            if i < k and mark[i] != k:
+                mark[i] = k
+                rows[count] = i
+                count += 1
+        pointers[k + 1] = count
+    return pointers, rows[:count]
+
+
+@numba.njit(cache=True)
+def static_pattern(indptr, indices):
+    """Patterns that hold ``L`` and ``U`` in ``A = L U`` without pivoting, ``A`` square in
+    compressed arrays: ``L``'s is the Cholesky factor's of ``A + A^T``'s pattern
+    (:func:`symmetrised_pattern`; row ``k`` of ``L``: the subtree of the elimination tree that
+    column ``k`` reaches), ``U``'s its transpose. The reduced Newton blocks are symmetric in
+    pattern but where ``W`` stores an entry and not its mirror (a product that came out exactly
+    0: contacts at right angles on one grain, a lattice). Returns ``(L_indptr, L_indices,
+    U_indptr, U_indices)``, CSC, each column's rows sorted: ``L``'s diagonal first, ``U``'s
+    last."""
+    n = indptr.size - 1
+    pointers, rows = symmetrised_pattern(indptr, indices)
+    parent = elimination_tree(pointers, rows)
     mark = np.full(n, -1, dtype=np.int64)
     counts = np.ones(n, dtype=np.int64)                 # the diagonal
     for k in range(n):
         mark[k] = k
-        for e in range(indptr[k], indptr[k + 1]):
-            i = indices[e]
+        for e in range(pointers[k], pointers[k + 1]):
+            i = rows[e]
             while i < k and mark[i] != k:
                 counts[i] += 1
                 mark[i] = k
@@ -965,13 +999,15 @@ def static_pattern(indptr, indices):
     mark[:] = -1
     for k in range(n):                                  # rows in order: each column sorted
         mark[k] = k
-        for e in range(indptr[k], indptr[k + 1]):
-            i = indices[e]
+        for e in range(pointers[k], pointers[k + 1]):
+            i = rows[e]
             while i < k and mark[i] != k:
                 lower_idx[filled[i]] = k
                 filled[i] += 1
                 mark[i] = k
                 i = parent[i]
+    if lower_idx.size >= 2**31:
+        raise ValueError("static_pattern: more than 2^31 entries in L (32-bit pointers of U)")
     upper_ptr, upper_idx, _ = compressed_transpose(n, lower_ptr, lower_idx, np.zeros(lower_idx.size))
     return lower_ptr, lower_idx, upper_ptr, upper_idx
 
@@ -991,7 +1027,7 @@ def static_lu(indptr, indices, data, lower_ptr, lower_idx, upper_ptr, upper_idx)
         largest = max(largest, abs(data[e]))
     for j in range(n):
         for e in range(indptr[j], indptr[j + 1]):
-            work[indices[e]] = data[e]
+            work[indices[e]] += data[e]                 # entries stored twice summed
         for e in range(upper_ptr[j], upper_ptr[j + 1]):
             k = upper_idx[e]
             value = work[k]

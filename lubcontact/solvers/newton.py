@@ -112,9 +112,9 @@ NEW_ROWS_LIMIT = 0.01
 """An active block whose rows are all but this fraction rows of the block last ordered by SuperLU
 is factorised in that block's elimination order (:class:`_Factorisations`), not ordered again."""
 
-STATIC_LU_RESIDUAL = 1e-10
-"""A solve with :class:`_StaticLU`'s factors (no pivoting) whose residual is above this times
-the right-hand side's norm is done again by SuperLU with pivoting."""
+STATIC_LU_BACKWARD_ERROR = 1e-11
+"""A solve with :class:`_StaticLU`'s factors (no pivoting) whose normwise backward error is above
+this is done again by SuperLU with pivoting (a stable LU's is a few times the machine epsilon)."""
 
 FILL_GROWTH = 1.25
 """A factorisation in a carried order whose factors hold more than this many times the ordered
@@ -563,6 +563,7 @@ class _Factorisations:
         self.reused = 0
         self.carry = carry
         self.carried = 0
+        self.pivoted = 0            # carried blocks SuperLU took back from _StaticLU
         self.ordered_rows: np.ndarray | None = None        # sorted
         self.positions: np.ndarray | None = None           # their places in the order
         self.fill = 0.0             # the ordered block's factor entries per block entry
@@ -582,7 +583,10 @@ class _Factorisations:
             self.fill = factors.nnz / matrix.nnz
         else:
             permuted = _permuted(matrix, order)
-            factors = _StaticLU.factorise(permuted) or spla.splu(permuted, **ORDERED_LU)
+            factors = _StaticLU.factorise(permuted)
+            if factors is None:
+                factors = spla.splu(permuted, **ORDERED_LU)
+                self.pivoted += 1
             self.carried += 1
             if factors.nnz > FILL_GROWTH * self.fill * matrix.nnz:
                 self.ordered_rows = None            # the order no longer fits: order afresh
@@ -596,6 +600,7 @@ class _Factorisations:
         solved = _ordered_solve(factors, order, rhs)
         if isinstance(factors, _StaticLU) and not factors.accurate(solved[order], rhs[order]):
             factors = spla.splu(factors.matrix, **ORDERED_LU)
+            self.pivoted += 1
             self.kept[0] = (matrix, factors, order)
             solved = _ordered_solve(factors, order, rhs)
         return solved
@@ -617,21 +622,25 @@ class _Factorisations:
 
 
 class _StaticLU:
-    """``A = L U`` without pivoting on the static patterns of a structurally symmetric ``A``
-    (:func:`~lubcontact.solvers.kernels.static_pattern`, :func:`~lubcontact.solvers.kernels.static_lu`),
-    for the blocks :class:`_Factorisations` factorises in a carried elimination order: on a
-    12 000-grain gluey step's 19 000-row block, 5.7 ms (patterns 2.6, values 3.1) against 10.4 ms
-    for SuperLU in the same order, the same fill (docs/records/benchmarks.md). ``nnz`` counts
-    the entries of both factors, as SuperLU's does."""
+    """``A = L U`` without pivoting on static patterns (:func:`~lubcontact.solvers.kernels.static_pattern`:
+    those of ``A + A^T``'s Cholesky factor; :func:`~lubcontact.solvers.kernels.static_lu`), for
+    the blocks :class:`_Factorisations` factorises in a carried elimination order: on a
+    12 000-grain gluey step's 19 000-row block, 5.4 ms (patterns 2.3, values 3.1; 8.3 ms in all
+    on the blocks of six such steps) against 10.4 ms for SuperLU in the same order, the same
+    fill (docs/records/benchmarks.md). ``nnz`` counts
+    the entries of both factors, the diagonal twice (SuperLU's counts its supernodes' storage:
+    the same on these blocks, within 1 %)."""
 
     def __init__(self, matrix: sp.csc_matrix, pattern: tuple, lower: np.ndarray, upper: np.ndarray):
         self.matrix, self.pattern, self.lower, self.upper = matrix, pattern, lower, upper
         self.nnz = lower.size + upper.size
+        self.norm = float(np.bincount(matrix.indices, weights=np.abs(matrix.data),
+                                      minlength=matrix.shape[0]).max(initial=0.0))   # |A|_inf
 
     @classmethod
     def factorise(cls, matrix: sp.csc_matrix) -> _StaticLU | None:
-        """The factors of ``matrix`` (CSC, square, structurally symmetric), or None where a
-        pivot is below ``1e-14`` times its largest entry (SuperLU then factorises it, pivoting)."""
+        """The factors of ``matrix`` (CSC, square), or None where a pivot is below ``1e-14``
+        times its largest entry (SuperLU then factorises it, pivoting)."""
         from .kernels import static_lu, static_pattern  # numba, imported on first use
 
         pattern = static_pattern(matrix.indptr, matrix.indices)
@@ -646,10 +655,12 @@ class _StaticLU:
         return static_lu_solve(lower_ptr, lower_idx, self.lower, upper_ptr, upper_idx, self.upper, rhs)
 
     def accurate(self, solved: np.ndarray, rhs: np.ndarray) -> bool:
-        """Whether ``solved`` solves ``matrix x = rhs`` to :data:`STATIC_LU_RESIDUAL` relative to
-        ``rhs`` (no pivoting: small pivots can amplify rounding, where SuperLU would pivot)."""
-        return bool(np.linalg.norm(self.matrix @ solved - rhs)
-                    <= STATIC_LU_RESIDUAL * np.linalg.norm(rhs))
+        """Whether ``solved`` solves ``matrix x = rhs`` with a normwise backward error
+        ``|r|_inf / (|A|_inf |x|_inf + |b|_inf)`` of at most :data:`STATIC_LU_BACKWARD_ERROR`
+        (no pivoting: small pivots can amplify rounding where SuperLU would pivot; an
+        ill-conditioned block's residual is large either way)."""
+        scale = self.norm * np.abs(solved).max(initial=0.0) + np.abs(rhs).max(initial=0.0)
+        return bool(np.abs(self.matrix @ solved - rhs).max(initial=0.0) <= STATIC_LU_BACKWARD_ERROR * scale)
 
 
 def _permuted(matrix: sp.csc_matrix, order: np.ndarray) -> sp.csc_matrix:
@@ -801,7 +812,9 @@ def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = 5
         ``newton_iterations`` (each one LU, more where a
         singular block is regularised), ``reused_factorisations`` (the sparse lane's LUs
         saved by a block met again: :class:`_Factorisations`), ``carried_orderings`` (its LUs
-        in the elimination order of an earlier block, not ordered again), ``gradient_steps``
+        in the elimination order of an earlier block, not ordered again), ``pivoted_factorisations``
+        (those of them that SuperLU factorised, pivoting, after :class:`_StaticLU`'s pivots or
+        solve were not good enough), ``gradient_steps``
         (steepest-descent steps taken where the Newton direction failed),
         ``proximal_steps`` and ``strategies`` (the starting weights tried, each with
         its start, ``"warm"`` or ``"cold"``),
@@ -865,6 +878,7 @@ def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = 5
             break
     info["reused_factorisations"] = function.factorisations.reused     # the polishes' too
     info["carried_orderings"] = function.factorisations.carried
+    info["pivoted_factorisations"] = function.factorisations.pivoted
     return MethodOutput(forces, status, iterations, setup_time=setup_time,
                         solve_time=time.perf_counter() - start - setup_time,
                         residual_history=history, info=info)

@@ -805,11 +805,14 @@ def test_an_active_block_with_few_new_rows_is_factorised_in_the_carried_order():
     assert newton._Factorisations().carry is False
 
 
-def test_the_static_lu_has_the_fill_of_symbolic_elimination_and_solves():
-    """On a structurally symmetric matrix (a grid's pattern, random values, randomly ordered) the
-    patterns of kernels.static_pattern are those of elimination without pivoting (row ``i``
-    reaches column ``j`` through every earlier pivot they share, done on booleans), L U is the
-    matrix to rounding, and the solve's residual is at rounding."""
+@pytest.mark.parametrize("symmetric", [True, False])
+def test_the_static_lu_has_the_fill_of_symbolic_elimination_and_solves(symmetric):
+    """On a grid's pattern (random values, randomly ordered) the patterns of
+    kernels.static_pattern are those of elimination without pivoting (row ``i`` reaches column
+    ``j`` through every earlier pivot they share, done on booleans); with a quarter of the
+    entries above the diagonal dropped (a pattern not symmetric, as ``W``'s where a product came
+    out exactly 0) they hold them (those of ``A + A^T``). Either way L U is the matrix to
+    rounding and the solve's residual is at rounding."""
     from lubcontact.solvers import kernels
 
     side = 9
@@ -817,48 +820,62 @@ def test_the_static_lu_has_the_fill_of_symbolic_elimination_and_solves():
     grid = sp.diags([np.ones(n - 1), np.ones(n - side)], [1, side], shape=(n, n))
     rng = np.random.default_rng(8)
     order = rng.permutation(n)
-    matrix = (grid + grid.T + sp.identity(n)).tocsc()[order][:, order].tocsc()
-    matrix.data = rng.uniform(-1.0, 1.0, size=matrix.nnz) + 10.0 * (matrix.tocoo().row == matrix.tocoo().col)
-    matrix = matrix.tocsc()
-    matrix.sort_indices()
+    dense = (grid + grid.T + sp.identity(n)).toarray()[order][:, order]
+    dense = np.where(dense != 0, rng.uniform(-1.0, 1.0, size=(n, n)), 0.0) + 10.0 * np.eye(n)
+    if not symmetric:
+        upper = np.argwhere(np.triu(dense, 1) != 0)
+        dropped = upper[rng.choice(len(upper), size=len(upper) // 4, replace=False)]
+        dense[dropped[:, 0], dropped[:, 1]] = 0.0
+    matrix = sp.csc_matrix(dense)
     lower_ptr, lower_idx, upper_ptr, upper_idx = kernels.static_pattern(matrix.indptr, matrix.indices)
-    filled = matrix.toarray() != 0
+    filled = dense != 0
     for k in range(n):                           # symbolic elimination, on booleans
         below = np.flatnonzero(filled[k + 1:, k]) + k + 1
         right = np.flatnonzero(filled[k, k + 1:]) + k + 1
         filled[np.ix_(below, right)] = True
     lower = sp.csc_matrix((np.ones(lower_idx.size), lower_idx, lower_ptr), shape=(n, n)).toarray() != 0
     upper = sp.csc_matrix((np.ones(upper_idx.size), upper_idx, upper_ptr), shape=(n, n)).toarray() != 0
-    assert np.array_equal(lower, np.tril(filled)) and np.array_equal(upper, np.triu(filled))
+    assert np.array_equal(lower, upper.T)
+    if symmetric:
+        assert np.array_equal(lower, np.tril(filled)) and np.array_equal(upper, np.triu(filled))
+    else:
+        assert np.all(lower >= np.tril(filled)) and np.all(upper >= np.triu(filled))
+        assert np.any(np.tril(filled) != np.triu(filled).T)
     lower_val, upper_val, failed = kernels.static_lu(matrix.indptr, matrix.indices, matrix.data,
                                                      lower_ptr, lower_idx, upper_ptr, upper_idx)
     assert failed == -1
     L = sp.csc_matrix((lower_val, lower_idx, lower_ptr), shape=(n, n))
     U = sp.csc_matrix((upper_val, upper_idx, upper_ptr), shape=(n, n))
-    assert np.allclose((L @ U).toarray(), matrix.toarray(), rtol=0, atol=1e-13)
+    assert np.allclose((L @ U).toarray(), dense, rtol=0, atol=1e-13)
     rhs = rng.normal(size=n)
     solved = kernels.static_lu_solve(lower_ptr, lower_idx, lower_val, upper_ptr, upper_idx, upper_val, rhs)
     assert np.abs(matrix @ solved - rhs).max() <= 1e-13 * np.abs(rhs).max()
 
 
 def test_a_carried_block_without_a_stable_static_lu_is_factorised_by_superlu():
-    """A carried block is factorised without pivoting (newton._StaticLU) where that is stable; a
-    zero pivot, or a tiny one whose solve misses STATIC_LU_RESIDUAL (1e-12 on a symmetric 2 x 2's
-    diagonal: a relative residual of 6e-5), hands it to SuperLU, which pivots: the direction is
-    then at rounding."""
+    """A carried block is factorised without pivoting (newton._StaticLU) where that is stable,
+    also where its pattern is not symmetric; a zero pivot, or a tiny one whose solve misses
+    STATIC_LU_BACKWARD_ERROR (1e-12 on a symmetric 2 x 2's diagonal: a backward error of 1e-5),
+    hands it to SuperLU, which pivots: the direction is then at rounding."""
     assert newton._StaticLU.factorise(sp.csc_matrix(np.array([[0.0, 1.0], [1.0, 0.0]]))) is None
     rows, rhs = np.arange(2), np.array([1.0, 1.0])
     kept = newton._Factorisations(carry=True)
     kept.solve(sp.csc_matrix(np.array([[2.0, 1.0], [1.0, 3.0]])), rhs, rows)      # ordered
     stable = sp.csc_matrix(np.array([[4.0, 1.0], [1.0, 5.0]]))
     kept.solve(stable, rhs, rows)
-    assert kept.carried == 1 and isinstance(kept.kept[0][1], newton._StaticLU)
+    assert kept.carried == 1 and kept.pivoted == 0 and isinstance(kept.kept[0][1], newton._StaticLU)
     tiny = sp.csc_matrix(np.array([[1e-12, 1.0], [1.0, 1e-12]]))
     static = newton._StaticLU.factorise(tiny)
     assert static is not None and not static.accurate(static.solve(rhs), rhs)
     solved = kept.solve(tiny, rhs, rows)
-    assert kept.carried == 2 and isinstance(kept.kept[0][1], spla.SuperLU)
+    assert kept.carried == 2 and kept.pivoted == 1 and isinstance(kept.kept[0][1], spla.SuperLU)
     assert np.abs(tiny @ solved - rhs).max() <= 1e-15
+    kept = newton._Factorisations(carry=True)
+    kept.solve(sp.csc_matrix(np.array([[2.0, 0.0], [1.0, 3.0]])), rhs, rows)      # ordered
+    lopsided = sp.csc_matrix(np.array([[4.0, 0.0], [1.0, 5.0]]))        # no mirror entry
+    solved = kept.solve(lopsided, rhs, rows)
+    assert kept.carried == 1 and isinstance(kept.kept[0][1], newton._StaticLU)
+    assert np.abs(lopsided @ solved - rhs).max() <= 1e-15
 
 
 def test_a_new_row_of_a_carried_order_goes_just_after_its_last_old_neighbour(monkeypatch):
