@@ -940,28 +940,35 @@ def elimination_tree(indptr, indices):
 @numba.njit(cache=True)
 def symmetrised_pattern(indptr, indices):
     """The part above the diagonal of ``A + A^T``'s pattern, ``A`` square in compressed arrays:
-    column ``k`` holds the rows ``i < k`` of ``A``'s column ``k`` and of its row ``k``, once each
+    column ``k`` holds the rows ``i < k`` with an entry at ``(i, k)`` or ``(k, i)``, once each
     (what the elimination tree and the row subtrees read)."""
     n = indptr.size - 1
-    row_ptr, row_idx, _ = compressed_transpose(n, indptr, indices, np.zeros(indices.size))
-    mark = np.full(n, -1, dtype=np.int64)
     pointers = np.zeros(n + 1, dtype=np.int64)
-    rows = np.empty(indices.size, dtype=np.int64)      # at most every entry of A once
-    count = 0
+    for j in range(n):                                  # entry (r, j) goes to column max(r, j)
+        for e in range(indptr[j], indptr[j + 1]):
+            if indices[e] != j:
+                pointers[max(indices[e], j) + 1] += 1
     for k in range(n):
-        for e in range(indptr[k], indptr[k + 1]):
-            i = indices[e]
-            if i < k and mark[i] != k:
-                mark[i] = k
-                rows[count] = i
+        pointers[k + 1] += pointers[k]
+    rows = np.empty(pointers[n], dtype=np.int64)
+    filled = pointers[:-1].copy()
+    for j in range(n):
+        for e in range(indptr[j], indptr[j + 1]):
+            r = indices[e]
+            if r != j:
+                column = max(r, j)
+                rows[filled[column]] = min(r, j)
+                filled[column] += 1
+    mark = np.full(n, -1, dtype=np.int64)
+    count = 0
+    for k in range(n):                                  # each row once: compacted in place
+        start, pointers[k] = pointers[k], count
+        for e in range(start, filled[k]):
+            if mark[rows[e]] != k:
+                mark[rows[e]] = k
+                rows[count] = rows[e]
                 count += 1
-        for e in range(row_ptr[k], row_ptr[k + 1]):
-            i = row_idx[e]
-            if i < k and mark[i] != k:
-                mark[i] = k
-                rows[count] = i
-                count += 1
-        pointers[k + 1] = count
+    pointers[n] = count
     return pointers, rows[:count]
 
 
