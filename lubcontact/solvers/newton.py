@@ -56,9 +56,8 @@ I`` and ``q - sigma r_k``, centre ``r_k`` at the result, shrink ``sigma`` after
 each subproblem solved (:func:`_proximal_newton`). The starting ``sigma`` values of
 :data:`STRATEGIES` are tried in turn while one stalls far from ``tol``, after a few plain
 Newton iterations on small frictionless problems with a warm start (:data:`PLAIN_TRY`).
-Stopping: the FCLIB
-error (:func:`~lubcontact.problem.metrics.coulomb_error`, the measure every
-report uses) below ``tol``. When every strategy stalls, the best iterate goes
+Stopping: the FCLIB error (:func:`~lubcontact.problem.metrics.coulomb_error`, the measure
+every report uses) below ``tol``. When every strategy stalls, the best iterate goes
 to fallbacks in turn (``fallback``; in 2D Gauss-Seidel, then apgd-jacobi's fixed
 point), each answer polished by Newton and kept when it beats the best so far, until one is
 below ``tol``, or kept within :data:`FALLBACK_GAP` ``tol``.
@@ -96,8 +95,9 @@ REGULARISATIONS = (0.0, 1e-10, 1e-8, 1e-6, 1e-4)
 
 SPARSE_LU = dict(permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.1, panel_size=1,
                  options=dict(SymmetricMode=True))
-"""SuperLU's settings for the factorised block, whose pattern is ``W_AA``'s (symmetric; on the
-2D sparse lane structurally so, the sliding rows eliminated):
+"""SuperLU's settings for the factorised block, whose pattern is ``W_AA``'s (symmetric but for
+the entries the product forming ``W`` left out as exact zeros; on the 2D sparse lane the sliding
+rows eliminated):
 a minimum-degree ordering of ``A^T + A`` with pivots preferred on the diagonal. On developed
 2000-grain flows its factors hold 2.6 times the block's entries against 3.9 with COLAMD, and a
 Newton step costs 15 % less (same iterations). Panels of one column (SuperLU's default is 20):
@@ -554,7 +554,7 @@ class _Factorisations:
     past :data:`FILL_GROWTH` times the ordered block's (on a 1 600-row grid pattern with 1 % of
     its rows new, scattered: 2.0 times, 2.4 times a fresh ordering's), the next block is
     ordered afresh. Only where ``carry`` is set (2D problems, whose blocks have ``W``'s
-    symmetric pattern, structurally): on a 3D Siconos file the carried orders' solves were ten
+    pattern, nearly symmetric): on a 3D Siconos file the carried orders' solves were ten
     times less accurate and Newton took 392 iterations instead of 154.
     """
 
@@ -622,14 +622,14 @@ class _Factorisations:
 
 
 class _StaticLU:
-    """``A = L U`` without pivoting on static patterns (:func:`~lubcontact.solvers.kernels.static_pattern`:
-    those of ``A + A^T``'s Cholesky factor; :func:`~lubcontact.solvers.kernels.static_lu`), for
-    the blocks :class:`_Factorisations` factorises in a carried elimination order: on a
-    12 000-grain gluey step's 19 000-row block, 5.4 ms (patterns 2.3, values 3.1; 8.3 ms in all
-    on the blocks of six such steps) against 10.4 ms for SuperLU in the same order, the same
-    fill (docs/records/benchmarks.md). ``nnz`` counts
-    the entries of both factors, the diagonal twice (SuperLU's counts its supernodes' storage:
-    the same on these blocks, within 1 %)."""
+    """``A = L U`` without pivoting on static patterns
+    (:func:`~lubcontact.solvers.kernels.static_pattern`: those of ``A + A^T``'s Cholesky factor;
+    :func:`~lubcontact.solvers.kernels.static_lu`), for the blocks :class:`_Factorisations`
+    factorises in a carried elimination order: on a 12 000-grain gluey step's 19 000-row block,
+    5.4 ms (patterns 2.3, values 3.1; 8.3 ms in all on the blocks of six such steps) against
+    10.4 ms for SuperLU in the same order, the same fill (docs/records/benchmarks.md). ``nnz``
+    counts the entries of both factors, the diagonal twice (SuperLU's counts its supernodes'
+    storage: the same on these blocks, within 1 %)."""
 
     def __init__(self, matrix: sp.csc_matrix, pattern: tuple, lower: np.ndarray, upper: np.ndarray):
         self.matrix, self.pattern, self.lower, self.upper = matrix, pattern, lower, upper
@@ -660,7 +660,8 @@ class _StaticLU:
         (no pivoting: small pivots can amplify rounding where SuperLU would pivot; an
         ill-conditioned block's residual is large either way)."""
         scale = self.norm * np.abs(solved).max(initial=0.0) + np.abs(rhs).max(initial=0.0)
-        return bool(np.abs(self.matrix @ solved - rhs).max(initial=0.0) <= STATIC_LU_BACKWARD_ERROR * scale)
+        residual = np.abs(self.matrix @ solved - rhs).max(initial=0.0)
+        return bool(residual <= STATIC_LU_BACKWARD_ERROR * scale)
 
 
 def _permuted(matrix: sp.csc_matrix, order: np.ndarray) -> sp.csc_matrix:
@@ -812,9 +813,9 @@ def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = 5
         ``newton_iterations`` (each one LU, more where a
         singular block is regularised), ``reused_factorisations`` (the sparse lane's LUs
         saved by a block met again: :class:`_Factorisations`), ``carried_orderings`` (its LUs
-        in the elimination order of an earlier block, not ordered again), ``pivoted_factorisations``
-        (those of them that SuperLU factorised, pivoting, after :class:`_StaticLU`'s pivots or
-        solve were not good enough), ``gradient_steps``
+        in the elimination order of an earlier block, not ordered again),
+        ``pivoted_factorisations`` (those of them that SuperLU factorised, pivoting, after
+        :class:`_StaticLU`'s pivots or solve were not good enough), ``gradient_steps``
         (steepest-descent steps taken where the Newton direction failed),
         ``proximal_steps`` and ``strategies`` (the starting weights tried, each with
         its start, ``"warm"`` or ``"cold"``),
