@@ -626,7 +626,7 @@ class _StaticLU:
     (:func:`~lubcontact.solvers.kernels.static_pattern`: those of ``A + A^T``'s Cholesky factor;
     :func:`~lubcontact.solvers.kernels.static_lu`), for the blocks :class:`_Factorisations`
     factorises in a carried elimination order: on a 12 000-grain gluey step's 19 000-row block,
-    5.4 ms (patterns 2.3, values 3.1; 8.3 ms in all on the blocks of six such steps) against
+    6.1 ms (patterns 3.0, values 3.1; 8.3 ms in all on the blocks of six such steps) against
     10.4 ms for SuperLU in the same order, the same fill (docs/records/benchmarks.md). ``nnz``
     counts the entries of both factors, the diagonal twice (SuperLU's counts its supernodes'
     storage: the same on these blocks, within 1 %)."""
