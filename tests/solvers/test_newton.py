@@ -1180,7 +1180,7 @@ def test_the_plain_finish_stops_at_round_off(settling_step, lane, monkeypatch):
 
     def spy(function, unshifted, forces, tol, max_iter, inner_tol=0.0):
         out = phase(function, unshifted, forces, tol, max_iter, inner_tol)
-        if function.sigma == 0.0 and max_iter == newton.FINISH_ITERATIONS:
+        if function.sigma == 0.0 and tol == newton.ROUND_OFF:
             finishes.append(out)
         return out
 
@@ -1192,6 +1192,32 @@ def test_the_plain_finish_stops_at_round_off(settling_step, lane, monkeypatch):
     assert finishes[0].history[0] > newton.ROUND_OFF >= finishes[0].history[-1]
     assert coulomb_error(problem.normalized(), result.forces / result.force_scale) <= newton.ROUND_OFF
     assert velocity_error(problem, result.velocities, reference.velocities) <= 1e-8
+
+
+@pytest.mark.parametrize("lane", ["compiled", "sparse"])
+def test_the_plain_finish_stops_after_an_iteration_that_gains_nothing(crowded_settling_step, lane,
+                                                                       monkeypatch):
+    """On a crowded step of the settling pile the finish's block is singular though not by its
+    count: its first plain iteration leaves the FCLIB error where it was (5e-9), and a second,
+    which two FINISH_ITERATIONS took, would factorise again for nothing (FINISH_GAIN)."""
+    problem = crowded_settling_step
+    if lane == "sparse":
+        use_the_sparse_lane(monkeypatch)
+    finishes = []
+    phase = newton._newton_phase
+
+    def spy(function, unshifted, forces, tol, max_iter, inner_tol=0.0):
+        out = phase(function, unshifted, forces, tol, max_iter, inner_tol)
+        if function.sigma == 0.0 and tol == newton.ROUND_OFF:
+            finishes.append(out)
+        return out
+
+    monkeypatch.setattr(newton, "_newton_phase", spy)
+    result = solve_coulomb(problem, "newton-ac", tol=1e-8)
+    assert result.success and [finish.iterations for finish in finishes] == [1]
+    start, end = finishes[0].history
+    assert newton.FINISH_GAIN * start < end <= 1e-8
+    assert coulomb_error(problem.normalized(), result.forces / result.force_scale) <= 1e-8
 
 
 def plain_try_strategies(problem, warm_start, compiled=True):
