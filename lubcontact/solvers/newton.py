@@ -77,7 +77,7 @@ from ..problem.cones import Cones
 from ..problem.conic import ConicProblem
 from ..problem.metrics import coulomb_error
 from ..problem.step import diagonal_scaled
-from .compiled_apgd import joint_applies, joint_coulomb_apgd
+from .compiled_apgd import csr_arrays, joint_applies, joint_coulomb_apgd
 from .coulomb import solve_coulomb
 from .dual_data import DENSE_LIMIT, dense_lu, dense_lu_solve, is_small
 from .registry import ALL_CONES, NEWTON, register
@@ -287,6 +287,11 @@ class AlartCurnier:
         A 2D problem (its FCLIB error compiled); one whose Newton phases run compiled on the
         dense ``W`` (at most ``DENSE_LIMIT`` rows); one on the sparse lane whose Newton systems
         and Jacobian rows are assembled compiled (:mod:`~lubcontact.solvers.kernels`).
+    w_arrays : tuple of ndarray
+        ``W``'s CSR arrays with unsigned indices (:func:`~.compiled_apgd.csr_arrays`), for the
+        kernels of the sparse lane (``compiled_rows``): numba checks every signed index for
+        wrap-around, and the reduced Newton system took 4.4 ms instead of 5.2 on a 12 000-grain
+        gluey step (51 879 rows) with them.
     tangent_rows : ndarray of int, shape (nf,)
         ``cone_t``'s one column (planar problems only).
     q_scale : float
@@ -337,6 +342,8 @@ class AlartCurnier:
         # compiled (a numpy sparse product G W and sum cost as much as the LU on developed
         # 2000-grain flows)
         self.compiled_rows = self.planar and not self.dense
+        if self.compiled_rows:
+            self.w_arrays = csr_arrays(self.W)
         if self.planar:             # one tangential row per contact; the FCLIB error compiled
             self.tangent_rows = np.ascontiguousarray(self.cone_t[:, 0])
             self.q_scale = 1.0 + float(np.linalg.norm(self.q))
@@ -408,7 +415,7 @@ class AlartCurnier:
             from .kernels import sparse_jacobian_rows_2d  # numba, imported on first use
 
             rows, indptr, indices, data, plain = sparse_jacobian_rows_2d(
-                self.W.indptr, self.W.indices, self.W.data, self.rho, self.lower, self.upper,
+                *self.w_arrays, self.rho, self.lower, self.upper,
                 self.box, self.cone_n, self.tangent_rows, self.cone_mu, self.unilateral,
                 self.sigma, y)
             active = np.zeros(self.n_rows, dtype=bool)
@@ -486,7 +493,7 @@ class AlartCurnier:
         from .kernels import reduced_newton_system_2d  # numba, imported on first use
 
         kept, indptr, indices, data, rhs, direction, sliding, normal, slope = \
-            reduced_newton_system_2d(self.W.indptr, self.W.indices, self.W.data, self.rho,
+            reduced_newton_system_2d(*self.w_arrays, self.rho,
                                      self.lower, self.upper, self.box, self.cone_n,
                                      self.tangent_rows, self.cone_mu, self.unilateral,
                                      self.sigma, y, phi)
