@@ -998,7 +998,7 @@ def static_pattern(indptr, indices):
     lower_ptr = np.zeros(n + 1, dtype=np.int64)
     for j in range(n):
         lower_ptr[j + 1] = lower_ptr[j] + counts[j]
-    lower_idx = np.empty(lower_ptr[n], dtype=np.int64)
+    lower_idx = np.empty(lower_ptr[n], dtype=np.uint32)    # unsigned: no wrap-around checks
     filled = lower_ptr[:-1].copy()
     for j in range(n):
         lower_idx[filled[j]] = j

@@ -77,7 +77,7 @@ from ..problem.cones import Cones
 from ..problem.conic import ConicProblem
 from ..problem.metrics import coulomb_error
 from ..problem.step import diagonal_scaled
-from .compiled_apgd import csr_arrays, joint_applies, joint_coulomb_apgd
+from .compiled_apgd import csr_arrays, joint_applies, joint_coulomb_apgd, positions
 from .coulomb import solve_coulomb
 from .dual_data import DENSE_LIMIT, dense_lu, dense_lu_solve, is_small
 from .registry import ALL_CONES, NEWTON, register
@@ -641,8 +641,9 @@ class _StaticLU:
     (:func:`~lubcontact.solvers.kernels.static_pattern`: those of ``A + A^T``'s Cholesky factor;
     :func:`~lubcontact.solvers.kernels.static_lu`), for the blocks :class:`_Factorisations`
     factorises in a carried elimination order: on a 12 000-grain gluey step's 19 000-row block,
-    6.1 ms (patterns 3.0, values 3.1; 8.3 ms in all on the blocks of six such steps) against
-    10.4 ms for SuperLU in the same order, the same fill (docs/records/benchmarks.md). ``nnz``
+    5.1 ms (patterns 3.0, values 2.1 with unsigned indices; 8.3 ms in all on the blocks of six
+    such steps with signed ones) against 10.4 ms for SuperLU in the same order, the same fill
+    (docs/records/benchmarks.md). ``nnz``
     counts the entries of both factors, the diagonal twice (SuperLU's counts its supernodes'
     storage: the same on these blocks, within 1 %)."""
 
@@ -658,8 +659,9 @@ class _StaticLU:
         times its largest entry (SuperLU then factorises it, pivoting)."""
         from .kernels import static_lu, static_pattern  # numba, imported on first use
 
-        pattern = static_pattern(matrix.indptr, matrix.indices)
-        lower, upper, failed = static_lu(matrix.indptr, matrix.indices, matrix.data, *pattern)
+        indptr, indices, data = csr_arrays(matrix)      # unsigned: no wrap-around checks
+        pattern = tuple(positions(array) for array in static_pattern(indptr, indices))
+        lower, upper, failed = static_lu(indptr, indices, data, *pattern)
         return None if failed >= 0 else cls(matrix, pattern, lower, upper)
 
     def solve(self, rhs: np.ndarray) -> np.ndarray:
