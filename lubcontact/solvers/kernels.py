@@ -809,7 +809,7 @@ def reduced_newton_system_2d(indptr, indices, data, rho, lower, upper, box, cone
     for i in kept:
         capacity += indptr[i + 1] - indptr[i] + 1
     row_ptr = np.zeros(n_kept + 1, dtype=np.int64)
-    row_col = np.empty(capacity, dtype=np.int64)
+    row_col = np.empty(capacity, dtype=np.uint32)          # unsigned: no wrap-around checks
     row_val = np.empty(capacity)
     rhs = np.empty(n_kept)
     scratch = np.zeros(n_kept)

@@ -688,7 +688,7 @@ def _permuted(matrix: sp.csc_matrix, order: np.ndarray) -> sp.csc_matrix:
     conversions, docs/records/benchmarks.md)."""
     from .kernels import permuted_csc  # numba, imported on first use
 
-    indptr, indices, data = permuted_csc(matrix.indptr, matrix.indices, matrix.data, order)
+    indptr, indices, data = permuted_csc(*csr_arrays(matrix), positions(order))
     permuted = sp.csc_matrix((data, indices, indptr), shape=matrix.shape)
     permuted.has_sorted_indices = True
     return permuted
