@@ -78,8 +78,8 @@ def positions(values: np.ndarray) -> np.ndarray:
 
 def csr_arrays(matrix: sp.csr_matrix | tuple[np.ndarray, np.ndarray, np.ndarray]
                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``(indptr, indices, data)`` of a CSR matrix (or of such a triple), the indices as
-    :func:`positions`."""
+    """``(indptr, indices, data)`` of a compressed sparse matrix, CSR (or CSC: the same arrays,
+    by columns), or of such a triple, the index arrays as :func:`positions`."""
     indptr, indices, values = (matrix.indptr, matrix.indices, matrix.data) \
         if sp.issparse(matrix) else matrix
     return positions(indptr), positions(indices), values

@@ -946,15 +946,16 @@ def symmetrised_pattern(indptr, indices):
     pointers = np.zeros(n + 1, dtype=np.int64)
     for j in range(n):                                  # entry (r, j) goes to column max(r, j)
         for e in range(indptr[j], indptr[j + 1]):
-            if indices[e] != j:
-                pointers[max(indices[e], j) + 1] += 1
+            r = np.int64(indices[e])                    # (numba makes uint64 op int64 a float)
+            if r != j:
+                pointers[max(r, j) + 1] += 1
     for k in range(n):
         pointers[k + 1] += pointers[k]
     rows = np.empty(pointers[n], dtype=np.int64)
     filled = pointers[:-1].copy()
     for j in range(n):
         for e in range(indptr[j], indptr[j + 1]):
-            r = indices[e]
+            r = np.int64(indices[e])
             if r != j:
                 column = max(r, j)
                 rows[filled[column]] = min(r, j)

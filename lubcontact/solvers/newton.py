@@ -204,8 +204,10 @@ FINISH_ITERATIONS = 2
 where they lower the error; they stop at :data:`ROUND_OFF`): quadratic convergence takes a
 solution at ``tol`` to round-off where the Jacobian is regular (none on the sparse lane where
 it is singular by its count: :meth:`AlartCurnier.hyperstatic`). Where the error's floor is above
-``ROUND_OFF`` both run for nothing: on ``heavy_on_light_stack`` from near its solution the plain
-try takes 3 iterations where plain Newton alone takes 1, to the same FCLIB error near 1e-12."""
+``ROUND_OFF`` the first runs for nothing, and the second only after a first that gained
+(:data:`FINISH_GAIN`): on ``heavy_on_light_stack`` from near its solution the plain try takes 2
+iterations where plain Newton alone takes 1, to the same FCLIB error near 1e-12 (3 before the
+gain was asked for)."""
 ROUND_OFF = 1e-14
 """FCLIB error at which those plain iterations stop: round-off. The first of them took the
 answer there on most steps of small piles and of developed flows, and the second factorised
@@ -217,7 +219,8 @@ convergence gains decades in one iteration, and where it gains less the block is
 there though not by its count. On 40-grain frictional piles at rest (142 rows, 120 degrees of
 freedom, 112 rows of ``W`` in the block) the finish's block had singular values of 1e-16 and
 its two iterations left the error where it was on half the steps
-(docs/records/benchmarks.md, "the finish stops where it gains nothing")."""
+(docs/records/benchmarks.md, "the finish stops where it gains nothing"). Each iteration is a
+Newton phase of its own: the second's line search is monotone from the first's iterate."""
 
 FALLBACKS_2D = ("nsgs", "apgd-jacobi")
 FALLBACKS_UNION = ("nsgs",)
