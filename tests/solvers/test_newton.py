@@ -159,7 +159,7 @@ def test_a_creeping_bed_converges_by_the_proximal_loop_without_fallback():
     settings = SolveSettings(method="newton-ac", tol=1e-6, exact_coulomb=True,
                              options={"fallback": None})
     result = settings.solve(problem, warm_start, warm_shift)
-    assert result.status == CONVERGED and result.info["strategies"] == [(1e-3, "warm")]
+    assert result.status == CONVERGED and result.info["strategies"] == [(newton.WARM_SPARSE_WEIGHT, "warm")]
     assert scaled_coulomb_error(problem, result.forces) <= 1e-6
 
 
@@ -1265,7 +1265,7 @@ def test_a_small_frictionless_problem_near_its_warm_start_is_solved_by_the_plain
     assert tight.status == CONVERGED and tight.strategies[0] == (1e-3, "warm")
     use_the_sparse_lane(monkeypatch)
     sparse = solve(original, "newton-ac", tol=1e-8, warm_start=near * chain.scaling.force)
-    assert sparse.success and sparse.info["strategies"] == [(1e-3, "warm")]
+    assert sparse.success and sparse.info["strategies"] == [(newton.WARM_SPARSE_WEIGHT, "warm")]
 
 
 def test_plain_newton_as_a_strategy_has_no_finish():
