@@ -64,6 +64,7 @@ below ``tol``, or kept within :data:`FALLBACK_GAP` ``tol``.
 """
 from __future__ import annotations
 
+import inspect
 import time
 import warnings
 from dataclasses import dataclass, field
@@ -80,7 +81,7 @@ from ..problem.step import diagonal_scaled
 from .compiled_apgd import csr_arrays, joint_applies, joint_coulomb_apgd, positions
 from .coulomb import solve_coulomb
 from .dual_data import DENSE_LIMIT, dense_lu, dense_lu_solve, is_small
-from .registry import ALL_CONES, NEWTON, register
+from .registry import ALL_CONES, NEWTON, register, solver_info
 from .result import CONVERGED, FAILED, INACCURATE, MAX_ITER, MethodOutput
 
 LINE_SEARCH_MEMORY = 5
@@ -247,6 +248,14 @@ on one piece and flips pieces by its branch rule, which on a gluey bed coming to
 quarters of the step (34-36 s at 2000 grains), and a polished answer 9 to 37 times worse
 than Gauss-Seidel's (docs/records/benchmarks.md, "The gluey bed coming to rest")."""
 
+FALLBACK_ROUND = 1000
+"""Iterations of the first round of a fallback that solves exact Coulomb itself (``nsgs``): its
+iteration cap is spent in rounds (:func:`fallback_rounds`: 1 000, 1 000, 2 000, 4 000, then the
+rest), each continued from the last one's forces and polished (:data:`POLISH_ITERATIONS`), until
+a polished answer reaches ``tol``. On a developed 12 000-grain gluey step whose Newton phases
+stalled at 2.9e-6 (tol 1e-6), Gauss-Seidel reached its own tol in about 4 500 sweeps (12.4 s),
+while Newton from its forces after 1 000 sweeps converged in 16 iterations and after 2 000 in
+one (docs/records/benchmarks.md, "the fallback in rounds")."""
 FALLBACK_GAP = 10.0
 """A fallback whose polished answer is kept (it beats the best so far) and lies within this many
 ``tol`` ends the chain: the next, slower first-order fallback has not closed such a gap. On a
@@ -885,25 +894,29 @@ def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = 5
     chain = () if phase.status == CONVERGED else fallback_chain(problem.cones, fallback)
     best_error = phase.error
     for name in chain:
-        rescue = solve_coulomb(problem, name, tol=tol, tol_fp=tol, warm_start=forces)
-        iterations += rescue.iterations
-        info["fallback_iterations"] = info.get("fallback_iterations", 0) + rescue.iterations
-        info["fallback_status"] = rescue.status
         info["fallbacks"] = [*info.get("fallbacks", []), name]
-        if not np.isfinite(rescue.forces).all():
-            continue
-        finish = _proximal_newton(function, unshifted, rescue.forces, tol, POLISH_ITERATIONS,
-                                  STRATEGIES[0])
-        iterations += finish.iterations
-        info["newton_iterations"] += finish.iterations
-        kept = finish.error < best_error       # else the best iterate so far and its status stay
-        if kept:
-            forces, best_error = finish.forces, finish.error
-            info["error"] = finish.error
-            # newton-ac's test is the FCLIB error: a fallback "converged" by its own
-            # measure but above tol is inaccurate here; otherwise the iterations ran out
-            status = CONVERGED if finish.error <= tol else \
-                INACCURATE if rescue.status == CONVERGED else MAX_ITER
+        origin, kept = forces, False
+        for cap in fallback_rounds(name):
+            rescue = solve_coulomb(problem, name, tol=tol, tol_fp=tol, warm_start=origin, max_iter=cap)
+            iterations += rescue.iterations
+            info["fallback_iterations"] = info.get("fallback_iterations", 0) + rescue.iterations
+            info["fallback_status"] = rescue.status
+            if not np.isfinite(rescue.forces).all():
+                break
+            finish = _proximal_newton(function, unshifted, rescue.forces, tol, POLISH_ITERATIONS,
+                                      STRATEGIES[0])
+            iterations += finish.iterations
+            info["newton_iterations"] += finish.iterations
+            if finish.error < best_error:      # else the best iterate so far and its status stay
+                kept, forces, best_error = True, finish.forces, finish.error
+                info["error"] = finish.error
+                # newton-ac's test is the FCLIB error: a fallback "converged" by its own
+                # measure but above tol is inaccurate here; otherwise the iterations ran out
+                status = CONVERGED if finish.error <= tol else \
+                    INACCURATE if rescue.status == CONVERGED else MAX_ITER
+            if status == CONVERGED or rescue.status == CONVERGED:
+                break
+            origin = rescue.forces               # the next round goes on from the fallback's own
         if status == CONVERGED or kept and best_error <= FALLBACK_GAP * tol:
             break
     info["reused_factorisations"] = function.factorisations.reused     # the polishes' too
@@ -912,6 +925,24 @@ def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = 5
     return MethodOutput(forces, status, iterations, setup_time=setup_time,
                         solve_time=time.perf_counter() - start - setup_time,
                         residual_history=history, info=info)
+
+
+def fallback_rounds(name: str) -> tuple[int | None, ...]:
+    """The iteration caps of the calls that spend fallback ``name``'s own cap (its ``max_iter``
+    default): for a method that solves exact Coulomb itself, :data:`FALLBACK_ROUND` twice, then
+    twice and four times that, then the rest (fewer where its cap is smaller); for any other (a fixed
+    point on s, whose outer loop a round would restart) one call, ``(None,)``."""
+    info = solver_info(name)
+    cap = inspect.signature(info.function).parameters.get("max_iter")
+    if not info.native_coulomb or cap is None or not isinstance(cap.default, int):
+        return (None,)
+    rounds, left = [], cap.default
+    for size in (FALLBACK_ROUND, FALLBACK_ROUND, 2 * FALLBACK_ROUND, 4 * FALLBACK_ROUND):
+        if size >= left:
+            break
+        rounds.append(size)
+        left -= size
+    return (*rounds, left)
 
 
 def fallback_chain(cones: Cones, fallback: str | None) -> tuple[str, ...]:

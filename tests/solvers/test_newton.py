@@ -1,5 +1,6 @@
 """newton-ac, the semismooth Newton method on the Alart-Curnier function, against exact answers,
 the Clarabel reference and Siconos' test problems."""
+import inspect
 import warnings
 from pathlib import Path
 
@@ -33,6 +34,7 @@ from lubcontact.solvers import (
     solver_info,
 )
 from lubcontact.solvers.coulomb import has_joint_phase
+from lubcontact.solvers.gauss_seidel import nonsmooth_gauss_seidel
 from lubcontact.solvers.newton import (
     FALLBACK_GAP,
     SIGMA_MAX,
@@ -420,6 +422,40 @@ def test_a_fallback_answer_kept_within_the_gap_ends_the_chain(stalling, monkeypa
     assert above.info["fallbacks"] == ["nearer-test", "echo-test"]
     assert not_kept.info["fallbacks"] == ["zero-test", "echo-test"]
     assert not_kept.info["error"] == pytest.approx(alone.info["error"], rel=1e-12)
+
+
+def test_a_fallback_that_solves_coulomb_itself_runs_in_rounds_each_polished(stalling, monkeypatch):
+    """A fallback that solves exact Coulomb itself (as nsgs) spends its iteration cap in rounds
+    (fallback_rounds: FALLBACK_ROUND, FALLBACK_ROUND, twice, four times, then the rest), each
+    from the last one's forces and polished: here the second round's answer is the solution, and
+    the chain stops there, where one call with the whole cap ended short of tol. A fixed point on
+    s (apgd-jacobi) runs in one call."""
+    problem, alone = stalling
+    solution = newton_alart_curnier(problem.normalized(), tol=1e-8).forces
+    calls = []
+
+    def rounds_test(problem, *, tol, max_iter=20_000, warm_start=None, replay=None):
+        if replay is not None:
+            return replay
+        calls.append((max_iter, np.array(warm_start, dtype=float)))
+        answer = solution if len(calls) == 2 else 0.5 * (warm_start + solution)
+        return MethodOutput(answer, MAX_ITER, max_iter)
+
+    register("rounds-test", kind=FIRST_ORDER, cones=ALL_CONES, warm_start=True,
+             native_coulomb=True)(rounds_test)
+    try:
+        monkeypatch.setattr(newton, "POLISH_ITERATIONS", 0)     # each round's answer as it is
+        result = solve_coulomb(problem, "newton-ac", tol=1e-8, fallback="rounds-test")
+        assert newton.fallback_rounds("rounds-test") == (1000, 1000, 2000, 4000, 12000)
+    finally:
+        unregister("rounds-test")
+    assert [cap for cap, _ in calls] == [newton.FALLBACK_ROUND] * 2
+    assert np.array_equal(calls[1][1], 0.5 * (calls[0][1] + solution))   # from the first's answer
+    assert result.status == CONVERGED and result.info["fallback_iterations"] == 2 * newton.FALLBACK_ROUND
+    assert scaled_coulomb_error(problem, result.forces) <= 1e-8 < alone.info["error"]
+    cap = inspect.signature(nonsmooth_gauss_seidel).parameters["max_iter"].default
+    assert sum(newton.fallback_rounds("nsgs")) == cap
+    assert newton.fallback_rounds("apgd-jacobi") == (None,)
 
 
 def test_a_fallback_worse_than_newton_never_replaces_its_best_iterate(stalling):
