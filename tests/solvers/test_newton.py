@@ -1201,12 +1201,9 @@ def test_the_polish_to_joint_finish_tol_stops_at_its_target(settling_step, monke
     assert velocity_error(problem, result.velocities, reference.velocities) <= 1e-8
 
 
-@pytest.mark.parametrize("lane", ["compiled", "sparse"])
-def test_the_plain_finish_stops_at_round_off(settling_step, lane, monkeypatch):
-    """The plain Newton iterations after the proximal loop (FINISH_ITERATIONS) stop once the
-    FCLIB error is at ROUND_OFF: the first takes the answer there on this step, and a second
-    factorised again for nothing (it cost one Newton iteration of 4-6 on small piles)."""
-    problem, reference = settling_step
+def plain_finishes(problem, lane, monkeypatch, **options):
+    """``solve_coulomb(problem, "newton-ac", **options)`` on the ``lane`` ("compiled" or
+    "sparse"), and the Newton phases of its plain finish (sigma 0, target ROUND_OFF)."""
     if lane == "sparse":
         use_the_sparse_lane(monkeypatch)
     finishes = []
@@ -1219,8 +1216,17 @@ def test_the_plain_finish_stops_at_round_off(settling_step, lane, monkeypatch):
         return out
 
     monkeypatch.setattr(newton, "_newton_phase", spy)
-    result = solve_coulomb(problem, "newton-ac", tol=1e-6,
-                           warm_start=reference.forces * (1.0 + 1e-3))
+    return solve_coulomb(problem, "newton-ac", **options), finishes
+
+
+@pytest.mark.parametrize("lane", ["compiled", "sparse"])
+def test_the_plain_finish_stops_at_round_off(settling_step, lane, monkeypatch):
+    """The plain Newton iterations after the proximal loop (FINISH_ITERATIONS) stop once the
+    FCLIB error is at ROUND_OFF: the first takes the answer there on this step, and a second
+    factorised again for nothing (it cost one Newton iteration of 4-6 on small piles)."""
+    problem, reference = settling_step
+    result, finishes = plain_finishes(problem, lane, monkeypatch, tol=1e-6,
+                                      warm_start=reference.forces * (1.0 + 1e-3))
     assert result.success and [finish.iterations for finish in finishes] == [1]
     assert finishes[0].history[0] > newton.ROUND_OFF >= finishes[0].history[-1]
     assert coulomb_error(problem.normalized(), result.forces / result.force_scale) <= newton.ROUND_OFF
@@ -1234,19 +1240,7 @@ def test_the_plain_finish_stops_after_an_iteration_that_gains_nothing(crowded_se
     count: its first plain iteration leaves the FCLIB error where it was (5e-9), and a second,
     which two FINISH_ITERATIONS took, would factorise again for nothing (FINISH_GAIN)."""
     problem = crowded_settling_step
-    if lane == "sparse":
-        use_the_sparse_lane(monkeypatch)
-    finishes = []
-    phase = newton._newton_phase
-
-    def spy(function, unshifted, forces, tol, max_iter, inner_tol=0.0):
-        out = phase(function, unshifted, forces, tol, max_iter, inner_tol)
-        if function.sigma == 0.0 and tol == newton.ROUND_OFF:
-            finishes.append(out)
-        return out
-
-    monkeypatch.setattr(newton, "_newton_phase", spy)
-    result = solve_coulomb(problem, "newton-ac", tol=1e-8)
+    result, finishes = plain_finishes(problem, lane, monkeypatch, tol=1e-8)
     assert result.success and [finish.iterations for finish in finishes] == [1]
     start, end = finishes[0].history
     assert newton.FINISH_GAIN * start < end <= 1e-8
