@@ -60,7 +60,8 @@ Stopping: the FCLIB error (:func:`~lubcontact.problem.metrics.coulomb_error`, th
 every report uses) below ``tol``. When every strategy stalls, the best iterate goes
 to fallbacks in turn (``fallback``; in 2D Gauss-Seidel, then apgd-jacobi's fixed
 point), each answer polished by Newton and kept when it beats the best so far, until one is
-below ``tol``, or kept within :data:`FALLBACK_GAP` ``tol``.
+below ``tol``, or kept within :data:`FALLBACK_GAP` ``tol``; Gauss-Seidel in rounds, each
+polished (:func:`fallback_rounds`).
 """
 from __future__ import annotations
 
@@ -82,7 +83,7 @@ from .compiled_apgd import csr_arrays, joint_applies, joint_coulomb_apgd, positi
 from .coulomb import solve_coulomb
 from .dual_data import DENSE_LIMIT, dense_lu, dense_lu_solve, is_small
 from .registry import ALL_CONES, NEWTON, register, solver_info
-from .result import CONVERGED, FAILED, INACCURATE, MAX_ITER, MethodOutput
+from .result import CONVERGED, DIVERGED, FAILED, INACCURATE, MAX_ITER, MethodOutput
 
 LINE_SEARCH_MEMORY = 5
 """Non-monotone line search: ``psi`` is compared with the largest of this many last values."""
@@ -149,7 +150,7 @@ WARM_SPARSE_WEIGHT = 3e-3
 the sparse lane (a flow's step, whose force network renews from step to step: the warm start's
 FCLIB error about 2e-2 on developed gluey flows). Newton iterations summed over captured steps of
 developed flows (exact Coulomb, tol 1e-6), 1e-3 against 3e-3 against 1e-2: gluey 2 000 to
-12 000 grains (219 steps) 6 578, 5 767, 5 749; dry (113 steps) 2 646, 2 646, 2 511; the tests'
+12 000 grains (209 steps) 6 578, 5 767, 5 749; dry (113 steps) 2 646, 2 646, 2 511; the tests'
 creeping 300-grain bed 234, 222, and with 1e-2 a stall. Not on the dense lane, where the warm
 starts of small piles near rest took 3-14 % more iterations with either
 (docs/records/benchmarks.md, "a firmer first weight on flows")."""
@@ -237,7 +238,8 @@ FALLBACKS_UNION = ("nsgs",)
 FALLBACKS_3D = ("apgd-jacobi",)
 """Fallbacks (``fallback="auto"``) tried in turn from the best iterate so far when every Newton
 strategy stalls, until one's polished answer is below tol (or kept within :data:`FALLBACK_GAP`
-``tol``). In 2D first Gauss-Seidel with exact local solves (:mod:`.gauss_seidel`): on gluey
+``tol``; Gauss-Seidel in rounds, each from the last one's forces and polished:
+:func:`fallback_rounds`). In 2D first Gauss-Seidel with exact local solves (:mod:`.gauss_seidel`): on gluey
 flow steps where Newton stalled at FCLIB errors 2e-5 to 1e-4 it reached 1e-6 in 0.3 s, or
 5e-6 at its cap, where apgd-jacobi's fixed point ran out at 1e-4; then apgd-jacobi's fixed
 point on ``s``, which solves Siconos' 2020-contact file to 1e-8 where Gauss-Seidel from
@@ -859,7 +861,8 @@ def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = 5
         its start, ``"warm"`` or ``"cold"``),
         ``newton_status`` and ``error`` (the Newton phase's FCLIB error), and
         ``fallbacks`` (the methods run), ``fallback_iterations`` (summed) and
-        ``fallback_status`` (the last one's) when a fallback ran.
+        ``fallback_status`` (the last call's: for a fallback run in rounds,
+        :func:`fallback_rounds`, its last round's) when a fallback ran.
     """
     if replay is not None:
         return replay
@@ -901,8 +904,6 @@ def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = 5
             iterations += rescue.iterations
             info["fallback_iterations"] = info.get("fallback_iterations", 0) + rescue.iterations
             info["fallback_status"] = rescue.status
-            if not np.isfinite(rescue.forces).all():
-                break
             finish = _proximal_newton(function, unshifted, rescue.forces, tol, POLISH_ITERATIONS,
                                       STRATEGIES[0])
             iterations += finish.iterations
@@ -914,8 +915,8 @@ def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = 5
                 # measure but above tol is inaccurate here; otherwise the iterations ran out
                 status = CONVERGED if finish.error <= tol else \
                     INACCURATE if rescue.status == CONVERGED else MAX_ITER
-            if status == CONVERGED or rescue.status == CONVERGED:
-                break
+            if status == CONVERGED or rescue.status in (CONVERGED, DIVERGED, FAILED):
+                break                            # (diverged: zero forces, from solve's check)
             origin = rescue.forces               # the next round goes on from the fallback's own
         if status == CONVERGED or kept and best_error <= FALLBACK_GAP * tol:
             break
@@ -929,12 +930,14 @@ def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = 5
 
 def fallback_rounds(name: str) -> tuple[int | None, ...]:
     """The iteration caps of the calls that spend fallback ``name``'s own cap (its ``max_iter``
-    default): for a method that solves exact Coulomb itself, :data:`FALLBACK_ROUND` twice, then
-    twice and four times that, then the rest (fewer where its cap is smaller); for any other (a fixed
-    point on s, whose outer loop a round would restart) one call, ``(None,)``."""
+    default): for a method that solves exact Coulomb itself from a warm start, :data:`FALLBACK_ROUND`
+    twice, then twice and four times that, then the rest (fewer where its cap is smaller); for
+    any other (a fixed point on s, whose outer loop a round would restart; a method without a
+    positive integer default) one call, ``(None,)``."""
     info = solver_info(name)
     cap = inspect.signature(info.function).parameters.get("max_iter")
-    if not info.native_coulomb or cap is None or not isinstance(cap.default, int):
+    if not (info.native_coulomb and info.warm_start) or cap is None \
+            or not isinstance(cap.default, int) or cap.default <= 0:
         return (None,)
     rounds, left = [], cap.default
     for size in (FALLBACK_ROUND, FALLBACK_ROUND, 2 * FALLBACK_ROUND, 4 * FALLBACK_ROUND):
@@ -963,7 +966,8 @@ def _strategies(function: AlartCurnier, unshifted: ConicProblem, forces: np.ndar
     """:func:`_proximal_newton` with each ``sigma`` of :data:`STRATEGIES` in turn, each from
     ``forces`` (a strategy's stalled iterate is a worse start than the warm start, measured),
     the first also from zero forces when ``forces`` is not zero (from a warm start on the 2D
-    sparse lane the first is :data:`WARM_SPARSE_WEIGHT` instead), until one converges, the best
+    sparse lane the first from ``forces`` is :data:`WARM_SPARSE_WEIGHT` instead; from zero it
+    stays ``STRATEGIES[0]``), until one converges, the best
     error is within :data:`STRATEGY_GAP` of ``tol`` or ``max_iter`` Newton iterations are
     spent; the best phase is returned (the plain try's, if best, as stalled where it stopped
     short of ``tol``; its error counts in the test against :data:`STRATEGY_GAP`).

@@ -24,6 +24,7 @@ from lubcontact.problem.metrics import (
 from lubcontact.problem.step import StepProblem
 from lubcontact.solvers import (
     CONVERGED,
+    DIVERGED,
     FIRST_ORDER,
     INACCURATE,
     MAX_ITER,
@@ -428,31 +429,45 @@ def test_a_fallback_that_solves_coulomb_itself_runs_in_rounds_each_polished(stal
     """A fallback that solves exact Coulomb itself (as nsgs) spends its iteration cap in rounds
     (fallback_rounds: FALLBACK_ROUND, FALLBACK_ROUND, twice, four times, then the rest), each
     from the last one's forces and polished: here the second round's answer is the solution, and
-    the chain stops there, where one call with the whole cap ended short of tol. A fixed point on
-    s (apgd-jacobi) runs in one call."""
+    the chain stops there, where one call with the whole cap ended short of tol. The rounds stop
+    too where the fallback says it converged (its answer polished above tol: inaccurate) or
+    diverged (non-finite forces, zero after solve's check). A fixed point on s (apgd-jacobi) runs
+    in one call."""
     problem, alone = stalling
     solution = newton_alart_curnier(problem.normalized(), tol=1e-8).forces
-    calls = []
+    monkeypatch.setattr(newton, "POLISH_ITERATIONS", 0)     # each round's answer as it is
 
-    def rounds_test(problem, *, tol, max_iter=20_000, warm_start=None, replay=None):
-        if replay is not None:
-            return replay
-        calls.append((max_iter, np.array(warm_start, dtype=float)))
-        answer = solution if len(calls) == 2 else 0.5 * (warm_start + solution)
-        return MethodOutput(answer, MAX_ITER, max_iter)
+    def rounds(answer):
+        """The solve with a fake native fallback whose k-th call (1, 2, ...) returns
+        ``answer(k, warm_start)``; the calls' caps and warm starts."""
+        calls = []
 
-    register("rounds-test", kind=FIRST_ORDER, cones=ALL_CONES, warm_start=True,
-             native_coulomb=True)(rounds_test)
-    try:
-        monkeypatch.setattr(newton, "POLISH_ITERATIONS", 0)     # each round's answer as it is
-        result = solve_coulomb(problem, "newton-ac", tol=1e-8, fallback="rounds-test")
-        assert newton.fallback_rounds("rounds-test") == (1000, 1000, 2000, 4000, 12000)
-    finally:
-        unregister("rounds-test")
+        def fake(problem, *, tol, max_iter=20_000, warm_start=None, replay=None):
+            if replay is not None:
+                return replay
+            calls.append((max_iter, np.array(warm_start, dtype=float)))
+            forces, status = answer(len(calls), calls[-1][1])
+            return MethodOutput(forces, status, max_iter)
+
+        register("rounds-test", kind=FIRST_ORDER, cones=ALL_CONES, warm_start=True,
+                 native_coulomb=True)(fake)
+        try:
+            assert newton.fallback_rounds("rounds-test") == (1000, 1000, 2000, 4000, 12000)
+            return solve_coulomb(problem, "newton-ac", tol=1e-8, fallback="rounds-test"), calls
+        finally:
+            unregister("rounds-test")
+
+    halfway = lambda warm_start: 0.5 * (warm_start + solution)       # noqa: E731
+    result, calls = rounds(lambda k, warm: (solution if k == 2 else halfway(warm), MAX_ITER))
     assert [cap for cap, _ in calls] == [newton.FALLBACK_ROUND] * 2
-    assert np.array_equal(calls[1][1], 0.5 * (calls[0][1] + solution))   # from the first's answer
+    assert np.array_equal(calls[1][1], halfway(calls[0][1]))          # from the first's answer
     assert result.status == CONVERGED and result.info["fallback_iterations"] == 2 * newton.FALLBACK_ROUND
     assert scaled_coulomb_error(problem, result.forces) <= 1e-8 < alone.info["error"]
+    said, calls = rounds(lambda k, warm: (halfway(warm), CONVERGED))
+    assert len(calls) == 1 and said.status == INACCURATE and said.info["fallback_status"] == CONVERGED
+    diverged, calls = rounds(lambda k, warm: (np.full_like(warm, np.nan), MAX_ITER))
+    assert len(calls) == 1 and diverged.info["fallback_status"] == DIVERGED
+    assert diverged.info["error"] == pytest.approx(alone.info["error"], rel=1e-12)
     cap = inspect.signature(nonsmooth_gauss_seidel).parameters["max_iter"].default
     assert sum(newton.fallback_rounds("nsgs")) == cap
     assert newton.fallback_rounds("apgd-jacobi") == (None,)
