@@ -818,7 +818,8 @@ def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = 5
         whose exact-Coulomb solve (:func:`~lubcontact.solvers.solve_coulomb`) takes over
         from the best Newton iterate when every strategy stalls (:data:`STALL_WINDOW`,
         :data:`STALL_HORIZON`), fails or reaches ``max_iter``, each from the best iterate so
-        far, until one's polished answer is below ``tol`` or is kept within
+        far (one that solves exact Coulomb itself, ``nsgs``, in rounds, each polished:
+        :func:`fallback_rounds`), until one's polished answer is below ``tol`` or is kept within
         :data:`FALLBACK_GAP` ``tol``; None: no fallback. The answer is the fallback's
         (polished) forces only where their FCLIB error is below the best iterate's so far.
         Newton stalls where the
