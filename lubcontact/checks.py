@@ -73,6 +73,8 @@ def per_item(field: str, value: ArrayLike, count: int) -> np.ndarray:
 
 def integer(field: str, value: float, minimum: int = 0) -> int:
     """An integer (an integral float such as 3.0 is accepted) >= ``minimum``."""
+    if type(value) is int and value >= minimum:          # the common case, without an array
+        return value
     ok = np.ndim(value) == 0 and np.isfinite(value) and float(value) == int(value)
     require(bool(ok) and int(value) >= minimum, field, f"must be an integer >= {minimum}", value)
     return int(value)

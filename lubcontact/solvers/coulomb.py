@@ -129,7 +129,7 @@ def solve_coulomb(problem: ConicProblem, method: str = "clarabel", *, tol: float
         return solve_native_coulomb(problem, method, tol=tol, max_iter=max_iter,
                                     warm_start=warm_start, max_outer=max_outer, **options)
     tol_fp = checks.positive_scalar("tol_fp", tol_fp)
-    max_outer = int(checks.positive("max_outer", max_outer, shape=()))
+    max_outer = checks.integer("max_outer", max_outer, minimum=1)
     nc = problem.cones.count
     current = np.zeros(nc) if shift is None else checks.as_array("shift", shift, shape=(nc,)).copy()
     if not problem.cones.has_friction:
@@ -243,7 +243,7 @@ def solve_native_coulomb(problem: ConicProblem, method: str, *, tol: float = 1e-
     if max_iter is not None:
         kwargs["max_iter"] = max_iter
     iterations, settled = 0, False
-    for outer in range(1, int(checks.positive("max_outer", max_outer, shape=())) + 1):  # noqa: B007
+    for outer in range(1, checks.integer("max_outer", max_outer, minimum=1) + 1):  # noqa: B007
         clock = time.perf_counter()
         out = info.function(scaled if native_union else branches.on(scaled), warm_start=start, **kwargs)
         setup, solving = out.times(time.perf_counter() - clock)

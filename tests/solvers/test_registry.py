@@ -23,6 +23,7 @@ from lubcontact.solvers import (
     dual_data,
     methods,
     register,
+    solve_coulomb,
     solver_info,
     unregister,
 )
@@ -224,6 +225,17 @@ def test_settings_validate_their_fields():
     assert SolveSettings(options={"max_iter": 6}).max_iter == 6
     with pytest.raises(ValueError, match="solver"):
         Simulation(scenes.push_pull(), Inelastic(), dt=0.1, solver="foo")
+
+
+@pytest.mark.parametrize("method", ["apgd-jacobi", "newton-ac"])
+def test_the_fixed_point_takes_a_whole_number_of_outer_iterations(settling_step, method):
+    """``max_outer`` of solve_coulomb (the fixed point on s, or the branch loop of a method that
+    solves exact Coulomb itself) is an integer >= 1 (3.0 is one): 2.5 was taken as 2."""
+    problem, _ = settling_step
+    for bad in (2.5, 0, -1):
+        with pytest.raises(ValueError, match="max_outer"):
+            solve_coulomb(problem, method, tol=1e-6, max_outer=bad)
+    assert 1 <= solve_coulomb(problem, method, tol=1e-6, max_outer=3.0).outer_iterations <= 3
 
 
 OPEN_TRIOS = {   # gaps (floor, pair, top), velocities, masses: every contact stays open
