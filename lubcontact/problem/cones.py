@@ -57,12 +57,12 @@ def project_friction_cone(normal: np.ndarray, tangential: np.ndarray,
     """
     norm_t = tangent_norms(tangential)
     inside = (norm_t <= mu * normal) & (normal >= 0.0)
-    polar = mu * norm_t <= -normal
-    scale = (normal + mu * norm_t) / (1.0 + mu * mu)
-    new_n = np.where(inside, normal, np.where(polar, 0.0, scale))
-    ratio = np.divide(mu * scale, norm_t, out=np.zeros_like(norm_t), where=norm_t > 0)
-    factor = np.where(inside, 1.0, np.where(polar, 0.0, ratio))   # of the tangential part
-    return new_n, factor[:, None] * tangential
+    # outside: the boundary's point, whose normal part is scale; 0 on the polar cone
+    # (mu |t| <= -n, where n + mu |t| <= 0)
+    scale = np.maximum((normal + mu * norm_t) / (1.0 + mu * mu), 0.0)
+    factor = np.divide(mu * scale, norm_t, out=inside.astype(float),     # of the tangential part
+                       where=~inside & (norm_t > 0))
+    return np.where(inside, normal, scale), factor[:, None] * tangential
 
 
 def tangent_norms(tangential: np.ndarray) -> np.ndarray:
@@ -377,6 +377,19 @@ class ConeProjector:
     ``R``, ``(-inf, 0]``; tangential rows of frictionless contacts ``{0}``);
     friction contacts go through :func:`project_friction_cone`. No Python loop
     over contacts.
+
+    Attributes
+    ----------
+    lower, upper : ndarray, shape (n_rows,)
+        The box's bounds (a friction contact's rows get theirs from its cone).
+    friction_normal, friction_tangent, friction_mu, friction_union : ndarray
+        The friction contacts (COULOMB, then UNION, each kind in row order; a contact of
+        another kind with tangential rows has no cone): normal rows (nf,),
+        tangential rows (nf, tangent_dim), coefficients (nf,) and which are UNION (nf,) of
+        bool. Solvers that loop over the contacts read them here rather than joining the pieces.
+    pieces : list of tuple of ndarray
+        The COULOMB and the UNION contacts' ``(normal rows, tangential rows, mu)``: views of
+        the ``friction_`` arrays.
     """
 
     def __init__(self, cones: Cones):
@@ -385,17 +398,22 @@ class ConeProjector:
         tangent_bounds = np.zeros(cones.n_rows - nc)
         self.lower = np.concatenate([_NORMAL_LOWER[kinds], tangent_bounds])
         self.upper = np.concatenate([_NORMAL_UPPER[kinds], tangent_bounds])
-        if not cones.has_friction:              # a box: both pieces empty
-            empty = (np.zeros(0, dtype=int), np.zeros((0, dim_t), dtype=int), np.zeros(0))
-            self.pieces = [empty, empty]
-            return
-        self.pieces = []
         tangential_kinds = kinds[cones.tangential]
-        for kind in (ConeKind.COULOMB, ConeKind.UNION):
-            positions = np.flatnonzero(tangential_kinds == int(kind))
-            normal_rows = cones.tangential[positions]
-            tangent_rows = nc + positions[:, None] * dim_t + np.arange(dim_t)
-            self.pieces.append((normal_rows, tangent_rows, cones.mu[normal_rows]))
+        coulomb = tangential_kinds == int(ConeKind.COULOMB)
+        union = tangential_kinds == int(ConeKind.UNION)
+        split = int(np.count_nonzero(coulomb))
+        if split == coulomb.size:             # the common case: every one COULOMB, in order
+            positions = np.arange(split)
+        else:
+            positions = np.concatenate([np.flatnonzero(coulomb), np.flatnonzero(union)])
+        self.friction_normal = cones.tangential[positions]
+        self.friction_tangent = nc + positions[:, None] * dim_t + np.arange(dim_t)
+        self.friction_mu = cones.mu[self.friction_normal]
+        self.friction_union = np.arange(positions.size) >= split
+        self.pieces = [(self.friction_normal[:split], self.friction_tangent[:split],
+                        self.friction_mu[:split]),
+                       (self.friction_normal[split:], self.friction_tangent[split:],
+                        self.friction_mu[split:])]
 
     @cached_property
     def box_rows(self) -> np.ndarray:

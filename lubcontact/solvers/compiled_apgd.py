@@ -87,13 +87,12 @@ def csr_arrays(matrix: sp.csr_matrix | tuple[np.ndarray, np.ndarray, np.ndarray]
 
 def is_box(cones: Cones) -> bool:
     """True when K is a box (no friction cone): the fused kernel applies."""
-    return all(piece[0].size == 0 for piece in cones.projector.pieces)
+    return cones.projector.friction_normal.size == 0
 
 
 def is_cone_2d(cones: Cones) -> bool:
     """True when K is a product of a box and 2D friction cones (Coulomb or UNION contacts)."""
-    coulomb, union = cones.projector.pieces
-    return coulomb[0].size + union[0].size > 0 and cones.tangent_dim == 1
+    return cones.projector.friction_normal.size > 0 and cones.tangent_dim == 1
 
 
 def run_apgd_cones(data: DualData, cones: Cones, z: np.ndarray, tol: float, max_iter: int,
@@ -150,17 +149,15 @@ def run_apgd_cones(data: DualData, cones: Cones, z: np.ndarray, tol: float, max_
     else:
         empty = np.zeros(0, dtype=np.uint32)
         operator = (*csr_arrays(data.sparse_arrays()), empty, empty, np.zeros(0), np.zeros(0))
-    (cone_n, cone_t, cone_mu), (union_n, union_t, union_mu) = cones.projector.pieces
-    union = np.repeat([False, True], [cone_n.size, union_n.size])
+    projector = cones.projector
     lipschitz = initial_lipschitz(data, z)
     streaming = z.size >= STREAMING_ROWS if streaming is None else streaming
     best, best_residual, history, code, iterations, products, _, offset = kernel(
         *operator, data.offset,
         data.offset if base is None else base, data.project.lower, data.project.upper,
-        positions(cones.projector.box_rows if streaming else np.zeros(0, dtype=np.uint32)),
-        positions(np.concatenate([cone_n, union_n])),
-        positions(np.concatenate([cone_t[:, 0], union_t[:, 0]])),
-        np.concatenate([cone_mu, union_mu]), union, data.ratio, z, tol, max_iter, lipschitz,
+        positions(projector.box_rows if streaming else np.zeros(0, dtype=np.uint32)),
+        positions(projector.friction_normal), positions(projector.friction_tangent[:, 0]),
+        projector.friction_mu, projector.friction_union, data.ratio, z, tol, max_iter, lipschitz,
         DIVERGENCE_FACTOR, every, check_every, streaming)
     data.products += products
     tracker = ResidualTracker(data, tol)

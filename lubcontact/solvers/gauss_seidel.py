@@ -78,11 +78,10 @@ def nonsmooth_gauss_seidel(problem: ConicProblem, *, tol: float, max_iter: int =
     q[:nc] -= problem.shift
     unshifted = problem.with_shift(np.zeros(nc))
     projector = cones.projector
-    (coulomb_n, coulomb_t, coulomb_mu), (union_n, union_t, union_mu) = projector.pieces
-    cone_n = np.concatenate([coulomb_n, union_n]).astype(np.int64)
-    cone_t = np.concatenate([coulomb_t[:, 0], union_t[:, 0]]).astype(np.int64)
-    mu = np.concatenate([coulomb_mu, union_mu]).astype(float)
-    unilateral = np.arange(cone_n.size) < coulomb_n.size
+    cone_n = projector.friction_normal.astype(np.int64)
+    cone_t = projector.friction_tangent[:, 0].astype(np.int64)
+    mu = projector.friction_mu.astype(float)
+    unilateral = ~projector.friction_union
     box = np.ones(problem.n_rows, dtype=bool)
     box[cone_n] = False
     box[cone_t] = False

@@ -318,7 +318,7 @@ class AlartCurnier:
     tangent_rows : ndarray of int, shape (nf,)
         ``cone_t``'s one column (planar problems only).
     q_scale : float
-        ``1 + |q|``, the FCLIB error's denominator (planar problems only).
+        ``1 + |q|``, the FCLIB error's denominator.
     rank_bound : int
         An upper bound on the rank of ``W`` (the problem's ``delassus_rank_bound``).
     """
@@ -340,13 +340,10 @@ class AlartCurnier:
         self.rank_bound = problem.delassus_rank_bound
         projector = cones.projector
         self.lower, self.upper = projector.lower.copy(), projector.upper.copy()
-        (coulomb_n, coulomb_t, coulomb_mu), (union_n, union_t, union_mu) = projector.pieces
-        self.cone_n = np.concatenate([coulomb_n, union_n])
-        self.cone_t = np.concatenate([coulomb_t, union_t])
-        self.cone_mu = np.concatenate([coulomb_mu, union_mu])
-        self.unilateral = np.arange(self.cone_n.size) < coulomb_n.size
+        self.cone_n, self.cone_t = projector.friction_normal, projector.friction_tangent
+        self.cone_mu, self.unilateral = projector.friction_mu, ~projector.friction_union
         self.box = np.ones(self.n_rows, dtype=bool)
-        self.box[coulomb_n] = False
+        self.box[self.cone_n[self.unilateral]] = False
         self.box[self.cone_t.ravel()] = False
         diagonal = self.W.diagonal()[:nc]
         positive = diagonal[diagonal > 0]
@@ -367,9 +364,9 @@ class AlartCurnier:
         self.compiled_rows = self.planar and not self.dense
         if self.compiled_rows:
             self.w_arrays = csr_arrays(self.W)
+        self.q_scale = 1.0 + float(np.sqrt(self.q @ self.q))
         if self.planar:             # one tangential row per contact; the FCLIB error compiled
             self.tangent_rows = np.ascontiguousarray(self.cone_t[:, 0])
-            self.q_scale = 1.0 + float(np.linalg.norm(self.q))
         if self.compiled:
             self.W = np.ascontiguousarray(self.W)
 
@@ -1043,7 +1040,6 @@ def _proximal_newton(function: AlartCurnier, unshifted: ConicProblem, forces: np
     polish to :data:`JOINT_FINISH` ``tol``, whose target that is).
     """
     scale = sigma * function.typical
-    q_norm = 1.0 + float(np.linalg.norm(function.q))
     error = function.coulomb_error(unshifted, forces)
     history, best = [error], (error, forces)
     iterations = gradient_steps = proximal_steps = 0
@@ -1058,7 +1054,7 @@ def _proximal_newton(function: AlartCurnier, unshifted: ConicProblem, forces: np
         function.set_proximal(scale, forces)
         if scale > 0:
             inner = _newton_phase(function, unshifted, forces, tol, min(INNER_CAP, max_iter - iterations),
-                                  inner_tol=INNER_REDUCTION * error * q_norm)
+                                  inner_tol=INNER_REDUCTION * error * function.q_scale)
         else:                           # plain Newton: one run, its line search's memory intact
             inner = _newton_phase(function, unshifted, forces, tol, min(STALL_WINDOW, max_iter - iterations))
         proximal_steps += 1
