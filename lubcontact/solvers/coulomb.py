@@ -228,7 +228,7 @@ def solve_native_coulomb(problem: ConicProblem, method: str, *, tol: float = 1e-
     info = solver_info(method)
     branches = _Branches(problem, warm_start, threshold=max(1e3 * tol, 1e-7))
     native_union = ConeKind.UNION in info.cones
-    if branches.union.any() and not native_union and not {ConeKind.COULOMB, ConeKind.NONPOS} <= info.cones:
+    if not branches.convex and not native_union and not {ConeKind.COULOMB, ConeKind.NONPOS} <= info.cones:
         raise ValueError(f"method: {method!r} cannot solve this problem: UNION contacts need "
                          "both pieces (COULOMB and NONPOS contacts)")
     clock = time.perf_counter()
@@ -253,7 +253,7 @@ def solve_native_coulomb(problem: ConicProblem, method: str, *, tol: float = 1e-
         if out.status == FAILED or not np.isfinite(out.forces).all():
             convex, settled = branches.on(unshifted), True
             break
-        if native_union:                         # each contact's piece from its force's sign
+        if native_union and not branches.convex:     # each contact's piece from its force's sign
             branches.pulled = problem.cones.pulled(out.forces)
         convex = branches.on(unshifted)
         shift = branches.restrict(coulomb_shift(convex, out.forces * force))
@@ -344,8 +344,9 @@ class _Branches:
     def __init__(self, problem: ConicProblem, warm_start: np.ndarray | None, threshold: float):
         self.base = problem
         self.union = problem.cones.mask(ConeKind.UNION)
+        self.convex = not self.union.any()
         self.pulled = np.zeros(problem.cones.count, dtype=bool)
-        if warm_start is not None:
+        if warm_start is not None and not self.convex:
             self.pulled = problem.cones.pulled(warm_start)
         self.threshold = threshold
         self.flips: list[int] = []
@@ -360,7 +361,7 @@ class _Branches:
 
     def on(self, problem: ConicProblem) -> ConicProblem:
         """``problem`` (the base problem or its normalised form) with the current pieces."""
-        if not self.union.any():
+        if self.convex:
             return problem
         return problem.with_cones(problem.cones.with_branches(self.pulled))
 
@@ -370,7 +371,7 @@ class _Branches:
 
     def update(self, convex: ConicProblem, forces: np.ndarray, length: float, force_unit: float) -> bool:
         """Flip the contacts inconsistent with the union; returns whether any flipped."""
-        if not self.union.any():
+        if self.convex:
             return False
         nc = convex.cones.count
         normal = forces[:nc] / force_unit
