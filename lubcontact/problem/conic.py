@@ -131,7 +131,7 @@ class ConicProblemMixin:
 
     def with_shift(self, shift: np.ndarray) -> Self:
         """A copy with another shift ``s``, sharing the matrices (``W`` is not rebuilt)."""
-        return self._replaced(shift=np.asarray(shift, dtype=float).copy())
+        return self._replaced(shift=shift)           # checked and copied there (checks.as_array)
 
     def with_cones(self, cones: Cones) -> Self:
         """A copy with other force sets of the same layout, sharing the matrices."""

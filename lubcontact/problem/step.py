@@ -246,7 +246,7 @@ class StepProblem(ConicProblemMixin):
                                     _jacobian_source=(self, velocity_scale / speed),
                                     gaps=self.gaps / length, cones=self.cones,
                                     dt=1.0, shift=self.shift / length, keys=self.keys,
-                                    scaling=scaling,
+                                    scaling=scaling, _factor_weight=None,   # M = I, dt = 1
                                     obstacle_offset=None if self.obstacle_offset is None
                                     else self.obstacle_offset / length)
 
