@@ -69,7 +69,8 @@ import inspect
 import time
 import warnings
 from dataclasses import dataclass, field
-from functools import cached_property
+from functools import cache, cached_property
+from types import ModuleType
 
 import numpy as np
 import scipy.sparse as sp
@@ -288,6 +289,15 @@ MAX_HALVINGS = 30
 """Step halvings before a direction is given up."""
 
 
+@cache
+def _kernels() -> ModuleType:
+    """:mod:`.kernels` (numba), imported on first use; an import statement in a function costs
+    0.8 us each time, which a small solve paid at each phase and each error."""
+    from . import kernels
+
+    return kernels
+
+
 class AlartCurnier:
     """The Alart-Curnier function of one normalised problem and its generalised Jacobian.
 
@@ -409,11 +419,9 @@ class AlartCurnier:
         if velocity is None:
             velocity = self.W @ forces + self.q
         if self.planar:
-            from .kernels import coulomb_error_2d  # numba, imported on first use
-
-            return float(coulomb_error_2d(forces, velocity, self.lower, self.upper, self.cone_n,
-                                          self.tangent_rows, self.cone_mu, self.unilateral,
-                                          self.q_scale))
+            return float(_kernels().coulomb_error_2d(forces, velocity, self.lower, self.upper,
+                                                     self.cone_n, self.tangent_rows, self.cone_mu,
+                                                     self.unilateral, self.q_scale))
         return coulomb_error(unshifted, forces, velocity)
 
     def jacobian(self, y: np.ndarray) -> tuple[sp.csr_matrix | np.ndarray, np.ndarray, int]:
@@ -432,9 +440,7 @@ class AlartCurnier:
             :func:`~lubcontact.solvers.kernels.sparse_jacobian_rows_2d` (``compiled_rows``).
         """
         if self.compiled_rows:
-            from .kernels import sparse_jacobian_rows_2d  # numba, imported on first use
-
-            rows, indptr, indices, data, plain = sparse_jacobian_rows_2d(
+            rows, indptr, indices, data, plain = _kernels().sparse_jacobian_rows_2d(
                 *self.w_arrays, self.rho, self.lower, self.upper,
                 self.box, self.cone_n, self.tangent_rows, self.cone_mu, self.unilateral,
                 self.sigma, y)
@@ -510,13 +516,11 @@ class AlartCurnier:
         if not self.compiled_rows:
             J, active, plain = self.jacobian(y)
             return _newton_direction(J, active, phi, self.factorisations, self.singular_by_count(plain))
-        from .kernels import reduced_newton_system_2d  # numba, imported on first use
-
         kept, indptr, indices, data, rhs, direction, sliding, normal, slope = \
-            reduced_newton_system_2d(*self.w_arrays, self.rho,
-                                     self.lower, self.upper, self.box, self.cone_n,
-                                     self.tangent_rows, self.cone_mu, self.unilateral,
-                                     self.sigma, y, phi)
+            _kernels().reduced_newton_system_2d(*self.w_arrays, self.rho,
+                                                self.lower, self.upper, self.box, self.cone_n,
+                                                self.tangent_rows, self.cone_mu, self.unilateral,
+                                                self.sigma, y, phi)
         if kept.size:
             block = sp.csc_matrix((data, indices, indptr), shape=(kept.size, kept.size))
             block.has_sorted_indices = True
@@ -550,10 +554,8 @@ class AlartCurnier:
         self.set_proximal(0.0, forces)
         y = self.residual(forces)[1]
         if self.planar:
-            from .kernels import plain_rows_2d  # numba, imported on first use
-
-            plain = plain_rows_2d(self.lower, self.upper, self.box, self.cone_n, self.tangent_rows,
-                                  self.cone_mu, self.unilateral, y)
+            plain = _kernels().plain_rows_2d(self.lower, self.upper, self.box, self.cone_n,
+                                             self.tangent_rows, self.cone_mu, self.unilateral, y)
         else:
             plain = self.jacobian(y)[2]
         return self.singular_by_count(plain)
@@ -649,10 +651,9 @@ class _Factorisations:
         to it."""
         if not self.carry or self.ordered_rows is None:
             return None
-        from .kernels import carried_order  # numba, imported on first use
-
-        order, carried = carried_order(matrix.indptr, matrix.indices, rows, self.ordered_rows,
-                                       self.positions, NEW_ROWS_LIMIT * rows.size)
+        order, carried = _kernels().carried_order(matrix.indptr, matrix.indices, rows,
+                                                  self.ordered_rows, self.positions,
+                                                  NEW_ROWS_LIMIT * rows.size)
         return order if carried else None
 
 
@@ -677,19 +678,17 @@ class _StaticLU:
     def factorise(cls, matrix: sp.csc_matrix) -> _StaticLU | None:
         """The factors of ``matrix`` (CSC, square), or None where a pivot is below ``1e-14``
         times its largest entry (SuperLU then factorises it, pivoting)."""
-        from .kernels import static_lu, static_pattern  # numba, imported on first use
-
         indptr, indices, data = csr_arrays(matrix)      # unsigned: no wrap-around checks
-        pattern = tuple(positions(array) for array in static_pattern(indptr, indices))
-        lower, upper, failed = static_lu(indptr, indices, data, *pattern)
+        compiled = _kernels()
+        pattern = tuple(positions(array) for array in compiled.static_pattern(indptr, indices))
+        lower, upper, failed = compiled.static_lu(indptr, indices, data, *pattern)
         return None if failed >= 0 else cls(matrix, pattern, lower, upper)
 
     def solve(self, rhs: np.ndarray) -> np.ndarray:
         """``matrix^-1 rhs``."""
-        from .kernels import static_lu_solve  # numba, imported on first use
-
         lower_ptr, lower_idx, upper_ptr, upper_idx = self.pattern
-        return static_lu_solve(lower_ptr, lower_idx, self.lower, upper_ptr, upper_idx, self.upper, rhs)
+        return _kernels().static_lu_solve(lower_ptr, lower_idx, self.lower, upper_ptr, upper_idx,
+                                          self.upper, rhs)
 
     def accurate(self, solved: np.ndarray, rhs: np.ndarray) -> bool:
         """Whether ``solved`` solves ``matrix x = rhs`` with a normwise backward error
@@ -706,9 +705,7 @@ def _permuted(matrix: sp.csc_matrix, order: np.ndarray) -> sp.csc_matrix:
     indices, as SuperLU takes it (:func:`~lubcontact.solvers.kernels.permuted_csc`: 0.96 ms a
     block of a 12 000-grain gluey flow against 1.4 ms for scipy's column gather and two
     conversions, docs/records/benchmarks.md)."""
-    from .kernels import permuted_csc  # numba, imported on first use
-
-    indptr, indices, data = permuted_csc(*csr_arrays(matrix), positions(order))
+    indptr, indices, data = _kernels().permuted_csc(*csr_arrays(matrix), positions(order))
     permuted = sp.csc_matrix((data, indices, indptr), shape=matrix.shape)
     permuted.has_sorted_indices = True
     return permuted
@@ -1200,16 +1197,16 @@ def _newton_phase(function: AlartCurnier, unshifted: ConicProblem, forces: np.nd
 def _compiled_phase(function: AlartCurnier, forces: np.ndarray, tol: float, max_iter: int,
                     inner_tol: float) -> _Phase:
     """:func:`_newton_phase` by :func:`~lubcontact.solvers.kernels.newton_phase_2d`."""
-    from .kernels import CONVERGED_CODE, FAILED_CODE, newton_phase_2d  # numba, on first use
-
     (best, best_error, last, last_error, iterations, gradient_steps, code, history,
-     solved) = newton_phase_2d(
+     solved) = _kernels().newton_phase_2d(
         function.W, function.q, function.rho, function.lower, function.upper, function.box,
         function.cone_n, function.tangent_rows, function.cone_mu, function.unilateral,
         function.sigma, function.center, function.q_scale, np.asarray(forces, dtype=float),
         float(tol), int(max_iter), float(inner_tol), np.array(REGULARISATIONS, dtype=float),
         LINE_SEARCH_MEMORY, ARMIJO, MAX_HALVINGS)
-    status = FAILED if code == FAILED_CODE else CONVERGED if code == CONVERGED_CODE else MAX_ITER
+    compiled = _kernels()
+    status = FAILED if code == compiled.FAILED_CODE else \
+        CONVERGED if code == compiled.CONVERGED_CODE else MAX_ITER
     return _Phase(forces=best, status=status, iterations=int(iterations),
                   error=float(best_error), history=history, gradient_steps=int(gradient_steps),
                   solved=bool(solved), last=last, last_error=float(last_error))
