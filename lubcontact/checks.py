@@ -37,7 +37,7 @@ def as_array(field: str, value: ArrayLike, shape: tuple[int | None, ...] | None 
         arr = np.array(value, dtype=dtype)
     except (TypeError, ValueError) as exc:
         raise ValueError(f"{field}: cannot convert {value!r} to an array of {dtype.__name__}") from exc
-    if shape is not None:
+    if shape is not None and arr.shape != shape:        # (equal: no entry to compare)
         ok = arr.ndim == len(shape) and all(
             want is None or want == got for want, got in zip(shape, arr.shape))
         if not ok:
