@@ -362,17 +362,17 @@ def _cone_constraints(cp: ModuleType, bound: Expression, tangential: Expression,
     return [cp.SOC(bound, cp.reshape(t_expr, (tangent_dim, -1), order="F"), axis=0)]
 
 
-def _normal_bounds() -> tuple[np.ndarray, np.ndarray]:
-    """Lower and upper bound of a contact's normal row, indexed by its :class:`ConeKind`, shape
-    (5,) each: ``[0, inf)`` NONNEG, ``R`` FREE, ``(-inf, 0]`` NONPOS; ``R`` for the friction
+def _normal_bounds() -> np.ndarray:
+    """Lower and upper bound (rows) of a contact's normal row, indexed by its :class:`ConeKind`,
+    shape (2, 5): ``[0, inf)`` NONNEG, ``R`` FREE, ``(-inf, 0]`` NONPOS; ``R`` for the friction
     cones, whose rows :class:`ConeProjector` projects after the box."""
-    lower, upper = np.full(len(ConeKind), -np.inf), np.full(len(ConeKind), np.inf)
-    lower[ConeKind.NONNEG] = upper[ConeKind.NONPOS] = 0.0
-    lower.flags.writeable = upper.flags.writeable = False
-    return lower, upper
+    bounds = np.array([np.full(len(ConeKind), -np.inf), np.full(len(ConeKind), np.inf)])
+    bounds[0, ConeKind.NONNEG] = bounds[1, ConeKind.NONPOS] = 0.0
+    bounds.flags.writeable = False
+    return bounds
 
 
-_NORMAL_LOWER, _NORMAL_UPPER = _normal_bounds()
+_NORMAL_BOUNDS = _normal_bounds()
 
 
 class ConeProjector:
@@ -400,9 +400,9 @@ class ConeProjector:
     def __init__(self, cones: Cones):
         nc, dim_t = cones.count, cones.tangent_dim
         kinds = cones.kinds
-        tangent_bounds = np.zeros(cones.n_rows - nc)
-        self.lower = np.concatenate([_NORMAL_LOWER[kinds], tangent_bounds])
-        self.upper = np.concatenate([_NORMAL_UPPER[kinds], tangent_bounds])
+        bounds = np.zeros((2, cones.n_rows))          # tangential rows: {0}
+        bounds[:, :nc] = _NORMAL_BOUNDS[:, kinds]
+        self.lower, self.upper = bounds
         tangential_kinds = kinds[cones.tangential]
         coulomb = tangential_kinds == int(ConeKind.COULOMB)
         if coulomb.all():                 # the common case: every one COULOMB, in order

@@ -353,7 +353,7 @@ class _Branches:
 
     @property
     def pulled_contacts(self) -> np.ndarray:
-        return np.flatnonzero(self.pulled)
+        return np.zeros(0, dtype=int) if self.convex else np.flatnonzero(self.pulled)
 
     def problem(self) -> ConicProblem:
         """The convex problem with every UNION contact on its current piece."""

@@ -113,7 +113,8 @@ class SolverInfo:
         if self.step_only and not isinstance(problem, StepProblem):
             return "it needs a step problem (velocities and masses), not a local problem"
         cones = problem.cones
-        unsupported = sorted(kind.name for kind in cones.present_kinds - self.cones)
+        unsupported = [] if self.cones == ALL_CONES else \
+            sorted(kind.name for kind in cones.present_kinds - self.cones)
         if unsupported:
             return f"{' and '.join(unsupported)} contacts are not supported"
         if cones.has_friction and cones.tangent_dim > 1 and not self.second_order:
