@@ -367,7 +367,7 @@ class _Branches:
 
     def restrict(self, shift: np.ndarray) -> np.ndarray:
         """No shift on pulled contacts."""
-        return np.where(self.pulled, 0.0, shift)
+        return shift if self.convex else np.where(self.pulled, 0.0, shift)
 
     def update(self, convex: ConicProblem, forces: np.ndarray, length: float, force_unit: float) -> bool:
         """Flip the contacts inconsistent with the union; returns whether any flipped."""
