@@ -356,11 +356,10 @@ class AlartCurnier:
         self.box[self.cone_n[self.unilateral]] = False
         self.box[self.cone_t.ravel()] = False
         diagonal = self.W.diagonal()[:nc]
-        positive = diagonal[diagonal > 0]
-        floor = 1e-12 * (positive.max() if positive.size else 1.0)
+        largest = diagonal.max(initial=0.0)
+        floor = 1e-12 * (largest if largest > 0 else 1.0)
         rho_contact = 1.0 / np.maximum(diagonal, floor)
-        row_contact = np.concatenate([np.arange(nc), np.repeat(cones.tangential, dim_t)]).astype(int)
-        self.rho = rho_contact[row_contact]
+        self.rho = np.concatenate([rho_contact, np.repeat(rho_contact[cones.tangential], dim_t)])
         self.dim_t = dim_t
         ordered = np.sort(diagonal)             # its median (np.median costs 8 us on a few values)
         middle = nc // 2
