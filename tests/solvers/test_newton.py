@@ -605,10 +605,11 @@ def test_the_compiled_residual_jacobian_and_error_are_their_numpy_twins(name, si
 @pytest.mark.parametrize("name", COMPILED_CASES)
 @pytest.mark.parametrize("sigma", [0.0, 1e-2])
 def test_the_compiled_sparse_jacobian_rows_are_the_numpy_rows(name, sigma, monkeypatch):
-    """On the sparse lane (limits set to zero) a 2D problem's Jacobian rows are assembled by a
-    compiled kernel: the same active rows and values as the numpy sparse product, and the same
-    count of rows of diag(rho) W (singular_by_count's; also counted alone by plain_rows_2d), at
-    points with every contact state."""
+    """On the sparse lane (limits set to zero) a 2D problem's residual and Jacobian rows are
+    computed by compiled kernels: the same residual, velocity and ``y`` as the numpy ones, the
+    same active rows and values as the numpy sparse product, and the same count of rows of
+    diag(rho) W (singular_by_count's; also counted alone by plain_rows_2d), at points with every
+    contact state."""
     from lubcontact.solvers.kernels import plain_rows_2d
 
     use_the_sparse_lane(monkeypatch)
@@ -619,11 +620,16 @@ def test_the_compiled_sparse_jacobian_rows_are_the_numpy_rows(name, sigma, monke
     function.set_proximal(sigma, rng.normal(size=problem.n_rows))
     for _ in range(20):
         forces = rng.normal(size=problem.n_rows) * rng.choice([1e-3, 1.0, 1e3], size=problem.n_rows)
-        y = function.residual(forces)[1]
+        compiled = function.residual(forces)
+        y = compiled[1]
         rows, active, plain = function.jacobian(y)
         function.compiled_rows = False
         expected, expected_active, expected_plain = function.jacobian(y)
+        numpy_residual = function.residual(forces)
         function.compiled_rows = True
+        scale = np.abs(forces).max() + np.abs(compiled[2]).max()
+        for mine, theirs in zip(compiled, numpy_residual, strict=True):
+            assert np.abs(mine - theirs).max() <= 1e-13 * scale
         assert np.array_equal(active, expected_active) and plain == expected_plain
         assert plain_rows_2d(function.lower, function.upper, function.box, function.cone_n,
                              function.tangent_rows, function.cone_mu, function.unilateral,
