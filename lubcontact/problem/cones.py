@@ -403,17 +403,17 @@ class ConeProjector:
         bounds = np.zeros((2, cones.n_rows))          # tangential rows: {0}
         bounds[:, :nc] = _NORMAL_BOUNDS[:, kinds]
         self.lower, self.upper = bounds
-        tangential_kinds = kinds[cones.tangential]
-        coulomb = tangential_kinds == int(ConeKind.COULOMB)
+        tangential = cones.tangential if cones.has_friction else np.zeros(0, dtype=int)
+        coulomb = kinds[tangential] == int(ConeKind.COULOMB)
         if coulomb.all():                 # the common case: every one COULOMB, in order
             split = coulomb.size
             positions = np.arange(split)
-            self.friction_normal = cones.tangential
+            self.friction_normal = tangential
         else:
             split = int(np.count_nonzero(coulomb))
-            union = tangential_kinds == int(ConeKind.UNION)
+            union = kinds[tangential] == int(ConeKind.UNION)
             positions = np.concatenate([np.flatnonzero(coulomb), np.flatnonzero(union)])
-            self.friction_normal = cones.tangential[positions]
+            self.friction_normal = tangential[positions]
         self.friction_tangent = (nc + positions)[:, None] if dim_t == 1 else \
             nc + positions[:, None] * dim_t + np.arange(dim_t)
         self.friction_mu = cones.mu[self.friction_normal]

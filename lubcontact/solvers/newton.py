@@ -368,14 +368,14 @@ class AlartCurnier:
             float(0.5 * (ordered[middle - 1] + ordered[middle]))
         self.sigma, self.center = 0.0, np.zeros(self.n_rows)
         self.factorisations = _Factorisations(carry=self.planar)
-        # on the sparse lane, a 2D problem's Newton systems and Jacobian rows are assembled
-        # compiled (a numpy sparse product G W and sum cost as much as the LU on developed
-        # 2000-grain flows)
+        # on the sparse lane, a 2D problem's Newton systems, Jacobian rows and residuals are
+        # assembled compiled (a numpy sparse product G W and sum cost as much as the LU on
+        # developed 2000-grain flows)
         self.compiled_rows = self.planar and not self.dense
         if self.compiled_rows:
             self.w_arrays = csr_arrays(self.W)
         self.q_scale = 1.0 + float(np.sqrt(self.q @ self.q))
-        if self.planar:             # one tangential row per contact; the FCLIB error compiled
+        if self.planar:             # one tangential row per contact, as the kernels take them
             self.tangent_rows = np.ascontiguousarray(self.cone_t[:, 0])
         if self.compiled:
             self.W = np.ascontiguousarray(self.W)

@@ -154,6 +154,16 @@ def test_frictionless_kinds_and_tangential_rows_of_frictionless_contacts():
     np.testing.assert_array_equal(cones.project_polar(x), [-2.0, 0.0, 4.0, 5.0])
 
 
+def test_cones_without_tangential_rows_project_whatever_the_empty_list_s_dtype():
+    """A contact list without tangential rows given as an empty float array (``np.array([])``)
+    is a box: the projector's friction contacts are empty index arrays (it indexed with the
+    float array, an IndexError)."""
+    cones = Cones(kinds=np.array([ConeKind.NONNEG, ConeKind.NONPOS], dtype=np.int8),
+                  mu=np.zeros(2), tangential=np.array([]), tangent_dim=1)
+    np.testing.assert_array_equal(cones.project(np.array([-1.0, 2.0])), [0.0, 0.0])
+    assert cones.projector.friction_normal.size == 0
+
+
 def test_union_picks_the_pull_piece_below_the_cone():
     cones = Cones(kinds=np.array([ConeKind.UNION], dtype=np.int8), mu=np.array([0.5]),
                   tangential=np.array([0]), tangent_dim=1)
