@@ -155,6 +155,21 @@ developed flows (exact Coulomb, tol 1e-6), 1e-3 against 3e-3 against 1e-2: gluey
 creeping 300-grain bed 234, 222, and with 1e-2 a stall. Not on the dense lane, where the warm
 starts of small piles near rest took 3-14 % more iterations with either
 (docs/records/benchmarks.md, "a firmer first weight on flows")."""
+SIGMA_DECREASE = 10.0
+"""The factor dividing the proximal weight after an outer iteration whose subproblem was solved
+(:func:`_proximal_newton`), but on gluey flows' steps (:data:`UNION_SIGMA_DECREASE`)."""
+UNION_SIGMA_DECREASE = 3.0
+"""The factor dividing the proximal weight after a solved subproblem on a 2D problem of the sparse
+lane with UNION contacts (a gluey flow's step, whose contacts change piece): more outer
+iterations, each in Newton's fast local phase. Newton iterations summed over captured steps of
+developed gluey flows (exact Coulomb, tol 1e-6), factor 10 against 3: 12 000 grains (70
+consecutive steps) 2 712 against 2 027 (one of the two steps that stalled into the Gauss-Seidel
+fallback converges, the other needs one round of it instead of two), 8 000 (90 steps) 2 599
+against 2 489, 4 000 (80) 1 929 against 1 844, 2 000 (8) 179 against 172. Not on dry problems: the
+tests' creeping 300-grain bed stalls with 3 or 4 (converges with 5 and 10), and on dry flows the
+steps cost more time with 3 (docs/records/benchmarks.md, "a slower decrease of the proximal
+weight on gluey flows"); nor on the dense lane, where small piles near rest took 2-6 % more
+iterations with 5 or 3."""
 PLAIN_TRY = 5
 """Plain Newton iterations (no proximal weight), at most, tried first from a warm start on a
 small 2D problem (the dense lane) without friction cones, unless plain Newton's block is
@@ -1019,7 +1034,8 @@ def _proximal_newton(function: AlartCurnier, unshifted: ConicProblem, forces: np
     ``r_k``: a well-posed problem even where ``W`` is rank deficient (more
     contact rows than degrees of freedom, a hyperstatic packing), whose Newton
     system is not singular. ``sigma`` starts at ``sigma`` times the median
-    diagonal of ``W`` (0: plain Newton throughout), is divided by 10 after an
+    diagonal of ``W`` (0: plain Newton throughout), is divided by :data:`SIGMA_DECREASE`
+    (:data:`UNION_SIGMA_DECREASE` on a 2D sparse problem with UNION contacts) after an
     outer iteration whose subproblem was solved (towards plain Newton, down to
     :data:`SIGMA_MIN`, but not down to a weight whose subproblem was not solved
     since the error last fell by :data:`STALL_FACTOR`) and multiplied by 10
@@ -1043,6 +1059,8 @@ def _proximal_newton(function: AlartCurnier, unshifted: ConicProblem, forces: np
     polish to :data:`JOINT_FINISH` ``tol``, whose target that is).
     """
     scale = sigma * function.typical
+    union = function.planar and not function.dense and not function.unilateral.all()
+    decrease = UNION_SIGMA_DECREASE if union else SIGMA_DECREASE
     error = function.coulomb_error(unshifted, forces)
     history, best = [error], (error, forces)
     iterations = gradient_steps = proximal_steps = 0
@@ -1077,8 +1095,8 @@ def _proximal_newton(function: AlartCurnier, unshifted: ConicProblem, forces: np
             if scale > SIGMA_MAX * function.typical:
                 status = STALLED
                 break
-        elif scale / 10.0 > floor:          # towards plain Newton, not to a weight that failed
-            scale = max(scale / 10.0, SIGMA_MIN * function.typical)
+        elif scale / decrease > floor:      # towards plain Newton, not to a weight that failed
+            scale = max(scale / decrease, SIGMA_MIN * function.typical)
         if inner.iterations == 0:
             status = FAILED
             break
