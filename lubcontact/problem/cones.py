@@ -391,7 +391,8 @@ class ConeProjector:
         The friction contacts (COULOMB, then UNION, each kind in row order; a contact of
         another kind with tangential rows has no cone): normal rows (nf,),
         tangential rows (nf, tangent_dim), coefficients (nf,) and which are UNION (nf,) of
-        bool. Solvers that loop over the contacts read them here rather than joining the pieces.
+        bool. Solvers that loop over the contacts read them here rather than joining the pieces
+        (read only: ``friction_normal`` is ``cones.tangential`` itself where all are COULOMB).
     pieces : list of tuple of ndarray
         The COULOMB and the UNION contacts' ``(normal rows, tangential rows, mu)``: views of
         the ``friction_`` arrays.
