@@ -241,8 +241,11 @@ class Simulation:
         """
         settings = self.settings if settings is None else settings
         timings: dict[str, float] = {}
+        start = time.perf_counter()
         searched = self.search_distance()
+        searching = time.perf_counter() - start
         contacts, gamma, problem, guess, shift = self._build_problem(timings, searched)
+        timings["contacts"] += searching          # the candidate distance: part of the search
         start = time.perf_counter()
         result = settings.solve(problem, guess, shift)
         unusable = self.max_residual is not None and not result.residual_per_row <= self.max_residual

@@ -27,7 +27,7 @@ class StepReport:
         ``D + dt u_n`` after the step.
     timings : dict
         Wall-clock seconds of the step's phases: ``contacts`` (the candidate
-        search), ``assembly`` (the step problem and its warm start), ``solve``
+        search, its distance included), ``assembly`` (the step problem and its warm start), ``solve``
         (set-up, iterations, finish, fixed point) and ``update`` (glue states,
         integration, checks, records).
     """
