@@ -27,9 +27,9 @@ class StepReport:
         ``D + dt u_n`` after the step.
     timings : dict
         Wall-clock seconds of the step's phases: ``contacts`` (the candidate
-        search, its distance included), ``assembly`` (the step problem and its warm start), ``solve``
-        (set-up, iterations, finish, fixed point) and ``update`` (glue states,
-        integration, checks, records).
+        search, its distance included), ``assembly`` (the step problem and its
+        warm start), ``solve`` (set-up, iterations, finish, fixed point) and
+        ``update`` (glue states, integration, checks, records).
     """
 
     contacts: Contacts
