@@ -344,7 +344,7 @@ class _Branches:
     def __init__(self, problem: ConicProblem, warm_start: np.ndarray | None, threshold: float):
         self.base = problem
         self.union = problem.cones.mask(ConeKind.UNION)
-        self.convex = not self.union.any()
+        self.convex = problem.cones.is_convex
         self.pulled = np.zeros(problem.cones.count, dtype=bool)
         if warm_start is not None and not self.convex:
             self.pulled = problem.cones.pulled(warm_start)

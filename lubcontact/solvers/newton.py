@@ -336,6 +336,10 @@ class AlartCurnier:
         dense ``W`` (at most ``DENSE_LIMIT`` rows); one on the sparse lane whose Newton systems,
         Jacobian rows and residuals are assembled compiled (:mod:`~lubcontact.solvers.kernels`;
         the residual in one pass, 6 % of a 12 000-grain gluey step).
+    flow_lane, convex : bool
+        A 2D problem of the sparse lane (a flow's step: :data:`WARM_SPARSE_WEIGHT`, and with
+        UNION contacts :data:`UNION_SIGMA_DECREASE`; fixed here, where ``compiled_rows`` is an
+        implementation switch); one without UNION contacts (``Cones.is_convex``).
     w_arrays : tuple of ndarray
         ``W``'s CSR arrays with unsigned indices (:func:`~.compiled_apgd.csr_arrays`), for the
         kernels of the sparse lane (``compiled_rows``): numba checks every signed index for
@@ -386,7 +390,9 @@ class AlartCurnier:
         # on the sparse lane, a 2D problem's Newton systems, Jacobian rows and residuals are
         # assembled compiled (a numpy sparse product G W and sum cost as much as the LU on
         # developed 2000-grain flows)
-        self.compiled_rows = self.planar and not self.dense
+        self.flow_lane = self.planar and not self.dense
+        self.convex = cones.is_convex
+        self.compiled_rows = self.flow_lane
         if self.compiled_rows:
             self.w_arrays = csr_arrays(self.W)
         self.q_scale = 1.0 + float(np.sqrt(self.q @ self.q))
@@ -999,7 +1005,7 @@ def _strategies(function: AlartCurnier, unshifted: ConicProblem, forces: np.ndar
     plain_try = PLAIN_TRY > 0 and max_iter > 2 * PLAIN_TRY and warm and function.dense \
         and function.planar and not function.cone_n.size and not function.singular_at(forces)
     starts = [(0.0, forces, True)] if plain_try else []
-    first = WARM_SPARSE_WEIGHT if warm and function.planar and not function.dense else STRATEGIES[0]
+    first = WARM_SPARSE_WEIGHT if warm and function.flow_lane else STRATEGIES[0]
     starts += [(first, forces, False)] \
         + ([(STRATEGIES[0], np.zeros_like(forces), False)] if warm else []) \
         + [(sigma, forces, False) for sigma in STRATEGIES[1:]]
@@ -1059,8 +1065,7 @@ def _proximal_newton(function: AlartCurnier, unshifted: ConicProblem, forces: np
     polish to :data:`JOINT_FINISH` ``tol``, whose target that is).
     """
     scale = sigma * function.typical
-    union = function.planar and not function.dense and not function.unilateral.all()
-    decrease = UNION_SIGMA_DECREASE if union else SIGMA_DECREASE
+    decrease = UNION_SIGMA_DECREASE if function.flow_lane and not function.convex else SIGMA_DECREASE
     error = function.coulomb_error(unshifted, forces)
     history, best = [error], (error, forces)
     iterations = gradient_steps = proximal_steps = 0
@@ -1221,14 +1226,14 @@ def _newton_phase(function: AlartCurnier, unshifted: ConicProblem, forces: np.nd
 def _compiled_phase(function: AlartCurnier, forces: np.ndarray, tol: float, max_iter: int,
                     inner_tol: float) -> _Phase:
     """:func:`_newton_phase` by :func:`~lubcontact.solvers.kernels.newton_phase_2d`."""
+    compiled = _kernels()
     (best, best_error, last, last_error, iterations, gradient_steps, code, history,
-     solved) = _kernels().newton_phase_2d(
+     solved) = compiled.newton_phase_2d(
         function.W, function.q, function.rho, function.lower, function.upper, function.box,
         function.cone_n, function.tangent_rows, function.cone_mu, function.unilateral,
         function.sigma, function.center, function.q_scale, np.asarray(forces, dtype=float),
         float(tol), int(max_iter), float(inner_tol), np.array(REGULARISATIONS, dtype=float),
         LINE_SEARCH_MEMORY, ARMIJO, MAX_HALVINGS)
-    compiled = _kernels()
     status = FAILED if code == compiled.FAILED_CODE else \
         CONVERGED if code == compiled.CONVERGED_CODE else MAX_ITER
     return _Phase(forces=best, status=status, iterations=int(iterations),
