@@ -12,7 +12,7 @@ import numpy as np
 
 from ..problem.cones import Cones
 from ..problem.step import StepProblem
-from .contacts import Contacts, normal_jacobian, obstacle_offset, stacked_rows, tangential_jacobian
+from .contacts import Contacts, contact_jacobian, obstacle_offset
 from .scene import Scene
 
 
@@ -62,9 +62,8 @@ def assemble(scene: Scene, contacts: Contacts, cones: Cones, dt: float, *,
     force = scene.external_forces().ravel()
     free_velocity = velocity.copy()
     free_velocity[: force.size] += dt * force / mass[: force.size]
-    jacobian = normal_jacobian(contacts, rotations)
-    if cones.has_friction:
-        jacobian = stacked_rows(jacobian, tangential_jacobian(contacts, cones.tangential))
+    tangential = cones.tangential if cones.has_friction else np.zeros(0, dtype=np.int64)
+    jacobian = contact_jacobian(contacts, tangential, rotations)
     obstacles = scene.obstacle_velocities()
     moving = obstacle_offset(contacts, obstacles, cones.tangential, dt) if np.any(obstacles) \
         else None

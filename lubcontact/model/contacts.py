@@ -106,106 +106,39 @@ def dof_count(n_grains: int, dim: int, rotations: bool) -> int:
     return n_grains * (dim + (n_rotations(dim) if rotations else 0))
 
 
-def normal_jacobian(contacts: Contacts, rotations: bool) -> sp.csr_matrix:
-    """Rows ``B`` with ``(B v)_c = u_n,c``, shape (nc, n_dof)."""
-    nc, dim, n = contacts.count, contacts.dim, contacts.n_grains
-    first, second, first_is_b = _bodies_in_order(contacts.body_a, contacts.body_b, n)
-    sign = np.where(first_is_b, 1.0, -1.0)[:, None]           # +n on b's columns, -n on a's
-    columns = np.concatenate([first[:, None] * dim + np.arange(dim),
-                              second[:, None] * dim + np.arange(dim)], axis=1)
-    values = np.concatenate([sign * contacts.normals, -sign * contacts.normals], axis=1)
-    kept = np.ones(columns.shape, dtype=bool)
-    kept[:, dim:] = (second < n)[:, None]                      # an obstacle has no column
-    return rows_to_csr(columns, values, kept, (nc, dof_count(n, dim, rotations)))
-
-
-def tangential_jacobian(contacts: Contacts, which: np.ndarray) -> sp.csr_matrix:
-    """Rows ``T`` with ``(T v)`` = tangential relative velocity, for contacts ``which``.
-
-    Always built with rotational columns (friction needs them).
+def contact_jacobian(contacts: Contacts, tangential: np.ndarray, rotations: bool) -> sp.csr_matrix:
+    """``H``: the normal rows ``B`` of every contact, ``(B v)_c = u_n,c``, then the tangential
+    rows ``T`` of the contacts ``tangential``, ``(T v)`` = their tangential relative velocity.
 
     Parameters
     ----------
-    which : ndarray of int
-        Indices of the contacts that get tangential rows, in row order.
+    contacts : Contacts
+    tangential : ndarray of int, shape (m,)
+        The contacts that get ``dim - 1`` tangential rows each, in row order (empty: normal
+        rows only).
+    rotations : bool
+        Columns for the rotational unknowns (after the translations); needed by tangential
+        rows.
 
     Returns
     -------
-    scipy.sparse.csr_matrix, shape (len(which) * (dim - 1), n_dof)
+    scipy.sparse.csr_matrix, shape (nc + m (dim - 1), n_dof)
+        Canonical (filled by :func:`~lubcontact.model.jacobian_rows.jacobian_rows`, compiled).
     """
+    from .jacobian_rows import jacobian_rows  # numba, imported on first use
+
+    tangential = np.asarray(tangential, dtype=np.int64)
+    if tangential.size and not rotations:
+        raise ValueError("rotations: tangential rows need the rotational columns, got False")
     dim, n = contacts.dim, contacts.n_grains
-    nt, nrot = dim - 1, n_rotations(dim)
-    normals = contacts.normals[which]
-    tangents = tangent_basis(normals)                       # (m, nt, dim)
-    levers = lever_coefficients(normals, tangents)          # (m, nt, nrot)
-    a, b = contacts.body_a[which], contacts.body_b[which]
-    ra, rb = contacts.radius_a[which], contacts.radius_b[which]
-    m, rot0 = len(which), n * dim
-    first, second, first_is_b = _bodies_in_order(a, b, n)
-    b_first = first_is_b[:, None, None]
-    # b's entries: t on its translations, -r_b lever on its rotations; a's: -t and -r_a lever
-    translation = (np.where(b_first, tangents, -tangents), np.where(b_first, -tangents, tangents))
-    lever_b, lever_a = -rb[:, None, None] * levers, -ra[:, None, None] * levers
-    rotation = (np.where(b_first, lever_b, lever_a), np.where(b_first, lever_a, lever_b))
-    # in column order: both bodies' translations, then both bodies' rotations
-    blocks = [(first[:, None, None] * dim + np.arange(dim), translation[0]),
-              (second[:, None, None] * dim + np.arange(dim), translation[1]),
-              (rot0 + first[:, None, None] * nrot + np.arange(nrot), rotation[0]),
-              (rot0 + second[:, None, None] * nrot + np.arange(nrot), rotation[1])]
-    width = 2 * (dim + nrot)
-    columns = np.concatenate([np.broadcast_to(c, v.shape) for c, v in blocks], axis=2)
-    values = np.concatenate([v for _, v in blocks], axis=2)
-    kept = np.ones((m, nt, width), dtype=bool)
-    obstacle = (second >= n)[:, None]
-    kept[:, :, dim: 2 * dim] = ~obstacle[:, :, None]
-    kept[:, :, 2 * dim + nrot:] = ~obstacle[:, :, None]
-    return rows_to_csr(columns.reshape(m * nt, width), values.reshape(m * nt, width),
-                       kept.reshape(m * nt, width), (m * nt, dof_count(n, dim, True)))
-
-
-def _bodies_in_order(body_a: np.ndarray, body_b: np.ndarray,
-                     n_grains: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Each contact's two bodies in the order of their columns: the grain with the lower
-    number first, an obstacle ``a`` (no columns) second.
-
-    Returns
-    -------
-    (ndarray, ndarray, ndarray of bool)
-        ``first`` and ``second`` bodies, shape (nc,), and whether ``first`` is ``b``.
-    """
-    first_is_b = (body_a >= n_grains) | (body_b < body_a)
-    return (np.where(first_is_b, body_b, body_a), np.where(first_is_b, body_a, body_b),
-            first_is_b)
-
-
-def rows_to_csr(columns: np.ndarray, values: np.ndarray, kept: np.ndarray,
-                shape: tuple[int, int]) -> sp.csr_matrix:
-    """A CSR matrix from a fixed number of candidate entries per row, built from its arrays.
-
-    Built directly (no COO matrix and its conversion, which cost more than a small step's
-    solve), in canonical form: each row's kept columns must increase along the row.
-
-    Parameters
-    ----------
-    columns : ndarray of int, shape (n_rows, k)
-        Column of each candidate entry.
-    values : ndarray, shape (n_rows, k)
-        Its value.
-    kept : ndarray of bool, shape (n_rows, k)
-        Whether the entry exists (a dropped entry's column may be anything).
-    shape : (int, int)
-        Shape of the matrix (``shape[0] == n_rows``).
-    """
-    indptr = np.concatenate([[0], np.cumsum(kept.sum(axis=1))])
-    return sp.csr_matrix((values[kept], columns[kept], indptr), shape=shape)
-
-
-def stacked_rows(top: sp.csr_matrix, bottom: sp.csr_matrix) -> sp.csr_matrix:
-    """``[top; bottom]`` for two CSR matrices with the same columns, built from their arrays."""
-    return sp.csr_matrix((np.concatenate([top.data, bottom.data]),
-                          np.concatenate([top.indices, bottom.indices]),
-                          np.concatenate([top.indptr, top.indptr[-1] + bottom.indptr[1:]])),
-                         shape=(top.shape[0] + bottom.shape[0], top.shape[1]))
+    normals = contacts.normals[tangential]
+    tangents = tangent_basis(normals)                       # (m, dim - 1, dim)
+    levers = lever_coefficients(normals, tangents)          # (m, dim - 1, nrot)
+    indptr, indices, data = jacobian_rows(contacts.body_a, contacts.body_b, contacts.normals,
+                                          contacts.radius_a, contacts.radius_b, tangential,
+                                          tangents, levers, n)
+    shape = (indptr.size - 1, dof_count(n, dim, rotations))
+    return sp.csr_matrix((data, indices, indptr), shape=shape)
 
 
 def obstacle_offset(contacts: Contacts, obstacle_velocities: np.ndarray, tangential: np.ndarray,

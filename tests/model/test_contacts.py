@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from lubcontact import GlueyLubrication, Grains, Inelastic, Scene, Simulation, find_contacts
-from lubcontact.model.contacts import normal_jacobian, tangential_jacobian
+from lubcontact.model.contacts import contact_jacobian
 from lubcontact.model.laws import PairState
 
 
@@ -58,7 +58,7 @@ def test_normal_rows_are_the_time_derivative_of_the_gaps(dim):
     scene = random_scene(dim, seed=10 + dim)
     contacts = find_contacts(scene, 0.3)
     velocity = scene.grains.velocities.ravel()
-    rate = normal_jacobian(contacts, rotations=False) @ velocity
+    rate = contact_jacobian(contacts, np.zeros(0, dtype=int), rotations=False) @ velocity
     h = 1e-7
     moved = scene.copy()
     moved.grains.positions += h * scene.grains.velocities
@@ -75,7 +75,7 @@ def test_tangential_rows_give_the_sliding_velocity_at_the_contact_point_2d():
     contacts = find_contacts(scene, 0.1)
     assert contacts.count == 2                      # the plane-disk and the disk-disk contact
     v = np.concatenate([grains.velocities.ravel(), grains.spins.ravel()])
-    rows = tangential_jacobian(contacts, np.arange(contacts.count))
+    rows = contact_jacobian(contacts, np.arange(contacts.count), rotations=True)[contacts.count:]
     assert rows.shape == (2, 6)
 
     def point_velocity(i, point):
@@ -98,7 +98,30 @@ def test_rolling_without_slipping_has_zero_tangential_velocity_in_3d():
     scene = Scene.create(grains, plane_points=[0.0, 0.0, 0.0], plane_normals=[0.0, 0.0, 1.0])
     contacts = find_contacts(scene, 0.1)
     v = np.concatenate([grains.velocities.ravel(), grains.spins.ravel()])
-    np.testing.assert_allclose(tangential_jacobian(contacts, np.arange(1)) @ v, 0.0, atol=1e-14)
+    rows = contact_jacobian(contacts, np.arange(1), rotations=True)[contacts.count:]
+    np.testing.assert_allclose(rows @ v, 0.0, atol=1e-14)
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_contact_rows_of_a_subset_are_the_full_set_s_rows_in_canonical_form(dim):
+    """The tangential rows of some contacts (in row order) are those rows of every contact's,
+    after the normal rows, whose rotational columns are zero; each row's columns increase."""
+    scene = random_scene(dim, seed=20 + dim)
+    contacts = find_contacts(scene, 0.3)
+    nc, nt = contacts.count, dim - 1
+    every = contact_jacobian(contacts, np.arange(nc), rotations=True)
+    which = np.flatnonzero(np.random.default_rng(dim).random(nc) < 0.4)
+    some = contact_jacobian(contacts, which, rotations=True)
+    assert some.shape == (nc + which.size * nt, every.shape[1]) and some.has_canonical_format
+    tangential_rows = nc + (which[:, None] * nt + np.arange(nt)).ravel()
+    assert (some - every[np.concatenate([np.arange(nc), tangential_rows])]).nnz == 0
+    translations = scene.grains.count * dim
+    assert every[:nc, translations:].nnz == 0
+    normal_only = contact_jacobian(contacts, np.zeros(0, dtype=int), rotations=False)
+    assert normal_only.shape == (nc, translations)
+    assert (normal_only - every[:nc, :translations]).nnz == 0
+    with pytest.raises(ValueError, match="rotations"):
+        contact_jacobian(contacts, which, rotations=False)
 
 
 def test_frictionless_problems_have_no_rotational_unknowns():
