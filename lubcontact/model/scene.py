@@ -368,9 +368,12 @@ class Scene:
             Fixed grains first, then planes (the global body order after the
             free grains: body ``N + k`` is row ``k``).
         """
+        n_fixed = len(self.fixed_radii)
+        if self.fixed_velocity is None and self.plane_velocity is None:   # obstacles at rest:
+            return np.zeros((n_fixed + self.planes.count, self.dim))      # a step asks 4 times
         t = self.time if t is None else t
         parts = []
-        for name, value, count in (("fixed_velocity", self.fixed_velocity, len(self.fixed_radii)),
+        for name, value, count in (("fixed_velocity", self.fixed_velocity, n_fixed),
                                    ("plane_velocity", self.plane_velocity, self.planes.count)):
             shape = (count, self.dim)
             if value is None:
