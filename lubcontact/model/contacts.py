@@ -131,14 +131,18 @@ def contact_jacobian(contacts: Contacts, tangential: np.ndarray, rotations: bool
     if tangential.size and not rotations:
         raise ValueError("rotations: tangential rows need the rotational columns, got False")
     dim, n = contacts.dim, contacts.n_grains
+    n_dof = dof_count(n, dim, rotations)
+    entries = 2 * (dim + n_rotations(dim)) * (contacts.count + tangential.size * (dim - 1))
+    if max(n_dof, entries) >= 2**31:                # an upper bound of H's entries
+        raise ValueError(f"contacts: {contacts.count} contacts of {n} grains exceed the 32-bit "
+                         "indices of H")
     normals = contacts.normals[tangential]
     tangents = tangent_basis(normals)                       # (m, dim - 1, dim)
     levers = lever_coefficients(normals, tangents)          # (m, dim - 1, nrot)
     indptr, indices, data = jacobian_rows(contacts.body_a, contacts.body_b, contacts.normals,
                                           contacts.radius_a, contacts.radius_b, tangential,
                                           tangents, levers, n)
-    shape = (indptr.size - 1, dof_count(n, dim, rotations))
-    return sp.csr_matrix((data, indices, indptr), shape=shape)
+    return sp.csr_matrix((data, indices, indptr), shape=(indptr.size - 1, n_dof))
 
 
 def obstacle_offset(contacts: Contacts, obstacle_velocities: np.ndarray, tangential: np.ndarray,

@@ -41,7 +41,9 @@ def jacobian_rows(body_a: np.ndarray, body_b: np.ndarray, normals: np.ndarray,
     Returns
     -------
     (ndarray, ndarray, ndarray)
-        ``indptr`` (nc + m nt + 1,), ``indices`` and ``data``, canonical: in each row the lower
+        ``indptr`` (nc + m nt + 1,), ``indices`` and ``data``, canonical, the indices in 32 bits
+        (scipy's own choice at these sizes: given 64-bit ones, its constructor scans and copies
+        them, 12.4 against 7.5 us for 50 rows; the caller checks that they fit): in each row the lower
         numbered grain's translations, the other's, then their rotations in the same order; an
         obstacle has no columns. A normal row holds ``+n`` on ``b``'s translations and ``-n``
         on ``a``'s; a tangential row ``+t`` and ``-r_b (n x t)`` on ``b``'s, ``-t`` and ``-r_a
@@ -50,7 +52,7 @@ def jacobian_rows(body_a: np.ndarray, body_b: np.ndarray, normals: np.ndarray,
     nc, dim = normals.shape
     m, nt, nrot = levers.shape
     n_rows = nc + m * nt
-    indptr = np.zeros(n_rows + 1, dtype=np.int64)
+    indptr = np.zeros(n_rows + 1, dtype=np.int32)
     for c in range(nc):
         indptr[c + 1] = dim if body_a[c] >= n_grains else 2 * dim
     for k in range(m):
@@ -59,7 +61,7 @@ def jacobian_rows(body_a: np.ndarray, body_b: np.ndarray, normals: np.ndarray,
             indptr[nc + k * nt + j + 1] = width
     for row in range(n_rows):
         indptr[row + 1] += indptr[row]
-    indices = np.empty(indptr[n_rows], dtype=np.int64)
+    indices = np.empty(indptr[n_rows], dtype=np.int32)
     data = np.empty(indptr[n_rows])
     rot0 = n_grains * dim
     for c in range(nc):

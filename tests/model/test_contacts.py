@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from lubcontact import GlueyLubrication, Grains, Inelastic, Scene, Simulation, find_contacts
-from lubcontact.model.contacts import contact_jacobian
+from lubcontact.model.contacts import Contacts, contact_jacobian
 from lubcontact.model.laws import PairState
 
 
@@ -122,6 +122,16 @@ def test_contact_rows_of_a_subset_are_the_full_set_s_rows_in_canonical_form(dim)
     assert (normal_only - every[:nc, :translations]).nnz == 0
     with pytest.raises(ValueError, match="rotations"):
         contact_jacobian(contacts, which, rotations=False)
+
+
+def test_a_jacobian_beyond_32_bit_indices_is_refused_before_it_is_built():
+    empty = np.zeros(0)
+    contacts = Contacts(body_a=empty.astype(int), body_b=empty.astype(int),
+                        keys=empty.astype(np.int64), gaps=empty, normals=np.zeros((0, 2)),
+                        points=np.zeros((0, 2)), radius_a=empty, radius_b=empty, n_grains=2**30 - 1)
+    with pytest.raises(ValueError, match="contacts: 0 contacts of 1073741823 grains exceed"):
+        contact_jacobian(contacts, np.zeros(0, dtype=int), rotations=True)
+    assert contact_jacobian(contacts, np.zeros(0, dtype=int), rotations=False).shape == (0, 2**31 - 2)
 
 
 def test_frictionless_problems_have_no_rotational_unknowns():
