@@ -104,8 +104,9 @@ def test_rolling_without_slipping_has_zero_tangential_velocity_in_3d():
 
 @pytest.mark.parametrize("dim", [2, 3])
 def test_contact_rows_of_a_subset_are_the_full_set_s_rows_in_canonical_form(dim):
-    """The tangential rows of some contacts (in row order) are those rows of every contact's,
-    after the normal rows, whose rotational columns are zero; each row's columns increase."""
+    """``H`` with the tangential rows of some contacts is ``H`` of every contact restricted to
+    the normal rows and those contacts' rows, in canonical form; the normal rows have no
+    rotational entries and are ``H`` without rotations."""
     scene = random_scene(dim, seed=20 + dim)
     contacts = find_contacts(scene, 0.3)
     nc, nt = contacts.count, dim - 1
