@@ -62,8 +62,7 @@ def assemble(scene: Scene, contacts: Contacts, cones: Cones, dt: float, *,
     force = scene.external_forces().ravel()
     free_velocity = velocity.copy()
     free_velocity[: force.size] += dt * force / mass[: force.size]
-    tangential = cones.tangential if cones.has_friction else np.zeros(0, dtype=np.int64)
-    jacobian = contact_jacobian(contacts, tangential, rotations)
+    jacobian = contact_jacobian(contacts, cones.tangential, rotations)
     obstacles = scene.obstacle_velocities()
     moving = obstacle_offset(contacts, obstacles, cones.tangential, dt) if np.any(obstacles) \
         else None

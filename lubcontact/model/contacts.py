@@ -107,15 +107,16 @@ def dof_count(n_grains: int, dim: int, rotations: bool) -> int:
 
 
 def contact_jacobian(contacts: Contacts, tangential: np.ndarray, rotations: bool) -> sp.csr_matrix:
-    """``H``: the normal rows ``B`` of every contact, ``(B v)_c = u_n,c``, then the tangential
-    rows ``T`` of the contacts ``tangential``, ``(T v)`` = their tangential relative velocity.
+    """``H``: the normal rows ``B``, ``(B v)_c = u_n,c``, then the tangential rows ``T``.
+
+    ``T`` holds ``dim - 1`` rows for each contact of ``tangential``: ``(T v)`` is their
+    tangential relative velocity.
 
     Parameters
     ----------
     contacts : Contacts
     tangential : ndarray of int, shape (m,)
-        The contacts that get ``dim - 1`` tangential rows each, in row order (empty: normal
-        rows only).
+        The contacts that get tangential rows, in row order (empty: normal rows only).
     rotations : bool
         Columns for the rotational unknowns (after the translations); needed by tangential
         rows.
@@ -123,7 +124,14 @@ def contact_jacobian(contacts: Contacts, tangential: np.ndarray, rotations: bool
     Returns
     -------
     scipy.sparse.csr_matrix, shape (nc + m (dim - 1), n_dof)
-        Canonical (filled by :func:`~lubcontact.model.jacobian_rows.jacobian_rows`, compiled).
+        Canonical, with 32-bit indices (filled by
+        :func:`~lubcontact.model.jacobian_rows.jacobian_rows`, compiled).
+
+    Raises
+    ------
+    ValueError
+        Naming ``rotations`` when tangential rows are asked for without rotational columns;
+        naming ``contacts`` when ``H``'s columns or entries would not fit 32-bit indices.
     """
     from .jacobian_rows import jacobian_rows  # numba, imported on first use
 
@@ -134,8 +142,8 @@ def contact_jacobian(contacts: Contacts, tangential: np.ndarray, rotations: bool
     n_dof = dof_count(n, dim, rotations)
     entries = 2 * (dim + n_rotations(dim)) * (contacts.count + tangential.size * (dim - 1))
     if max(n_dof, entries) >= 2**31:                # an upper bound of H's entries
-        raise ValueError(f"contacts: {contacts.count} contacts of {n} grains exceed the 32-bit "
-                         "indices of H")
+        raise ValueError(f"contacts: H of {contacts.count} contacts and {n_dof} unknowns would "
+                         f"hold up to {entries} entries, beyond 32-bit indices")
     normals = contacts.normals[tangential]
     tangents = tangent_basis(normals)                       # (m, dim - 1, dim)
     levers = lever_coefficients(normals, tangents)          # (m, dim - 1, nrot)

@@ -1,4 +1,6 @@
 """Contact detection and Jacobians against brute force and finite differences."""
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -125,14 +127,81 @@ def test_contact_rows_of_a_subset_are_the_full_set_s_rows_in_canonical_form(dim)
         contact_jacobian(contacts, which, rotations=False)
 
 
+def test_every_tangential_row_is_the_model_s_sliding_velocity_2d():
+    """``u_T = t.(v_b - v_a) - r_b omega_b - r_a omega_a`` with ``t`` the normal turned by +90
+    degrees, an obstacle ``a`` (fixed grain, plane) at rest, on every contact of a random scene."""
+    scene = random_scene(2, seed=31)
+    contacts = find_contacts(scene, 0.3)
+    grains, n = scene.grains, scene.grains.count
+    assert (contacts.body_a >= n).sum() > 5 and (contacts.body_a < n).sum() > 20
+    v = np.concatenate([grains.velocities.ravel(), grains.spins.ravel()])
+    rows = contact_jacobian(contacts, np.arange(contacts.count), rotations=True)[contacts.count:]
+    expected = []
+    for c in range(contacts.count):
+        a, b = contacts.body_a[c], contacts.body_b[c]
+        t = np.array([-contacts.normals[c, 1], contacts.normals[c, 0]])
+        u = t @ grains.velocities[b] - contacts.radius_b[c] * grains.spins[b, 0]
+        if a < n:
+            u -= t @ grains.velocities[a] + contacts.radius_a[c] * grains.spins[a, 0]
+        expected.append(u)
+    np.testing.assert_allclose(rows @ v, expected, rtol=1e-13, atol=1e-13)
+
+
+def swapped(contacts, pairs):
+    """``contacts`` with the bodies of the grain pairs ``pairs`` swapped (``b < a``), their
+    normals turned and radii exchanged: the same contacts, described from the other grain."""
+    a, b = contacts.body_a.copy(), contacts.body_b.copy()
+    a[pairs], b[pairs] = contacts.body_b[pairs], contacts.body_a[pairs]
+    ra, rb = contacts.radius_a.copy(), contacts.radius_b.copy()
+    ra[pairs], rb[pairs] = contacts.radius_b[pairs], contacts.radius_a[pairs]
+    normals = contacts.normals.copy()
+    normals[pairs] *= -1.0
+    return Contacts(body_a=a, body_b=b, keys=contacts.keys, gaps=contacts.gaps, normals=normals,
+                    points=contacts.points, radius_a=ra, radius_b=rb, n_grains=contacts.n_grains)
+
+
+def test_a_contact_described_from_its_other_grain_has_the_same_rows_2d():
+    """``u_n = n.(v_b - v_a)`` and, in 2D, ``u_T`` do not depend on which grain is ``b``."""
+    scene = random_scene(2, seed=32)
+    contacts = find_contacts(scene, 0.3)
+    pairs = np.flatnonzero(contacts.body_a < scene.grains.count)[::2]
+    assert pairs.size > 10
+    every = np.arange(contacts.count)
+    expected = contact_jacobian(contacts, every, rotations=True)
+    turned = contact_jacobian(swapped(contacts, pairs), every, rotations=True)
+    assert turned.has_canonical_format
+    np.testing.assert_array_equal(turned.toarray(), expected.toarray())
+
+
+def test_a_body_numbered_as_an_obstacle_gets_no_columns_on_either_side():
+    """A hand-built contact whose ``b`` is an obstacle (``find_contacts`` never makes one) has
+    ``a``'s entries only, none left unset."""
+    contacts = find_contacts(random_scene(2, seed=33), 0.3)
+    n, c = contacts.n_grains, np.flatnonzero(contacts.body_a < contacts.n_grains)[0]
+    body_b = contacts.body_b.copy()
+    body_b[c] = n + 1
+    rows = contact_jacobian(replace(contacts, body_b=body_b), [c], rotations=True)
+    a = contacts.body_a[c]
+    normal, tangential = (rows.indices[rows.indptr[r]: rows.indptr[r + 1]] for r in (c, contacts.count))
+    assert normal.tolist() == [2 * a, 2 * a + 1]            # the stored entries, as filled
+    assert tangential.tolist() == [2 * a, 2 * a + 1, 2 * n + a]
+
+
 def test_a_jacobian_beyond_32_bit_indices_is_refused_before_it_is_built():
     empty = np.zeros(0)
     contacts = Contacts(body_a=empty.astype(int), body_b=empty.astype(int),
                         keys=empty.astype(np.int64), gaps=empty, normals=np.zeros((0, 2)),
                         points=np.zeros((0, 2)), radius_a=empty, radius_b=empty, n_grains=2**30 - 1)
-    with pytest.raises(ValueError, match="contacts: 0 contacts of 1073741823 grains exceed"):
+    with pytest.raises(ValueError, match="contacts: H of 0 contacts and 3221225469 unknowns"):
         contact_jacobian(contacts, np.zeros(0, dtype=int), rotations=True)
     assert contact_jacobian(contacts, np.zeros(0, dtype=int), rotations=False).shape == (0, 2**31 - 2)
+    many = 2**28                                # entries: 12 per row at most in 3D, 2^31.6 in all
+    zeros, index = np.broadcast_to(0.0, (many,)), np.broadcast_to(0, (many,))
+    contacts = Contacts(body_a=index, body_b=index, keys=index, gaps=zeros,
+                        normals=np.broadcast_to(0.0, (many, 3)), points=np.broadcast_to(0.0, (many, 3)),
+                        radius_a=zeros, radius_b=zeros, n_grains=10)
+    with pytest.raises(ValueError, match=f"contacts: H of {many} contacts and 60 unknowns"):
+        contact_jacobian(contacts, np.zeros(0, dtype=int), rotations=True)
 
 
 def test_frictionless_problems_have_no_rotational_unknowns():
