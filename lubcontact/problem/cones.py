@@ -393,6 +393,9 @@ class ConeProjector:
         tangential rows (nf, tangent_dim), coefficients (nf,) and which are UNION (nf,) of
         bool. Solvers that loop over the contacts read them here rather than joining the pieces
         (read only: ``friction_normal`` is ``cones.tangential`` itself where all are COULOMB).
+    planar_tangent : ndarray of int, shape (nf,)
+        In 2D only (``tangent_dim`` 1): each friction contact's one tangential row, as the
+        compiled 2D loops take them (``friction_tangent`` is a view of it).
     pieces : list of tuple of ndarray
         The COULOMB and the UNION contacts' ``(normal rows, tangential rows, mu)``: views of
         the ``friction_`` arrays.
@@ -415,8 +418,11 @@ class ConeProjector:
             union = kinds[tangential] == int(ConeKind.UNION)
             positions = np.concatenate([np.flatnonzero(coulomb), np.flatnonzero(union)])
             self.friction_normal = tangential[positions]
-        self.friction_tangent = (nc + positions)[:, None] if dim_t == 1 else \
-            nc + positions[:, None] * dim_t + np.arange(dim_t)
+        if dim_t == 1:
+            self.planar_tangent = nc + positions
+            self.friction_tangent = self.planar_tangent[:, None]
+        else:
+            self.friction_tangent = nc + positions[:, None] * dim_t + np.arange(dim_t)
         self.friction_mu = cones.mu[self.friction_normal]
         self.friction_union = np.arange(positions.size) >= split
         self.pieces = [(self.friction_normal[:split], self.friction_tangent[:split],

@@ -156,7 +156,7 @@ def run_apgd_cones(data: DualData, cones: Cones, z: np.ndarray, tol: float, max_
         *operator, data.offset,
         data.offset if base is None else base, data.project.lower, data.project.upper,
         positions(projector.box_rows if streaming else np.zeros(0, dtype=np.uint32)),
-        positions(projector.friction_normal), positions(projector.friction_tangent[:, 0]),
+        positions(projector.friction_normal), positions(projector.planar_tangent),
         projector.friction_mu, projector.friction_union, data.ratio, z, tol, max_iter, lipschitz,
         DIVERGENCE_FACTOR, every, check_every, streaming)
     data.products += products

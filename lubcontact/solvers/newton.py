@@ -397,7 +397,7 @@ class AlartCurnier:
             self.w_arrays = csr_arrays(self.W)
         self.q_scale = 1.0 + float(np.sqrt(self.q @ self.q))
         if self.planar:             # one tangential row per contact, as the kernels take them
-            self.tangent_rows = np.ascontiguousarray(self.cone_t[:, 0])
+            self.tangent_rows = projector.planar_tangent
         if self.compiled:
             self.W = np.ascontiguousarray(self.W)
 
