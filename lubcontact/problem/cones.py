@@ -395,7 +395,7 @@ class ConeProjector:
         (read only: ``friction_normal`` is ``cones.tangential`` itself where all are COULOMB).
     planar_tangent : ndarray of int, shape (nf,)
         In 2D only (``tangent_dim`` 1): each friction contact's one tangential row, as the
-        compiled 2D loops take them (``friction_tangent`` is a view of it).
+        compiled 2D loops of newton-ac and APGD take them (``friction_tangent`` is a view of it).
     pieces : list of tuple of ndarray
         The COULOMB and the UNION contacts' ``(normal rows, tangential rows, mu)``: views of
         the ``friction_`` arrays.
