@@ -789,7 +789,8 @@ def _block_solve(block: sp.csc_matrix | np.ndarray, rhs: np.ndarray, rows: np.nd
     degrees of freedom) is regularised, ``block + delta I`` with ``delta`` from
     :data:`REGULARISATIONS` in turn (a proximal step, as in Siconos' PROX), from the first
     positive one where the block is ``singular`` by a count (:meth:`AlartCurnier.singular_by_count`).
-    On the 2D sparse lane the block is the reduced one (:meth:`AlartCurnier.newton_direction`),
+    On the 2D sparse lane the block is the reduced one (:meth:`AlartCurnier.newton_direction`;
+    on the compiled dense lane too, :func:`~lubcontact.solvers.kernels.newton_direction_2d`),
     so only its rows are shifted, not the eliminated sliding rows: the regularised direction
     differs from that of the whole active block's by about ``delta`` (relative).
     """

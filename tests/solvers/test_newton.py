@@ -666,13 +666,23 @@ def test_the_compiled_sparse_jacobian_rows_are_the_numpy_rows(name, sigma, monke
         assert difference <= 1e-13 * max(np.abs(expected.toarray()).max(initial=0.0), 1.0)
 
 
+def solves_the_whole_newton_system(J, active, phi, direction):
+    """Check that ``direction``, found from a reduced system, solves the whole Newton system
+    ``J d = -phi`` (J: the active rows) as the unreduced block's (_newton_direction) does."""
+    expected = newton._newton_direction(J, active, phi)
+    assert np.array_equal(direction[~active], -phi[~active])
+    scale = abs(J).max() * np.abs(direction).max()          # a backward error: 7e-15
+    assert np.abs(J @ direction + phi[active]).max() <= 1e-13 * scale
+    assert np.abs(direction - expected).max() <= 1e-10 * np.abs(expected).max()
+
+
 def eliminated_sliding_rows(function, points):
     """Check the sparse lane's reduced Newton system (kernels.reduced_newton_system_2d) of
     ``function`` at each of ``points`` (forces): a block of as many rows as J has rows of
     diag(rho) (W + sigma I), with sorted row indices in each column, and a direction that solves
-    the whole system J d = -phi as the unreduced block's (_newton_direction) does. Returns the
-    sliding rows eliminated at each point, and whether any of them has an entry of W in a kept
-    row (its column folded into its normal's)."""
+    the whole system (:func:`solves_the_whole_newton_system`). Returns the sliding rows
+    eliminated at each point, and whether any of them has an entry of W in a kept row (its
+    column folded into its normal's)."""
     from lubcontact.solvers.kernels import reduced_newton_system_2d
 
     assert function.compiled_rows
@@ -690,13 +700,40 @@ def eliminated_sliding_rows(function, points):
         assert np.count_nonzero(block.diagonal()) == kept.size or function.sigma == 0
         eliminated.append(sliding)
         folded = folded or function.W[kept][:, sliding].nnz > 0
-        direction = function.newton_direction(y, phi)
-        expected = newton._newton_direction(J, active, phi)
-        assert np.array_equal(direction[~active], -phi[~active])
-        scale = abs(J).max() * np.abs(direction).max()          # a backward error: 7e-15
-        assert np.abs(J @ direction + phi[active]).max() <= 1e-13 * scale
-        assert np.abs(direction - expected).max() <= 1e-10 * np.abs(expected).max()
+        solves_the_whole_newton_system(J, active, phi, function.newton_direction(y, phi))
     return eliminated, folded
+
+
+@pytest.mark.parametrize("name", [name for name in COMPILED_CASES if name != "mu_zero_friction"])
+@pytest.mark.parametrize("sigma", [1e-4, 1e-2])
+def test_the_compiled_dense_lane_solves_the_newton_system_without_its_sliding_rows(name, sigma):
+    """The compiled dense lane's Newton direction (kernels.newton_direction_2d) comes from the
+    system reduced to its rows of diag(rho) (W + sigma I), as on the sparse lane: checked at
+    points with every contact state, on the hard cases with friction, where contacts slide
+    (before, it factorised the whole active block)."""
+    from lubcontact.solvers.kernels import fold_sliding_rows_2d, generalised_jacobian_2d, newton_direction_2d
+
+    problem = load_cases()[name].problem.normalized()
+    function = AlartCurnier(problem)
+    assert function.compiled and function.dense
+    rng = np.random.default_rng(5)
+    function.set_proximal(sigma, rng.normal(size=problem.n_rows))
+    n = problem.n_rows
+    sliding_rows = 0
+    for _ in range(20):
+        forces = rng.normal(size=n) * rng.choice([1e-3, 1.0, 1e3], size=n)
+        phi, y, _ = function.residual(forces)
+        J, active, plain = function.jacobian(y)
+        states = (function.lower, function.upper, function.box, function.cone_n,
+                  function.tangent_rows, function.cone_mu, function.unilateral)
+        kept, *_, sliding, _, _ = fold_sliding_rows_2d(*generalised_jacobian_2d(*states, y), phi)
+        assert kept.size == plain and sliding.size == np.count_nonzero(active) - plain
+        sliding_rows += sliding.size
+        direction, ok = newton_direction_2d(function.W, function.rho, *states, function.sigma,
+                                            y, phi, np.array(newton.REGULARISATIONS))
+        assert ok
+        solves_the_whole_newton_system(J, active, phi, direction)
+    assert sliding_rows > 0
 
 
 @pytest.mark.parametrize("name", [name for name in COMPILED_CASES if name != "mu_zero_friction"])
@@ -1146,19 +1183,24 @@ def test_the_compiled_lu_solves_like_numpy_and_reports_an_exactly_singular_block
 
 
 def test_a_singular_active_block_is_regularised_alike_when_compiled():
-    """Two equal rows make the active block singular: the compiled direction takes the first
-    regularisation that factorises, as _newton_direction does, and finds the same direction."""
-    from lubcontact.solvers.kernels import newton_direction_2d
+    """Two equal rows and columns of ``W`` (box rows inside their bounds, no proximal weight)
+    make the active block singular: the compiled direction takes the first regularisation that
+    factorises, as _newton_direction does, and finds the same direction."""
+    from lubcontact.solvers.kernels import lu_solve, newton_direction_2d
 
     rng = np.random.default_rng(2)
-    J = rng.normal(size=(3, 5))
-    J[1] = J[0]
-    active = np.array([True, True, False, True, False])
-    J[:, 1] = J[:, 0]                      # J_AA's first two rows and columns alike: singular
-    phi = rng.normal(size=5)
-    expected = newton._newton_direction(J, active, phi)
-    direction, ok = newton_direction_2d(np.flatnonzero(active), J, phi,
-                                          np.array(newton.REGULARISATIONS))
+    root = rng.normal(size=(4, 4))
+    spread = np.array([[1, 0, 0, 0], [1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]])
+    W = spread @ (root @ root.T + np.eye(4)) @ spread.T   # rows and columns 0 and 1 alike
+    n = W.shape[0]
+    phi, y = rng.normal(size=n), rng.normal(size=n)
+    assert not lu_solve(np.ascontiguousarray(W.T), phi)[1]        # a zero pivot: singular
+    no_cones = np.zeros(0, dtype=np.int64)
+    direction, ok = newton_direction_2d(
+        W, np.ones(n), np.full(n, -np.inf), np.full(n, np.inf), np.ones(n, dtype=bool),
+        no_cones, no_cones, np.zeros(0), np.zeros(0, dtype=bool), 0.0, y, phi,
+        np.array(newton.REGULARISATIONS))
+    expected = newton._newton_direction(W, np.ones(n, dtype=bool), phi)   # J = W here
     assert ok and expected is not None
     assert np.allclose(direction, expected, rtol=1e-6, atol=1e-9)
 
