@@ -403,15 +403,6 @@ def apgd_cone2d(indptr, indices, values, t_indptr, t_indices, t_values, scratch,
 
 
 @numba.njit(cache=True, inline="always")
-def _row_product(indptr, indices, values, r, row):
-    """``(W r)_row``."""
-    total = 0.0
-    for k in range(indptr[row], indptr[row + 1]):
-        total += values[k] * r[indices[k]]
-    return total
-
-
-@numba.njit(cache=True, inline="always")
 def local_coulomb_2d(a, c, c2, d, b_n, b_t, mu, unilateral, r_n, r_t):
     """Exact solution of one 2D contact's Coulomb law with the others frozen.
 
@@ -450,15 +441,6 @@ def local_coulomb_2d(a, c, c2, d, b_n, b_t, mu, unilateral, r_n, r_t):
     return n, t
 
 
-@numba.njit(cache=True, inline="always")
-def _moved(indptr, indices, values, state, row, change, tracked):
-    """After ``r_row`` changed by ``change``: with ``tracked``, ``state += change x (row of
-    F^T)``, keeping ``state = F r`` (nothing to do when ``state`` is ``r`` itself)."""
-    if tracked and change != 0.0:
-        for k in range(indptr[row], indptr[row + 1]):
-            state[indices[k]] += values[k] * change
-
-
 @numba.njit(cache=True)
 def gauss_seidel_2d(indptr, indices, values, q, lower, upper, box_rows, box_diagonal, cone_n,
                     cone_t, cone_mu, unilateral, local, r, state, tracked, sweeps):
@@ -474,7 +456,13 @@ def gauss_seidel_2d(indptr, indices, values, q, lower, upper, box_rows, box_diag
     ``tracked``, the rows of ``F^T`` (``W = F^T F``) and ``state = F r`` (the
     velocities, updated after each change of ``r``): a row of ``F^T`` holds the
     few degrees of freedom of one contact's two bodies where a row of ``W``
-    holds every contact sharing a body with it.
+    holds every contact sharing a body with it. After ``r_i`` changes by ``delta``, with
+    ``tracked``, ``state += delta x (row i of F^T)`` keeps ``state = F r`` (nothing to do when
+    ``state`` is ``r`` itself).
+
+    The products with a row and the updates are written out in the loops: compiled helpers
+    called per row with the arrays as arguments, even inlined, made a sweep four times as long
+    (2.2 against 0.52 ms at 51 800 rows, a 12 000-grain gluey step).
     """
     for _ in range(sweeps):
         for k in range(box_rows.size):
@@ -482,22 +470,35 @@ def gauss_seidel_2d(indptr, indices, values, q, lower, upper, box_rows, box_diag
             diagonal = box_diagonal[k]
             if diagonal <= 0.0:
                 continue
-            u = _row_product(indptr, indices, values, state, i) + q[i]
-            new = min(max(r[i] - u / diagonal, lower[i]), upper[i])
+            u = 0.0                                             # (W r)_i
+            for e in range(indptr[i], indptr[i + 1]):
+                u += values[e] * state[indices[e]]
+            new = min(max(r[i] - (u + q[i]) / diagonal, lower[i]), upper[i])
             change = new - r[i]
             r[i] = new
-            _moved(indptr, indices, values, state, i, change, tracked)
+            if tracked and change != 0.0:
+                for e in range(indptr[i], indptr[i + 1]):
+                    state[indices[e]] += values[e] * change
         for j in range(cone_n.size):
             n, t = cone_n[j], cone_t[j]
             a, c, c2, d = local[j, 0], local[j, 1], local[j, 2], local[j, 3]
-            b_n = _row_product(indptr, indices, values, state, n) + q[n] - a * r[n] - c * r[t]
-            b_t = _row_product(indptr, indices, values, state, t) + q[t] - c2 * r[n] - d * r[t]
+            u_n = u_t = 0.0                                     # (W r)_n, (W r)_t
+            for e in range(indptr[n], indptr[n + 1]):
+                u_n += values[e] * state[indices[e]]
+            for e in range(indptr[t], indptr[t + 1]):
+                u_t += values[e] * state[indices[e]]
+            b_n = u_n + q[n] - a * r[n] - c * r[t]
+            b_t = u_t + q[t] - c2 * r[n] - d * r[t]
             new_n, new_t = local_coulomb_2d(a, c, c2, d, b_n, b_t, cone_mu[j], unilateral[j],
                                             r[n], r[t])
             change_n, change_t = new_n - r[n], new_t - r[t]
             r[n], r[t] = new_n, new_t
-            _moved(indptr, indices, values, state, n, change_n, tracked)
-            _moved(indptr, indices, values, state, t, change_t, tracked)
+            if tracked and change_n != 0.0:
+                for e in range(indptr[n], indptr[n + 1]):
+                    state[indices[e]] += values[e] * change_n
+            if tracked and change_t != 0.0:
+                for e in range(indptr[t], indptr[t + 1]):
+                    state[indices[e]] += values[e] * change_t
 
 
 # -- newton-ac: the Newton phase of a 2D problem ---------------------------------------------
