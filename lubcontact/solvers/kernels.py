@@ -755,25 +755,30 @@ def compressed_transpose(size, pointers, indices, values):
 @numba.njit(cache=True)
 def fold_sliding_rows_2d(rows, first_col, first_val, second_col, second_val, phi):
     """Which active rows of a 2D Newton system ``J d = -phi`` are kept and which fold
-    (:func:`reduced_newton_system_2d`), from :func:`generalised_jacobian_2d`'s arrays.
+    (:func:`reduced_newton_system_2d`), from :func:`generalised_jacobian_2d`'s arrays, and where
+    each column of ``W`` goes in the reduced system.
 
     Returns
     -------
     tuple
-        ``(kept, position, normal_of, base, sliding, normal, slope)``: the plain rows (m,),
-        sorted; per row (n,) its place in ``kept`` or -1, and a sliding row's normal row or -1;
-        the direction on the other rows (n,): ``-phi`` on identity rows, ``c_t`` on the sliding
-        rows ``sliding``, whose normal rows are ``normal`` and whose folded coefficients
-        ``mu s`` are ``slope``.
+        ``(kept, target, factor, outer, base, sliding, normal, slope)``: the plain rows (m,),
+        sorted; per column ``j`` of ``W`` (n,): ``target``, the block's column it adds to (its
+        own place in ``kept``, its normal row's for a sliding row, ``m`` (no column) for an
+        identity row), ``factor``, what it is multiplied by there (1, ``mu s``, 0), and
+        ``outer``, the known direction it multiplies on the right-hand side (0 for a kept row,
+        ``base`` otherwise); the direction on the other rows (n,) ``base``: ``-phi`` on
+        identity rows, ``c_t`` on the sliding rows ``sliding``, whose normal rows are
+        ``normal`` and whose folded coefficients ``mu s`` are ``slope``. The maps let the
+        builders add every entry of a row of ``W`` without a branch on its column's kind: with
+        branches, half of them mispredicted, the sparse block took twice as long (2.4 against
+        1.3 ms for 20 500 kept rows of a 12 000-grain gluey step).
     """
     n = phi.size
     base = -phi
     position = np.full(n, -1)               # place in kept, or -1
-    normal_of = np.full(n, -1)              # a sliding row's normal row, or -1
     n_kept = n_sliding = 0
     for i in rows:
         if not is_plain_row(i, first_col[i], first_val[i], second_col[i]):
-            normal_of[i] = second_col[i]
             base[i] = -phi[i] + second_val[i] * phi[second_col[i]]
             n_sliding += 1
         else:
@@ -783,16 +788,21 @@ def fold_sliding_rows_2d(rows, first_col, first_val, second_col, second_val, phi
     sliding = np.empty(n_sliding, dtype=np.int64)
     normal = np.empty(n_sliding, dtype=np.int64)
     slope = np.empty(n_sliding)
+    target = np.full(n, n_kept)
+    factor = np.zeros(n)
+    outer = base.copy()
     b = 0
     for i in rows:
         if position[i] >= 0:
             kept[position[i]] = i
+            target[i], factor[i], outer[i] = position[i], 1.0, 0.0
         else:
-            if position[normal_of[i]] < 0:        # a sliding contact's normal row is plain
+            if position[second_col[i]] < 0:         # a sliding contact's normal row is plain
                 raise ValueError("a sliding tangential row's normal row is not plain")
-            sliding[b], normal[b], slope[b] = i, normal_of[i], second_val[i]
+            sliding[b], normal[b], slope[b] = i, second_col[i], second_val[i]
+            target[i], factor[i] = position[second_col[i]], second_val[i]
             b += 1
-    return kept, position, normal_of, base, sliding, normal, slope
+    return kept, target, factor, outer, base, sliding, normal, slope
 
 
 @numba.njit(cache=True)
@@ -826,7 +836,7 @@ def reduced_newton_system_2d(indptr, indices, data, rho, lower, upper, box, cone
     """
     rows, first_col, first_val, second_col, second_val = generalised_jacobian_2d(
         lower, upper, box, cone_n, cone_t, cone_mu, unilateral, y)
-    kept, position, normal_of, base, sliding, normal, slope = fold_sliding_rows_2d(
+    kept, target, factor, outer, base, sliding, normal, slope = fold_sliding_rows_2d(
         rows, first_col, first_val, second_col, second_val, phi)
     n_kept = kept.size
     # the block's rows (CSR, accumulated in a scratch row), then transposed to CSC
@@ -837,33 +847,30 @@ def reduced_newton_system_2d(indptr, indices, data, rho, lower, upper, box, cone
     row_col = np.empty(capacity, dtype=np.uint32)          # unsigned: no wrap-around checks
     row_val = np.empty(capacity)
     rhs = np.empty(n_kept)
-    scratch = np.zeros(n_kept)
-    seen = np.full(n_kept, -1)
-    pattern = np.empty(n_kept, dtype=np.int64)
+    scratch = np.zeros(n_kept + 1)          # the last: where an identity row's entries go
+    seen = np.full(n_kept + 1, -1)
+    pattern = np.empty(n_kept + 1, dtype=np.int64)
     count = 0
     for a in range(n_kept):
         i = kept[a]
         seen[a], scratch[a], pattern[0] = a, sigma, a          # the diagonal, always stored
+        seen[n_kept] = a                                        # never a column of the block
         size = 1
         outside = 0.0                           # W_i base on the columns not kept
         for k in range(indptr[i], indptr[i + 1]):
             j = indices[k]
-            column = position[j]
-            weight = data[k]
-            if column < 0:
-                outside += data[k] * base[j]
-                if normal_of[j] < 0:
-                    continue
-                column = position[normal_of[j]]
-                weight = data[k] * second_val[j]
-            if seen[column] != a:
-                seen[column], scratch[column], pattern[size] = a, 0.0, column
-                size += 1
-            scratch[column] += weight
+            outside += data[k] * outer[j]
+            column = target[j]
+            pattern[size] = column
+            size += seen[column] != a
+            seen[column] = a
+            scratch[column] += data[k] * factor[j]
         rhs[a] = -phi[i] - rho[i] * outside
         for k in range(size):
-            row_col[count + k] = pattern[k]
-            row_val[count + k] = rho[i] * scratch[pattern[k]]
+            column = pattern[k]
+            row_col[count + k] = column
+            row_val[count + k] = rho[i] * scratch[column]
+            scratch[column] = 0.0
         count += size
         row_ptr[a + 1] = count
     B_indptr, B_indices, B_data = compressed_transpose(n_kept, row_ptr, row_col, row_val)
@@ -1121,30 +1128,23 @@ def lu_solve(transposed, rhs):
 
 
 @numba.njit(cache=True)
-def reduced_dense_block_2d(W, rho, sigma, phi, kept, position, normal_of, second_val, base):
+def reduced_dense_block_2d(W, rho, sigma, phi, kept, target, factor, outer):
     """The block and right-hand side of :func:`reduced_newton_system_2d` with ``W`` dense:
     ``(transposed, rhs)``, ``B^T`` (m x m, C order: ``B`` in LAPACK's column order, as
-    :func:`lu_solve` takes it) and ``rhs`` (m,), from :func:`fold_sliding_rows_2d`'s arrays and
-    ``second_val`` (:func:`generalised_jacobian_2d`'s folded coefficients)."""
+    :func:`lu_solve` takes it) and ``rhs`` (m,), from :func:`fold_sliding_rows_2d`'s arrays."""
     n, m = phi.size, kept.size
-    transposed = np.zeros((m, m))
+    transposed = np.zeros((m + 1, m))       # the last row: where an identity row's entries go
     rhs = np.empty(m)
     for a in range(m):
         i = kept[a]
         outside = 0.0                           # W_i base on the columns not kept
         for j in range(n):
             weight = W[i, j]
-            column = position[j]
-            if column < 0:
-                outside += weight * base[j]
-                if normal_of[j] < 0:
-                    continue
-                column = position[normal_of[j]]
-                weight *= second_val[j]
-            transposed[column, a] += rho[i] * weight
+            outside += weight * outer[j]
+            transposed[target[j], a] += rho[i] * (weight * factor[j])
         transposed[a, a] += rho[i] * sigma
         rhs[a] = -phi[i] - rho[i] * outside
-    return transposed, rhs
+    return transposed[:m], rhs
 
 
 @numba.njit(cache=True)
@@ -1155,15 +1155,15 @@ def newton_direction_2d(W, rho, lower, upper, box, cone_n, cone_t, cone_mu, unil
     a block ``delta``-regularised is shifted on those rows only): ``(direction, ok)``."""
     rows, first_col, first_val, second_col, second_val = generalised_jacobian_2d(
         lower, upper, box, cone_n, cone_t, cone_mu, unilateral, y)
-    kept, position, normal_of, direction, sliding, normal, slope = fold_sliding_rows_2d(
+    kept, target, factor, outer, direction, sliding, normal, slope = fold_sliding_rows_2d(
         rows, first_col, first_val, second_col, second_val, phi)
     m = kept.size
     solved_any = m == 0
     for delta in regularisations:
         if solved_any:
             break
-        transposed, rhs = reduced_dense_block_2d(W, rho, sigma, phi, kept, position, normal_of,
-                                                 second_val, direction)   # lu_solve overwrites it
+        transposed, rhs = reduced_dense_block_2d(W, rho, sigma, phi, kept, target, factor,
+                                                 outer)           # lu_solve overwrites it
         for a in range(m):
             transposed[a, a] += delta
         solved, ok = lu_solve(transposed, rhs)
