@@ -54,7 +54,7 @@ from ..problem.cones import ConeKind
 from ..problem.conic import ConicProblem
 from ..problem.metrics import coulomb_shift
 from .compiled_apgd import joint_applies, joint_coulomb_apgd
-from .registry import FIRST_ORDER, solve, solver_info
+from .registry import FIRST_ORDER, accepting_solver, solve, solver_info
 from .result import CONVERGED, FAILED, MAX_ITER, CoulombResult
 
 JOINT_MAX_ITER = 20_000
@@ -231,6 +231,7 @@ def solve_native_coulomb(problem: ConicProblem, method: str, *, tol: float = 1e-
     if not branches.convex and not native_union and not {ConeKind.COULOMB, ConeKind.NONPOS} <= info.cones:
         raise ValueError(f"method: {method!r} cannot solve this problem: UNION contacts need "
                          "both pieces (COULOMB and NONPOS contacts)")
+    accepting_solver(method, problem if native_union else branches.on(problem))   # before solving
     clock = time.perf_counter()
     unshifted = problem.with_shift(np.zeros(problem.cones.count))   # a copy: no cache on the caller's problem
     scaled = unshifted.normalized()

@@ -79,7 +79,7 @@ def nonsmooth_gauss_seidel(problem: ConicProblem, *, tol: float, max_iter: int =
     unshifted = problem.with_shift(np.zeros(nc))
     projector = cones.projector
     cone_n = projector.friction_normal.astype(np.int64)
-    cone_t = projector.friction_tangent[:, 0].astype(np.int64)
+    cone_t = projector.planar_tangent.astype(np.int64)
     mu = projector.friction_mu.astype(float)
     unilateral = ~projector.friction_union
     box = np.ones(problem.n_rows, dtype=bool)

@@ -185,6 +185,22 @@ def solver_info(name: str) -> SolverInfo:
     return _REGISTRY[name]
 
 
+def accepting_solver(name: str, problem: ConicProblem) -> SolverInfo:
+    """The :class:`SolverInfo` of a registered method that can solve ``problem``.
+
+    Raises
+    ------
+    ValueError
+        For an unknown method, or one that cannot solve ``problem`` (the reason, and the
+        methods that can).
+    """
+    info = solver_info(name)
+    if (reason := info.rejection(problem)) is not None:
+        raise ValueError(f"method: {name!r} cannot solve this problem: {reason}; "
+                         f"methods that can: {', '.join(capable_methods(problem))}")
+    return info
+
+
 def solve(problem: ConicProblem, method: str = "clarabel", *, tol: float = 1e-9,
           max_iter: int | None = None, warm_start: np.ndarray | None = None,
           normalized: ConicProblem | None = None, **options) -> SolveResult:
@@ -219,10 +235,7 @@ def solve(problem: ConicProblem, method: str = "clarabel", *, tol: float = 1e-9,
         For an unknown method, a problem it does not accept, or bad ``tol``,
         ``max_iter`` or ``warm_start``.
     """
-    info = solver_info(method)
-    if (reason := info.rejection(problem)) is not None:
-        raise ValueError(f"method: {method!r} cannot solve this problem: {reason}; "
-                         f"methods that can: {', '.join(capable_methods(problem))}")
+    info = accepting_solver(method, problem)
     if not tol > 0:
         raise ValueError(f"tol: must be > 0, got {tol}")
     if max_iter is not None and not (float(max_iter) == int(max_iter) and int(max_iter) > 0):

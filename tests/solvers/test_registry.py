@@ -77,6 +77,30 @@ def test_an_unsupported_problem_is_rejected_before_any_work():
     assert "test-convex-only" not in methods()
 
 
+def test_an_unsupported_problem_is_rejected_before_a_native_coulomb_solve():
+    """An exact-Coulomb solve by a method that solves Coulomb natively is refused before the
+    method runs, with the message of solve(): a 2D-only native method given 3D cones (before, the
+    method ran first and its forces were refused afterwards, by the check at s*)."""
+    calls = []
+
+    @register("test-planar-coulomb", cones={ConeKind.NONNEG, ConeKind.FREE, ConeKind.COULOMB},
+              second_order=False, native_coulomb=True)
+    def _never(problem, *, tol, warm_start=None, replay=None):
+        calls.append(1)
+        return MethodOutput(np.zeros(problem.n_rows), CONVERGED, 1)
+
+    try:
+        cone_3d = CASES["cone_apex_3d"].problem
+        with pytest.raises(ValueError, match=r"method: 'test-planar-coulomb' cannot solve this "
+                                             r"problem: second-order"):
+            solve_coulomb(cone_3d, "test-planar-coulomb")
+        with pytest.raises(ValueError, match=r"method: 'nsgs' cannot solve this problem: second"):
+            solve_coulomb(cone_3d, "nsgs")
+        assert calls == []
+    finally:
+        unregister("test-planar-coulomb")
+
+
 @pytest.mark.parametrize("value", [0, -3, 2.5])
 def test_bad_max_iter_is_rejected_naming_the_field(value):
     with pytest.raises(ValueError, match="max_iter"):
