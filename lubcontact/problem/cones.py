@@ -394,8 +394,10 @@ class ConeProjector:
         bool. Solvers that loop over the contacts read them here rather than joining the pieces
         (read only: ``friction_normal`` is ``cones.tangential`` itself where all are COULOMB).
     planar_tangent : ndarray of int, shape (nf,)
-        In 2D only (``tangent_dim`` 1): each friction contact's one tangential row, as the
-        compiled 2D loops of newton-ac and APGD take them (``friction_tangent`` is a view of it).
+        In 2D (``tangent_dim`` 1): each friction contact's one tangential row, as the 2D loops
+        of newton-ac, APGD and Gauss-Seidel take them (``friction_tangent`` is a view of it);
+        also where there is no friction contact (empty), as on a frictionless 3D problem, which
+        those loops solve too. Absent on 3D problems with friction.
     pieces : list of tuple of ndarray
         The COULOMB and the UNION contacts' ``(normal rows, tangential rows, mu)``: views of
         the ``friction_`` arrays.
@@ -423,6 +425,8 @@ class ConeProjector:
             self.friction_tangent = self.planar_tangent[:, None]
         else:
             self.friction_tangent = nc + positions[:, None] * dim_t + np.arange(dim_t)
+            if not positions.size:          # no friction contact: a 2D loop has no row to read
+                self.planar_tangent = positions
         self.friction_mu = cones.mu[self.friction_normal]
         self.friction_union = np.arange(positions.size) >= split
         self.pieces = [(self.friction_normal[:split], self.friction_tangent[:split],

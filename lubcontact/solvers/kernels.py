@@ -503,8 +503,8 @@ def gauss_seidel_2d(indptr, indices, values, q, lower, upper, box_rows, box_diag
 
 # -- newton-ac: the Newton phase of a 2D problem ---------------------------------------------
 # On a problem of a few tens of rows a Newton iteration written with numpy is some forty array
-# calls (the Alart-Curnier residual, the rows of the generalised Jacobian, the LU of the active
-# block, the line search's residuals, the FCLIB error), 100-300 us, where the arithmetic takes
+# calls (the Alart-Curnier residual, the rows of the generalised Jacobian, the LU of the Newton
+# system's block, the line search's residuals, the FCLIB error), 100-300 us, where the arithmetic takes
 # a few. newton_phase_2d runs the iterations of one phase (newton._newton_phase) with the same
 # rules: the regularisations of a singular active block, the non-monotone Armijo line search,
 # the steepest-descent direction where Newton's gives no decrease, the stopping tests and the

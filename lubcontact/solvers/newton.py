@@ -40,10 +40,13 @@ where ``G`` vanishes (open contacts, zero-forced rows) are identity rows: their
 update is ``-phi`` and they are eliminated, so the LU factorisation (SuperLU on the
 sparse lane) is of the active rows only. A 2D problem of up to ``DENSE_LIMIT`` rows runs
 each Newton phase in one compiled call on the dense ``W``
-(:func:`~lubcontact.solvers.kernels.newton_phase_2d`, the numpy phase's twin); on a larger 2D
-problem the Newton system is assembled compiled, without its sliding tangential rows: in 2D
+(:func:`~lubcontact.solvers.kernels.newton_phase_2d`, with the numpy phase's rules); there and
+on a larger 2D problem the Newton system is solved without its sliding tangential rows: in 2D
 ``I - t t^T`` vanishes, so such a row says ``d_T = mu t d_n`` plus a constant, and its unknown
-folds into its normal row's (:meth:`AlartCurnier.newton_direction`).
+folds into its normal row's (:meth:`AlartCurnier.newton_direction`,
+:func:`~lubcontact.solvers.kernels.newton_direction_2d`). The numpy phase, the compiled one's
+reference in the tests, factorises the whole active block; the two directions agree to
+round-off where the block is regular.
 
 Globalisation: a non-monotone Armijo line search on ``psi = |phi|^2 / 2``
 (the reference value is the largest of the last few); when the Newton
@@ -792,7 +795,10 @@ def _block_solve(block: sp.csc_matrix | np.ndarray, rhs: np.ndarray, rows: np.nd
     On the 2D sparse lane the block is the reduced one (:meth:`AlartCurnier.newton_direction`;
     on the compiled dense lane too, :func:`~lubcontact.solvers.kernels.newton_direction_2d`),
     so only its rows are shifted, not the eliminated sliding rows: the regularised direction
-    differs from that of the whole active block's by about ``delta`` (relative).
+    differs from that of the whole active block's by about ``delta`` (relative). Where the block
+    is singular but factorises unregularised (plain Newton, ``sigma`` = 0, ``W`` rank deficient),
+    the two eliminations pick different null-space components: directions that differ by up to
+    O(1) relative, or one far too long, which the line search rejects.
     """
     dense = rows.size <= DENSE_LIMIT
     if dense and not isinstance(block, np.ndarray):

@@ -2,11 +2,13 @@
 Clarabel's fixed point on s and its own domain; and as newton-ac's first 2D fallback."""
 import numpy as np
 import pytest
+import scipy.sparse as sp
 
 from lubcontact.bench.cases.reference import CASES as REFERENCE_CASES
 from lubcontact.bench.cases.reference import load as load_reference
 from lubcontact.bench.hard import expected_for, load_cases
-from lubcontact.problem.cones import ConeKind
+from lubcontact.problem.cones import ConeKind, Cones
+from lubcontact.problem.local import LocalProblem
 from lubcontact.problem.metrics import scaled_coulomb_error, scaled_velocity_error, velocity_error
 from lubcontact.solvers import CONVERGED, MAX_ITER, solve, solve_coulomb, solver_info
 from lubcontact.solvers.kernels import local_coulomb_2d
@@ -60,6 +62,22 @@ def test_three_dimensional_friction_is_rejected_and_max_iter_is_honest():
     result = solve(problem, "nsgs", tol=1e-12, max_iter=30)
     assert result.status == MAX_ITER and result.iterations == 30
     assert result.residual_history.size == 4          # the start and three checks
+
+
+def test_a_frictionless_three_dimensional_problem_is_solved():
+    """Without friction contacts a 3D problem has no cone for the 2D loops to refuse: nsgs
+    solves it, directly and as exact Coulomb, as Clarabel does (2034919 had it raise
+    AttributeError: no planar tangent rows on a 3D problem)."""
+    rng = np.random.default_rng(0)
+    root = rng.normal(size=(3, 3))
+    cones = Cones.frictionless(np.full(3, ConeKind.NONNEG), 2)
+    problem = LocalProblem(delassus=sp.csr_matrix(root @ root.T + np.eye(3)),
+                           free_velocity=np.array([-1.0, -0.5, 0.2]), cones=cones, name="3d")
+    assert problem.cones.tangent_dim == 2 and not problem.cones.has_friction
+    expected = solve(problem, "clarabel-dual", tol=1e-10).forces
+    for result in (solve(problem, "nsgs", tol=1e-10), solve_coulomb(problem, "nsgs", tol=1e-10)):
+        assert result.status == CONVERGED
+        assert np.abs(result.forces - expected).max() <= 1e-8 * np.abs(expected).max()
 
 
 def test_newton_ac_falls_back_on_gauss_seidel_first_in_2d():

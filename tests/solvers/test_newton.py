@@ -726,13 +726,16 @@ def test_the_compiled_dense_lane_solves_the_newton_system_without_its_sliding_ro
         J, active, plain = function.jacobian(y)
         states = (function.lower, function.upper, function.box, function.cone_n,
                   function.tangent_rows, function.cone_mu, function.unilateral)
-        kept, *_, sliding, _, _ = fold_sliding_rows_2d(*generalised_jacobian_2d(*states, y), phi)
+        kept, *_, base, sliding, normal, slope = fold_sliding_rows_2d(
+            *generalised_jacobian_2d(*states, y), phi)
         assert kept.size == plain and sliding.size == np.count_nonzero(active) - plain
         sliding_rows += sliding.size
         direction, ok = newton_direction_2d(function.W, function.rho, *states, function.sigma,
                                             y, phi, np.array(newton.REGULARISATIONS))
         assert ok
         solves_the_whole_newton_system(J, active, phi, direction)
+        # the sliding rows' unknowns follow their normal rows' exactly: they were eliminated
+        assert np.array_equal(direction[sliding], base[sliding] + slope * direction[normal])
     assert sliding_rows > 0
 
 
@@ -782,9 +785,10 @@ def test_the_sliding_rows_of_union_contacts_fold_into_their_bilateral_normal_row
 def test_the_compiled_newton_phase_takes_the_numpy_phase_steps(name, start):
     """The compiled phase and the numpy one (``compiled`` off) from the same start: the same
     iterations, steepest-descent steps, status and errors, and the same velocities to round-off
-    (on the hyperstatic hexagonal packing, whose regularised Newton systems are ill-conditioned,
-    the two LUs' rounding moves the smallest errors by up to 1 % and the velocities by 5e-11;
-    the forces, which are not unique there, by 1e-8 of their size)."""
+    (the compiled phase factorises the Newton system without its sliding rows, the numpy one the
+    whole active block: on the hyperstatic hexagonal packing, whose regularised Newton systems
+    are ill-conditioned, the two solves' rounding moves the smallest errors by up to 1 % and the
+    velocities by 5e-11; the forces, which are not unique there, by 1e-8 of their size)."""
     problem = load_cases()[name].problem.normalized()
     unshifted = problem.with_shift(np.zeros(problem.cones.count))
     forces = np.zeros(problem.n_rows)
