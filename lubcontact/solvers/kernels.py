@@ -504,15 +504,15 @@ def gauss_seidel_2d(indptr, indices, values, q, lower, upper, box_rows, box_diag
 # -- newton-ac: the Newton phase of a 2D problem ---------------------------------------------
 # On a problem of a few tens of rows a Newton iteration written with numpy is some forty array
 # calls (the Alart-Curnier residual, the rows of the generalised Jacobian, the LU of the Newton
-# system's block, the line search's residuals, the FCLIB error), 100-300 us, where the arithmetic takes
-# a few. newton_phase_2d runs the iterations of one phase (newton._newton_phase) with the same
-# rules: the regularisations of a singular active block, the non-monotone Armijo line search,
-# the steepest-descent direction where Newton's gives no decrease, the stopping tests and the
-# best iterate. Its formulas are those of newton.AlartCurnier and metrics.coulomb_error written
-# per row for 2D contacts (one tangential row each); the tests hold each to its numpy twin. Its
-# Newton system is reduced to the rows of diag(rho) (W + sigma I) (fold_sliding_rows_2d: the
-# sliding rows eliminated, as on the sparse lane, where reduced_newton_system_2d assembles that
-# system and sparse_jacobian_rows_2d the Jacobian's rows, for the steepest-descent direction).
+# system's block, the line search's residuals, the FCLIB error), 100-300 us, where the arithmetic
+# takes a few. newton_phase_2d runs the iterations of one phase (newton._newton_phase) with the
+# same rules: the regularisations of a singular active block, the non-monotone Armijo line search,
+# the steepest-descent direction where Newton's gives no decrease, the stopping tests and the best
+# iterate. Its formulas are those of newton.AlartCurnier and metrics.coulomb_error written per row
+# for 2D contacts (one tangential row each); the tests hold each to its numpy twin. Its Newton
+# system is reduced to the rows of diag(rho) (W + sigma I) (fold_sliding_rows_2d: the sliding rows
+# eliminated, as on the sparse lane, where reduced_newton_system_2d assembles that system and
+# sparse_jacobian_rows_2d the Jacobian's rows, for the steepest-descent direction).
 #
 # Arguments (n rows, nf frictional contacts; AlartCurnier's attributes, normalised units):
 # W (n, n), the dense Delassus matrix (indptr, indices, data: its CSR arrays on the sparse
