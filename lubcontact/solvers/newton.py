@@ -37,9 +37,9 @@ generalised Jacobian at ``y`` (block diagonal per contact: 0 or 1 on box rows,
 ``(R/|y_T|) (I - t t^T)`` and the column ``mu t`` on a sliding one, ``t =
 y_T/|y_T|``), the Jacobian of ``phi`` is ``J = I - G + G diag(rho) W``. Rows
 where ``G`` vanishes (open contacts, zero-forced rows) are identity rows: their
-update is ``-phi`` and they are eliminated, so the LU factorisation (SuperLU on the
-sparse lane) is of the active rows only. A 2D problem of up to ``DENSE_LIMIT`` rows runs
-each Newton phase in one compiled call on the dense ``W``
+update is ``-phi`` and they are eliminated, so the LU factorisation (sparse above
+``DENSE_LIMIT`` rows: :class:`_Factorisations`) is of the active rows only. A 2D problem of up
+to ``DENSE_LIMIT`` rows runs each Newton phase in one compiled call on the dense ``W``
 (:func:`~lubcontact.solvers.kernels.newton_phase_2d`, with the numpy phase's rules); there and
 on a larger 2D problem the Newton system is solved without its sliding tangential rows: in 2D
 ``I - t t^T`` vanishes, so such a row says ``d_T = mu t d_n`` plus a constant, and its unknown
@@ -101,9 +101,9 @@ REGULARISATIONS = (0.0, 1e-10, 1e-8, 1e-6, 1e-4)
 
 SPARSE_LU = dict(permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.1, panel_size=1,
                  options=dict(SymmetricMode=True))
-"""SuperLU's settings for the factorised block, whose pattern is ``W_AA``'s (symmetric but for
-the entries the product forming ``W`` left out as exact zeros; on the 2D sparse lane the sliding
-rows eliminated):
+"""SuperLU's settings for a factorised block ordered by SuperLU (3D problems; a 2D block is
+ordered by :mod:`.ordering`: :class:`_Factorisations`), whose pattern is ``W_AA``'s (symmetric
+but for the entries the product forming ``W`` left out as exact zeros):
 a minimum-degree ordering of ``A^T + A`` with pivots preferred on the diagonal. On developed
 2000-grain flows its factors hold 2.6 times the block's entries against 3.9 with COLAMD, and a
 Newton step costs 15 % less (same iterations). Panels of one column (SuperLU's default is 20):
@@ -111,11 +111,12 @@ the same factors, 21-22 ms instead of 27-30 for the 22 000-27 000-row blocks of 
 flows, whose supernodes are too small for wider panels to pay (docs/records/benchmarks.md)."""
 
 ORDERED_LU = {**SPARSE_LU, "permc_spec": "NATURAL"}
-"""SuperLU's settings for an active block already permuted by an ordering carried over from an
-earlier block (:class:`_Factorisations`): no ordering of its own."""
+"""SuperLU's settings for an active block already permuted by an elimination order (carried over
+from an earlier block, or a 2D block's own: :class:`_Factorisations`) where the static LU's
+pivots were not good enough: no ordering of its own."""
 
 NEW_ROWS_LIMIT = 0.01
-"""An active block whose rows are all but this fraction rows of the block last ordered by SuperLU
+"""An active block whose rows are all but this fraction rows of the block last ordered afresh
 is factorised in that block's elimination order (:class:`_Factorisations`), not ordered again."""
 
 STATIC_LU_BACKWARD_ERROR = 1e-11
@@ -305,6 +306,14 @@ STALLED = "stalled"
 
 MAX_HALVINGS = 30
 """Step halvings before a direction is given up."""
+
+
+@cache
+def _ordering() -> ModuleType:
+    """:mod:`.ordering` (numba), imported on first use."""
+    from . import ordering
+
+    return ordering
 
 
 @cache
@@ -602,9 +611,9 @@ class AlartCurnier:
 
 
 class _Factorisations:
-    """SuperLU's factorisations of the :data:`KEPT_FACTORISATIONS` active blocks used last,
-    reused for a block equal to one of them entry for entry (the same factors, so the same
-    direction), and the elimination order of the last block SuperLU ordered, carried over.
+    """The factorisations of the :data:`KEPT_FACTORISATIONS` active blocks used last, reused for
+    a block equal to one of them entry for entry (the same factors, so the same direction), and
+    the elimination order of the last block ordered afresh, carried over.
 
     In 2D the generalised Jacobian is constant on each piece of the Alart-Curnier function: on
     the hard steps of developed flows most Newton iterations after the first twenty keep the
@@ -623,6 +632,14 @@ class _Factorisations:
     ordered afresh. Only where ``carry`` is set (2D problems, whose blocks have ``W``'s
     pattern, nearly symmetric): on a 3D Siconos file the carried orders' solves were ten
     times less accurate and Newton took 392 iterations instead of 154.
+
+    Where ``carry`` is set a block is also ordered afresh by an approximate minimum degree
+    (:func:`~lubcontact.solvers.ordering.approximate_minimum_degree`) and factorised by
+    :class:`_StaticLU` in that order, as carried blocks are: SuperLU's own minimum degree was
+    7 of its 19 ms on the 20 000-row blocks of a 12 000-grain gluey step, and SuperLU gives no
+    order without factorising (14-16 ms instead, 5 % fewer factor entries:
+    docs/records/benchmarks.md, "a fresh order by approximate minimum degree"). Elsewhere
+    (3D) SuperLU orders and factorises with pivoting (:data:`SPARSE_LU`).
     """
 
     def __init__(self, carry: bool = False):
@@ -630,7 +647,7 @@ class _Factorisations:
         self.reused = 0
         self.carry = carry
         self.carried = 0
-        self.pivoted = 0            # carried blocks SuperLU took back from _StaticLU
+        self.pivoted = 0            # blocks SuperLU took back from _StaticLU
         self.ordered_rows: np.ndarray | None = None        # sorted
         self.positions: np.ndarray | None = None           # their places in the order
         self.fill = 0.0             # the ordered block's factor entries per block entry
@@ -644,7 +661,10 @@ class _Factorisations:
                 self.kept.insert(0, self.kept.pop(position))      # the most recently used first
                 return self._solved(rhs)
         order = self._carried_order(matrix, rows)
-        if order is None:
+        carried = order is not None
+        if not carried and self.carry:
+            order = _ordering().approximate_minimum_degree(*csr_arrays(matrix)[:2])
+        if order is None:                   # SuperLU's own order, pivoting
             factors = spla.splu(matrix, **SPARSE_LU)
             self.ordered_rows, self.positions = rows, factors.perm_c
             self.fill = factors.nnz / matrix.nnz
@@ -654,9 +674,13 @@ class _Factorisations:
             if factors is None:
                 factors = spla.splu(permuted, **ORDERED_LU)
                 self.pivoted += 1
-            self.carried += 1
-            if factors.nnz > FILL_GROWTH * self.fill * matrix.nnz:
-                self.ordered_rows = None            # the order no longer fits: order afresh
+            if carried:
+                self.carried += 1
+                if factors.nnz > FILL_GROWTH * self.fill * matrix.nnz:
+                    self.ordered_rows = None        # the order no longer fits: order afresh
+            else:
+                self.ordered_rows, self.positions = rows, _places(order)
+                self.fill = factors.nnz / matrix.nnz
         self.kept = [(matrix, factors, order), *self.kept][:KEPT_FACTORISATIONS]
         return self._solved(rhs)
 
@@ -741,6 +765,14 @@ def _permuted(matrix: sp.csc_matrix, order: np.ndarray) -> sp.csc_matrix:
     return permuted
 
 
+def _places(order: np.ndarray) -> np.ndarray:
+    """Each row's place in an elimination ``order`` (its inverse permutation), 32-bit as
+    SuperLU's ``perm_c``, the form :class:`_Factorisations` carries."""
+    places = np.empty(order.size, dtype=np.int32)
+    places[order] = np.arange(order.size, dtype=np.int32)
+    return places
+
+
 def _ordered_solve(factors: spla.SuperLU, order: np.ndarray | None, rhs: np.ndarray) -> np.ndarray:
     """The solution of ``A x = rhs`` from the factors of ``A`` (``order`` None) or of
     ``A[order][:, order]``."""
@@ -784,9 +816,10 @@ def _block_solve(block: sp.csc_matrix | np.ndarray, rhs: np.ndarray, rows: np.nd
     """``block^-1 rhs`` for the active block of a Newton system (``rows``: the system's rows it
     holds, sorted), or None when every regularisation fails.
 
-    The block is factorised by a dense LU (LAPACK) up to :data:`DENSE_LIMIT` rows,
-    by SuperLU above (:data:`SPARSE_LU`; through ``factorisations``, which reuses the factors
-    of a block met again).
+    The block is factorised by a dense LU (LAPACK) up to :data:`DENSE_LIMIT` rows, sparse
+    above, through ``factorisations`` (:class:`_Factorisations`: in 2D an elimination order of
+    its own or carried over and a static LU; in 3D SuperLU, :data:`SPARSE_LU`; the factors of a
+    block met again reused).
 
     A singular active block (``W`` rank deficient: more sticking rows than
     degrees of freedom) is regularised, ``block + delta I`` with ``delta`` from

@@ -1130,6 +1130,9 @@ def test_a_block_singular_by_its_count_of_sticking_rows_skips_the_failed_factori
     assert np.array_equal(newton._newton_direction(J, active, phi, singular=True), tried)
     assert outcomes == ["factorised"]
     outcomes.clear()                    # the sparse lane's reduced system counts alike
+    static = newton._StaticLU.factorise             # (in 2D its fresh blocks: the static LU)
+    monkeypatch.setattr(newton._StaticLU, "factorise", classmethod(
+        lambda cls, matrix: outcomes.append("factorised") or static(matrix)))
     function.set_proximal(0.0, answer.forces / scaled.scaling.force)
     direction = function.newton_direction(y, phi)
     assert outcomes == ["factorised"] and np.isfinite(direction).all()

@@ -1,0 +1,122 @@
+"""The approximate-minimum-degree order of newton-ac's fresh 2D blocks (solvers.ordering)."""
+from pathlib import Path
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from lubcontact.problem import StepProblem
+from lubcontact.solvers import kernels, newton
+from lubcontact.solvers.newton import AlartCurnier
+from lubcontact.solvers.ordering import approximate_minimum_degree, symmetric_adjacency
+
+
+def grid(m: int) -> sp.csr_matrix:
+    """The 5-point pattern of an m x m grid, with its diagonal."""
+    line = sp.diags([1.0, 1.0, 1.0], [-1, 0, 1], shape=(m, m))
+    return (sp.kron(line, sp.identity(m)) + sp.kron(sp.identity(m), line)).tocsr()
+
+
+def factor_entries(matrix: sp.spmatrix, order: np.ndarray) -> int:
+    """Entries of the lower factor of ``matrix[order][:, order]`` without pivoting (its
+    symmetrised pattern's Cholesky factor: kernels.static_pattern)."""
+    permuted = sp.csc_matrix(matrix)[order][:, order].tocsc()
+    permuted.sort_indices()
+    return kernels.static_pattern(permuted.indptr.astype(np.int64),
+                                  permuted.indices.astype(np.uint32))[1].size
+
+
+def is_permutation(order: np.ndarray, n: int) -> bool:
+    return order.dtype == np.int64 and np.array_equal(np.sort(order), np.arange(n))
+
+
+@pytest.mark.parametrize("pattern", ["empty", "one", "diagonal", "path", "star", "complete",
+                                     "two_components", "twins", "asymmetric", "random"])
+def test_the_order_is_a_permutation_of_the_rows(pattern):
+    """Every row once, whatever the pattern: none, isolated rows, a path, a star (one row next
+    to all: mass elimination), a complete graph (one supervariable), two components, rows with
+    the same neighbours (supervariables), an entry without its mirror, a random pattern; with
+    32-bit indices as scipy stores them."""
+    rng = np.random.default_rng(0)
+    n = {"empty": 0, "one": 1}.get(pattern, 40)
+    patterns = {
+        "empty": lambda: sp.csr_matrix((0, 0)), "one": lambda: sp.identity(1),
+        "diagonal": lambda: sp.identity(n),
+        "path": lambda: sp.diags([1.0, 1.0, 1.0], [-1, 0, 1], shape=(n, n)),
+        "star": lambda: sp.csr_matrix((np.ones(2 * n - 1),
+                                       (np.r_[np.zeros(n, int), np.arange(1, n)],
+                                        np.r_[np.arange(n), np.zeros(n - 1, int)]))),
+        "complete": lambda: np.ones((n, n)),
+        "two_components": lambda: sp.block_diag([grid(4), np.ones((24, 24))]),
+        "twins": lambda: sp.kron(grid(4), sp.csr_matrix(np.ones((2, 2)))),
+        "asymmetric": lambda: sp.triu(sp.random(n, n, 0.1, random_state=1)) + sp.identity(n),
+        "random": lambda: sp.random(n, n, 0.05, random_state=2) + sp.identity(n),
+    }
+    matrix = patterns[pattern]()
+    matrix = sp.csr_matrix(matrix)
+    assert matrix.indices.dtype == np.int32
+    order = approximate_minimum_degree(matrix.indptr, matrix.indices)
+    assert is_permutation(order, matrix.shape[0])
+    if pattern == "random":                     # a seeded random pattern of another density too
+        dense = sp.csr_matrix(sp.random(n, n, 0.3, random_state=rng.integers(100)))
+        assert is_permutation(approximate_minimum_degree(dense.indptr, dense.indices), n)
+
+
+def test_the_adjacency_is_the_symmetrised_pattern_without_its_diagonal():
+    matrix = sp.csr_matrix(sp.random(30, 30, 0.1, random_state=3) + sp.identity(30))
+    pointers, neighbours = symmetric_adjacency(matrix.indptr, matrix.indices)
+    expected = ((abs(matrix) + abs(matrix.T)) != 0).astype(float).tolil()
+    expected.setdiag(0)
+    expected = sp.csr_matrix(expected)
+    expected.eliminate_zeros()
+    assert np.array_equal(pointers, expected.indptr)
+    for row in range(30):
+        assert np.array_equal(np.sort(neighbours[pointers[row]:pointers[row + 1]]),
+                              expected.indices[expected.indptr[row]:expected.indptr[row + 1]])
+
+
+def test_the_order_keeps_the_fill_of_a_grid_near_superlu_s_minimum_degree():
+    """On a 30 x 30 grid the factor's entries in this order are within 5 % of those in
+    SuperLU's minimum-degree order (10 231 against 10 098) and far below the natural order's
+    (27 029)."""
+    matrix = grid(30)
+    order = approximate_minimum_degree(matrix.indptr, matrix.indices)
+    spd = (sp.identity(900) * 10 - matrix + sp.identity(900)).tocsc()
+    superlu = spla.splu(spd, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
+                        options=dict(SymmetricMode=True))
+    mine = factor_entries(matrix, order)
+    theirs = factor_entries(matrix, np.argsort(superlu.perm_c))
+    assert mine <= 1.05 * theirs
+    assert mine <= 0.5 * factor_entries(matrix, np.arange(900))
+
+
+def test_a_fresh_2d_block_is_factorised_in_this_order_by_the_static_lu(monkeypatch):
+    """A gluey + friction flow step's reduced Newton block (some 700 rows, the sparse lane):
+    factorised afresh in this order without pivoting, no SuperLU call, and solved to a
+    backward error below 1e-13; its fill within 10 % of SuperLU's own order's (which took a
+    third of SuperLU's factorisation on 20 000-row blocks)."""
+    with np.load(Path(__file__).parents[1] / "flow" / "data" / "gluey-flow-step.npz") as data:
+        problem = StepProblem.from_arrays(data).normalized()
+        start = data["warm_start"] / problem.scaling.force
+    function = AlartCurnier(problem)
+    assert function.compiled_rows and not function.dense
+    function.set_proximal(1e-3 * function.typical, start)
+    phi, y, _ = function.residual(start)
+    kept, indptr, indices, values, rhs, *_ = kernels.reduced_newton_system_2d(
+        *function.w_arrays, function.rho, function.lower, function.upper, function.box,
+        function.cone_n, function.tangent_rows, function.cone_mu, function.unilateral,
+        function.sigma, y, phi)
+    block = sp.csc_matrix((values, indices, indptr), shape=(kept.size, kept.size))
+    calls = []
+    monkeypatch.setattr(newton.spla, "splu", lambda *args, **kwargs: calls.append(1))
+    factorisations = newton._Factorisations(carry=True)
+    solved = factorisations.solve(block, rhs, kept)
+    assert calls == [] and factorisations.pivoted == 0
+    matrix, factors, order = factorisations.kept[0]
+    assert isinstance(factors, newton._StaticLU) and is_permutation(order, kept.size)
+    scale = abs(block).max() * np.abs(solved).max() + np.abs(rhs).max()
+    assert np.abs(block @ solved - rhs).max() <= 1e-13 * scale
+    monkeypatch.undo()
+    superlu = spla.splu(block, **newton.SPARSE_LU)
+    assert factors.nnz <= 1.1 * superlu.nnz
