@@ -637,7 +637,7 @@ class _Factorisations:
     (:func:`~lubcontact.solvers.ordering.approximate_minimum_degree`) and factorised by
     :class:`_StaticLU` in that order, as carried blocks are: SuperLU's own minimum degree was
     7 of its 19 ms on the 20 000-row blocks of a 12 000-grain gluey step, and SuperLU gives no
-    order without factorising (14-16 ms instead, 5 % fewer factor entries:
+    order without factorising (12-15 ms instead, 5 % fewer factor entries:
     docs/records/benchmarks.md, "a fresh order by approximate minimum degree"). Elsewhere
     (3D) SuperLU orders and factorises with pivoting (:data:`SPARSE_LU`).
     """

@@ -4,9 +4,9 @@
 newton-ac factorises an active block of its 2D Newton systems afresh where the rows changed too
 much for the last block's order to carry over (``newton._Factorisations``). SuperLU's
 minimum-degree ordering was about 7 of its 19 ms on the 20 000-row blocks of a 12 000-grain gluey
-flow, and SuperLU gives no order without factorising; this order, then the static LU of those
-blocks, took 14-16 ms with 5 % fewer factor entries (docs/records/benchmarks.md, "a fresh order
-by approximate minimum degree").
+flow, and SuperLU gives no order without factorising; this order (5.5-7.3 ms), then the static
+LU of those blocks, took 12-15 ms against SuperLU's 17-20, with 5 % fewer factor entries
+(docs/records/benchmarks.md, "a fresh order by approximate minimum degree").
 
 The method is the approximate minimum degree of Amestoy, Davis and Duff (SIAM J. Matrix Anal.
 Appl. 17, 1996), written here from its description: the graph of the remaining rows is kept as a
