@@ -715,7 +715,8 @@ class _StaticLU:
     """``A = L U`` without pivoting on static patterns
     (:func:`~lubcontact.solvers.kernels.static_pattern`: those of ``A + A^T``'s Cholesky factor;
     :func:`~lubcontact.solvers.kernels.static_lu`), for the blocks :class:`_Factorisations`
-    factorises in a carried elimination order: on a 12 000-grain gluey step's 19 000-row block,
+    factorises in an elimination order of its own (a 2D block ordered afresh) or carried over:
+    on a 12 000-grain gluey step's 19 000-row block,
     5.1 ms (patterns 3.0, values 2.1 with unsigned indices; 8.3 ms in all on the blocks of six
     such steps with signed ones) against 10.4 ms for SuperLU in the same order, the same fill
     (docs/records/benchmarks.md). ``nnz``
@@ -916,8 +917,9 @@ def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = 5
         singular block is regularised), ``reused_factorisations`` (the sparse lane's LUs
         saved by a block met again: :class:`_Factorisations`), ``carried_orderings`` (its LUs
         in the elimination order of an earlier block, not ordered again),
-        ``pivoted_factorisations`` (those of them that SuperLU factorised, pivoting, after
-        :class:`_StaticLU`'s pivots or solve were not good enough), ``gradient_steps``
+        ``pivoted_factorisations`` (the sparse lane's LUs in such an order or in a 2D block's
+        own that SuperLU factorised, pivoting, after :class:`_StaticLU`'s pivots or solve were
+        not good enough), ``gradient_steps``
         (steepest-descent steps taken where the Newton direction failed),
         ``proximal_steps`` and ``strategies`` (the starting weights tried, each with
         its start, ``"warm"`` or ``"cold"``),

@@ -19,7 +19,8 @@ element ``e`` next to them ``|L_e \\ L_p|`` is counted; each row's degree is bou
 degree plus the new element's, and by its rows plus the new element's plus those counts; rows
 whose only neighbour is the new element are eliminated with the pivot (mass elimination), and
 rows with the same lists are merged (supervariables, found by a hash). Not implemented: the
-special handling of dense rows (none in contact networks) and aggressive absorption beyond the
+special handling of dense rows (none in contact networks; a row next to all others makes the
+order quadratic in time: 0.4 s for a 20 000-row star) and aggressive absorption beyond the
 elements whose rows all lie in the new one.
 """
 from __future__ import annotations

@@ -32,14 +32,16 @@ def is_permutation(order: np.ndarray, n: int) -> bool:
 
 
 @pytest.mark.parametrize("pattern", ["empty", "one", "diagonal", "path", "star", "complete",
-                                     "two_components", "twins", "asymmetric", "random"])
+                                     "two_components", "twins", "asymmetric", "random",
+                                     "compacted"])
 def test_the_order_is_a_permutation_of_the_rows(pattern):
     """Every row once, whatever the pattern: none, isolated rows, a path, a star (one row next
     to all: mass elimination), a complete graph (one supervariable), two components, rows with
-    the same neighbours (supervariables), an entry without its mirror, a random pattern; with
-    32-bit indices as scipy stores them."""
+    the same neighbours (supervariables), an entry without its mirror, a random pattern, one
+    whose element lists outgrow the first workspace (compacted once, 2 000 rows); with 32-bit
+    indices as scipy stores them."""
     rng = np.random.default_rng(0)
-    n = {"empty": 0, "one": 1}.get(pattern, 40)
+    n = {"empty": 0, "one": 1, "compacted": 2000}.get(pattern, 40)
     patterns = {
         "empty": lambda: sp.csr_matrix((0, 0)), "one": lambda: sp.identity(1),
         "diagonal": lambda: sp.identity(n),
@@ -52,6 +54,7 @@ def test_the_order_is_a_permutation_of_the_rows(pattern):
         "twins": lambda: sp.kron(grid(4), sp.csr_matrix(np.ones((2, 2)))),
         "asymmetric": lambda: sp.triu(sp.random(n, n, 0.1, random_state=1)) + sp.identity(n),
         "random": lambda: sp.random(n, n, 0.05, random_state=2) + sp.identity(n),
+        "compacted": lambda: sp.random(n, n, 0.0025, random_state=0),
     }
     matrix = patterns[pattern]()
     matrix = sp.csr_matrix(matrix)
