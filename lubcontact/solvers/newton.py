@@ -663,7 +663,8 @@ class _Factorisations:
         order = self._carried_order(matrix, rows)
         carried = order is not None
         if not carried and self.carry:
-            order = _ordering().approximate_minimum_degree(*csr_arrays(matrix)[:2])
+            pattern = _kernels().symmetrised_pattern(*csr_arrays(matrix)[:2])
+            order = _ordering().approximate_minimum_degree(*pattern)
         if order is None:                   # SuperLU's own order, pivoting
             factors = spla.splu(matrix, **SPARSE_LU)
             self.ordered_rows, self.positions = rows, factors.perm_c

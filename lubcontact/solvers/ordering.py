@@ -30,41 +30,27 @@ import numpy as np
 
 
 @numba.njit(cache=True)
-def symmetric_adjacency(indptr: np.ndarray, indices: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The pattern of ``A + A^T`` without its diagonal, both triangles, each entry once, in
-    compressed arrays: ``(pointers, neighbours)``; ``A`` square in compressed arrays (CSR or CSC:
-    the same pattern's transpose)."""
-    n = indptr.size - 1
-    pointers = np.zeros(n + 1, dtype=np.int64)
-    for j in range(n):
-        for e in range(indptr[j], indptr[j + 1]):
-            i = np.int64(indices[e])                        # (numba makes uint64 op int64 a float)
-            if i != j:
-                pointers[i + 1] += 1
-                pointers[j + 1] += 1
+def _both_triangles(pointers: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The adjacency of a symmetric pattern given by its part above the diagonal (column ``k``
+    holding the rows ``i < k``, once each), with both triangles: ``(pointers, neighbours)``."""
+    n = pointers.size - 1
+    counts = np.zeros(n + 1, dtype=np.int64)
     for k in range(n):
-        pointers[k + 1] += pointers[k]
-    neighbours = np.empty(pointers[n], dtype=np.int64)
-    filled = pointers[:-1].copy()
-    for j in range(n):
-        for e in range(indptr[j], indptr[j + 1]):
-            i = np.int64(indices[e])
-            if i != j:
-                neighbours[filled[i]] = j
-                filled[i] += 1
-                neighbours[filled[j]] = i
-                filled[j] += 1
-    mark = np.full(n, -1, dtype=np.int64)
-    count = 0
-    for k in range(n):                                      # each neighbour once, in place
-        start, pointers[k] = pointers[k], count
-        for e in range(start, filled[k]):
-            if mark[neighbours[e]] != k:
-                mark[neighbours[e]] = k
-                neighbours[count] = neighbours[e]
-                count += 1
-    pointers[n] = count
-    return pointers, neighbours[:count]
+        counts[k + 1] += pointers[k + 1] - pointers[k]
+        for e in range(pointers[k], pointers[k + 1]):
+            counts[rows[e] + 1] += 1
+    for k in range(n):
+        counts[k + 1] += counts[k]
+    neighbours = np.empty(counts[n], dtype=np.int64)
+    filled = counts[:-1].copy()
+    for k in range(n):
+        for e in range(pointers[k], pointers[k + 1]):
+            i = rows[e]
+            neighbours[filled[k]] = i
+            filled[k] += 1
+            neighbours[filled[i]] = k
+            filled[i] += 1
+    return counts, neighbours
 
 
 @numba.njit(cache=True)
@@ -88,16 +74,22 @@ def _compacted(lists: np.ndarray, start: np.ndarray, length: np.ndarray, live: n
 
 
 @numba.njit(cache=True)
-def approximate_minimum_degree(indptr: np.ndarray, indices: np.ndarray) -> np.ndarray:
-    """An elimination order of ``A`` (square, in compressed arrays) that keeps the fill of its
-    factors low: the approximate minimum degree of ``A + A^T``'s pattern (module docstring).
+def approximate_minimum_degree(pointers: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """An elimination order of a square ``A`` that keeps the fill of its factors low: the
+    approximate minimum degree of ``A + A^T``'s pattern (module docstring).
+
+    Parameters
+    ----------
+    pointers, rows : ndarray of int
+        The part of ``A + A^T``'s pattern above the diagonal, column ``k`` holding the rows
+        ``i < k`` once each (:func:`~lubcontact.solvers.kernels.symmetrised_pattern`).
 
     Returns
     -------
     ndarray of int64, shape (n,)
         The rows in elimination order: factorise ``A[order][:, order]``.
     """
-    pointers, neighbours = symmetric_adjacency(indptr, indices)
+    pointers, neighbours = _both_triangles(pointers, rows)
     n = pointers.size - 1
     if n == 0:
         return np.empty(0, dtype=np.int64)

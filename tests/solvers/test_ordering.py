@@ -9,13 +9,20 @@ import scipy.sparse.linalg as spla
 from lubcontact.problem import StepProblem
 from lubcontact.solvers import kernels, newton
 from lubcontact.solvers.newton import AlartCurnier
-from lubcontact.solvers.ordering import approximate_minimum_degree, symmetric_adjacency
+from lubcontact.solvers.ordering import _both_triangles, approximate_minimum_degree
 
 
 def grid(m: int) -> sp.csr_matrix:
     """The 5-point pattern of an m x m grid, with its diagonal."""
     line = sp.diags([1.0, 1.0, 1.0], [-1, 0, 1], shape=(m, m))
     return (sp.kron(line, sp.identity(m)) + sp.kron(sp.identity(m), line)).tocsr()
+
+
+def order_of(matrix: sp.spmatrix) -> np.ndarray:
+    """The approximate-minimum-degree order of ``matrix`` (compressed), as newton-ac asks for it:
+    from the part of its symmetrised pattern above the diagonal."""
+    matrix = sp.csr_matrix(matrix)
+    return approximate_minimum_degree(*kernels.symmetrised_pattern(matrix.indptr, matrix.indices))
 
 
 def factor_entries(matrix: sp.spmatrix, order: np.ndarray) -> int:
@@ -59,16 +66,17 @@ def test_the_order_is_a_permutation_of_the_rows(pattern):
     matrix = patterns[pattern]()
     matrix = sp.csr_matrix(matrix)
     assert matrix.indices.dtype == np.int32
-    order = approximate_minimum_degree(matrix.indptr, matrix.indices)
+    order = order_of(matrix)
     assert is_permutation(order, matrix.shape[0])
     if pattern == "random":                     # a seeded random pattern of another density too
         dense = sp.csr_matrix(sp.random(n, n, 0.3, random_state=rng.integers(100)))
-        assert is_permutation(approximate_minimum_degree(dense.indptr, dense.indices), n)
+        assert is_permutation(order_of(dense), n)
 
 
-def test_the_adjacency_is_the_symmetrised_pattern_without_its_diagonal():
+def test_the_adjacency_has_both_triangles_of_the_symmetrised_pattern_without_its_diagonal():
     matrix = sp.csr_matrix(sp.random(30, 30, 0.1, random_state=3) + sp.identity(30))
-    pointers, neighbours = symmetric_adjacency(matrix.indptr, matrix.indices)
+    pointers, neighbours = _both_triangles(*kernels.symmetrised_pattern(matrix.indptr,
+                                                                         matrix.indices))
     expected = ((abs(matrix) + abs(matrix.T)) != 0).astype(float).tolil()
     expected.setdiag(0)
     expected = sp.csr_matrix(expected)
@@ -84,7 +92,7 @@ def test_the_order_keeps_the_fill_of_a_grid_near_superlu_s_minimum_degree():
     SuperLU's minimum-degree order (10 231 against 10 098) and far below the natural order's
     (27 029)."""
     matrix = grid(30)
-    order = approximate_minimum_degree(matrix.indptr, matrix.indices)
+    order = order_of(matrix)
     spd = (sp.identity(900) * 10 - matrix + sp.identity(900)).tocsc()
     superlu = spla.splu(spd, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
                         options=dict(SymmetricMode=True))
