@@ -938,8 +938,9 @@ def test_the_static_lu_has_the_fill_of_symbolic_elimination_and_solves(symmetric
     ``j`` through every earlier pivot they share, done on booleans); with a quarter of the
     entries above the diagonal dropped (a pattern not symmetric, as ``W``'s where a product came
     out exactly 0) they hold them (those of ``A + A^T``). Either way L U is the matrix to
-    rounding and the solve's residual is at rounding. Through newton._StaticLU, which hands the
-    kernels unsigned index arrays, as the Newton phases do."""
+    rounding and the solve's residual is at rounding; its norm (for the backward error) is
+    ``|A|_inf``. Through newton._StaticLU, which hands the kernels unsigned index arrays, as the
+    Newton phases do."""
     side = 9
     n = side * side
     grid = sp.diags([np.ones(n - 1), np.ones(n - side)], [1, side], shape=(n, n))
@@ -974,6 +975,7 @@ def test_the_static_lu_has_the_fill_of_symbolic_elimination_and_solves(symmetric
     rhs = rng.normal(size=n)
     solved = factors.solve(rhs)
     assert np.abs(matrix @ solved - rhs).max() <= 1e-13 * np.abs(rhs).max()
+    assert factors.norm == pytest.approx(np.abs(dense).sum(axis=1).max(), rel=1e-14)
 
 
 def test_a_carried_block_without_a_stable_static_lu_is_factorised_by_superlu():
