@@ -159,6 +159,13 @@ developed flows (exact Coulomb, tol 1e-6), 1e-3 against 3e-3 against 1e-2: gluey
 creeping 300-grain bed 234, 222, and with 1e-2 a stall. Not on the dense lane, where the warm
 starts of small piles near rest took 3-14 % more iterations with either
 (docs/records/benchmarks.md, "a firmer first weight on flows")."""
+WARM_DENSE_WEIGHT = 1e-4
+"""The first starting weight, in place of ``STRATEGIES[0]``, from a warm start on a 2D problem of
+the dense lane (at most ``DENSE_LIMIT`` rows, a small system's step, near the previous one's
+forces). Newton iterations summed over 150 captured steps of settling frictional piles of 10,
+20 and 40 grains (exact Coulomb, tol 1e-8), 1e-3 against 3e-4, 1e-4, 3e-5, 1e-5: 275, 273, 269,
+283, 339; 628, 583, 566, 509, 588; 1 005, 883, 918, 872, 899 (docs/records/benchmarks.md,
+"a softer first weight on small systems")."""
 SIGMA_DECREASE = 10.0
 """The factor dividing the proximal weight after an outer iteration whose subproblem was solved
 (:func:`_proximal_newton`), but on gluey flows' steps (:data:`UNION_SIGMA_DECREASE`)."""
@@ -1031,8 +1038,9 @@ def _strategies(function: AlartCurnier, unshifted: ConicProblem, forces: np.ndar
     """:func:`_proximal_newton` with each ``sigma`` of :data:`STRATEGIES` in turn, each from
     ``forces`` (a strategy's stalled iterate is a worse start than the warm start, measured),
     the first also from zero forces when ``forces`` is not zero (from a warm start on the 2D
-    sparse lane the first from ``forces`` is :data:`WARM_SPARSE_WEIGHT` instead; from zero it
-    stays ``STRATEGIES[0]``), until one converges, the best
+    sparse lane the first from ``forces`` is :data:`WARM_SPARSE_WEIGHT` instead, on the 2D dense
+    lane :data:`WARM_DENSE_WEIGHT`, which ``STRATEGIES[0]`` then replaces among the later ones;
+    from zero it stays ``STRATEGIES[0]``), until one converges, the best
     error is within :data:`STRATEGY_GAP` of ``tol`` or ``max_iter`` Newton iterations are
     spent; the best phase is returned (the plain try's, if best, as stalled where it stopped
     short of ``tol``; its error counts in the test against :data:`STRATEGY_GAP`).
@@ -1048,10 +1056,11 @@ def _strategies(function: AlartCurnier, unshifted: ConicProblem, forces: np.ndar
     plain_try = PLAIN_TRY > 0 and max_iter > 2 * PLAIN_TRY and warm and function.dense \
         and function.planar and not function.cone_n.size and not function.singular_at(forces)
     starts = [(0.0, forces, True)] if plain_try else []
-    first = WARM_SPARSE_WEIGHT if warm and function.flow_lane else STRATEGIES[0]
+    first = STRATEGIES[0] if not warm else WARM_SPARSE_WEIGHT if function.flow_lane \
+        else WARM_DENSE_WEIGHT if function.planar and function.dense else STRATEGIES[0]
     starts += [(first, forces, False)] \
         + ([(STRATEGIES[0], np.zeros_like(forces), False)] if warm else []) \
-        + [(sigma, forces, False) for sigma in STRATEGIES[1:]]
+        + [(STRATEGIES[0] if sigma == first else sigma, forces, False) for sigma in STRATEGIES[1:]]
     for sigma, start, is_plain_try in starts:
         budget = PLAIN_TRY if is_plain_try else max_iter - iterations
         phase = _proximal_newton(function, unshifted, start, tol, budget, sigma,

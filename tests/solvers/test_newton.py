@@ -1360,7 +1360,8 @@ def test_a_small_frictionless_problem_near_its_warm_start_is_solved_by_the_plain
         settling_step, monkeypatch):
     """From a warm start near the solution of a small frictionless problem, plain Newton (the
     plain try, PLAIN_TRY) takes the answer to round-off in one iteration, where the proximal
-    loop spends one iteration per weight (1e-3, 1e-4, ..., then the finish); from a warm start
+    loop spends one iteration per weight (WARM_DENSE_WEIGHT, then a tenth of it, ..., then the
+    finish); from a warm start
     already at tol, the finish takes it there. No plain try on the sparse lane, with friction
     cones, or where the block at the warm start is singular by its count (the jammed hexagonal
     box)."""
@@ -1377,22 +1378,23 @@ def test_a_small_frictionless_problem_near_its_warm_start_is_solved_by_the_plain
     assert loose.iterations == 1 and loose.error <= newton.ROUND_OFF
     monkeypatch.setattr(newton, "PLAIN_TRY", 0)
     proximal = plain_try_strategies(chain, near)
-    assert proximal.status == CONVERGED and proximal.strategies == [(1e-3, "warm")]
+    assert proximal.status == CONVERGED and proximal.strategies == [(newton.WARM_DENSE_WEIGHT, "warm")]
     assert proximal.iterations >= 3
     monkeypatch.undo()
     jammed = load_cases()["hex_box_jammed"].problem.normalized()
     assert AlartCurnier(jammed).singular_at(np.ones(jammed.n_rows))
-    assert plain_try_strategies(jammed, np.ones(jammed.n_rows)).strategies[0] == (1e-3, "warm")
+    first = (newton.WARM_DENSE_WEIGHT, "warm")
+    assert plain_try_strategies(jammed, np.ones(jammed.n_rows)).strategies[0] == first
     problem, reference = settling_step                     # friction cones
     frictional = solve_coulomb(problem, "newton-ac", tol=1e-6, warm_start=reference.forces * (1.0 + 1e-3))
-    assert frictional.success and frictional.info["strategies"] == [(1e-3, "warm")]
+    assert frictional.success and frictional.info["strategies"] == [(newton.WARM_DENSE_WEIGHT, "warm")]
     cold = plain_try_strategies(chain, np.zeros(chain.n_rows))
     assert cold.status == CONVERGED and cold.strategies[0] == (1e-3, "cold")
     stack = load_cases()["heavy_on_light_stack"].problem.normalized()    # max_iter too small
     unshifted = stack.with_shift(np.zeros(stack.n_contacts))
     tight = newton._strategies(AlartCurnier(stack), unshifted, np.random.default_rng(0).normal(
         size=stack.n_rows), 1e-8, 2 * newton.PLAIN_TRY)
-    assert tight.status == CONVERGED and tight.strategies[0] == (1e-3, "warm")
+    assert tight.status == CONVERGED and tight.strategies[0] == (newton.WARM_DENSE_WEIGHT, "warm")
     use_the_sparse_lane(monkeypatch)
     sparse = solve(original, "newton-ac", tol=1e-8, warm_start=near * chain.scaling.force)
     assert sparse.success and sparse.info["strategies"] == [(newton.WARM_SPARSE_WEIGHT, "warm")]
@@ -1405,6 +1407,39 @@ def test_plain_newton_as_a_strategy_has_no_finish():
     result = solve(load_cases()["mass_ratio_1e6_sandwich"].problem, "newton-ac", tol=1e-8)
     assert result.status == CONVERGED and result.info["strategies"] == [(1e-3, "cold"), (0.0, "cold")]
     assert result.iterations == 2 and result.info["error"] > newton.ROUND_OFF
+
+
+def test_the_first_weight_from_a_warm_start_depends_on_the_lane(settling_step, monkeypatch):
+    """From a warm start the strategies begin at WARM_DENSE_WEIGHT on the 2D dense lane (a small
+    system's step) and at WARM_SPARSE_WEIGHT on the sparse lane (a flow's step), then try
+    STRATEGIES[0] from zero forces and the rest of STRATEGIES from the warm start, the first
+    weight's place among them taken by STRATEGIES[0]: each start once. From zero forces they
+    begin at STRATEGIES[0]."""
+    problem, reference = settling_step
+    scaled = problem.normalized()
+    unshifted = scaled.with_shift(np.zeros(scaled.n_contacts))
+    warm = reference.forces / scaled.scaling.force
+    tried = []
+
+    def stalled(function, unshifted, forces, tol, max_iter, sigma, finish=True):
+        tried.append((sigma, "warm" if forces.any() else "cold"))
+        return newton._Phase(forces=forces, status=newton.STALLED, iterations=1, error=1.0,
+                             history=np.ones(2), gradient_steps=0)
+
+    monkeypatch.setattr(newton, "_proximal_newton", stalled)
+    dense = AlartCurnier(scaled)
+    assert dense.planar and dense.dense and not dense.flow_lane
+    newton._strategies(dense, unshifted, warm, 1e-8, 200)
+    assert tried == [(newton.WARM_DENSE_WEIGHT, "warm"), (1e-3, "cold"), (0.0, "warm"), (1e-3, "warm")]
+    tried.clear()
+    newton._strategies(dense, unshifted, np.zeros_like(warm), 1e-8, 200)
+    assert tried == [(sigma, "cold") for sigma in newton.STRATEGIES]
+    tried.clear()
+    use_the_sparse_lane(monkeypatch)
+    sparse = AlartCurnier(scaled)
+    assert sparse.flow_lane
+    newton._strategies(sparse, unshifted, warm, 1e-8, 200)
+    assert tried == [(newton.WARM_SPARSE_WEIGHT, "warm"), (1e-3, "cold"), (0.0, "warm"), (1e-4, "warm")]
 
 
 def test_a_best_plain_try_short_of_tol_is_reported_stalled():
@@ -1434,7 +1469,8 @@ def test_a_failed_plain_try_hands_over_to_the_strategies_from_the_warm_start(com
     tried, cap = plain_try_strategies(jammed, warm_start, compiled), newton.PLAIN_TRY
     monkeypatch.setattr(newton, "PLAIN_TRY", 0)
     untried = plain_try_strategies(jammed, warm_start, compiled)
-    assert tried.strategies == [(0.0, "warm"), (1e-3, "warm")] and untried.strategies == [(1e-3, "warm")]
+    first = (newton.WARM_DENSE_WEIGHT, "warm")
+    assert tried.strategies == [(0.0, "warm"), first] and untried.strategies == [first]
     assert tried.status == untried.status == CONVERGED
     assert tried.iterations == untried.iterations + cap > cap
     assert tried.error == untried.error <= 1e-8
