@@ -1056,8 +1056,11 @@ def _strategies(function: AlartCurnier, unshifted: ConicProblem, forces: np.ndar
     plain_try = PLAIN_TRY > 0 and max_iter > 2 * PLAIN_TRY and warm and function.dense \
         and function.planar and not function.cone_n.size and not function.singular_at(forces)
     starts = [(0.0, forces, True)] if plain_try else []
-    first = STRATEGIES[0] if not warm else WARM_SPARSE_WEIGHT if function.flow_lane \
-        else WARM_DENSE_WEIGHT if function.planar and function.dense else STRATEGIES[0]
+    first = STRATEGIES[0]
+    if warm and function.flow_lane:
+        first = WARM_SPARSE_WEIGHT
+    elif warm and function.planar and function.dense:
+        first = WARM_DENSE_WEIGHT
     starts += [(first, forces, False)] \
         + ([(STRATEGIES[0], np.zeros_like(forces), False)] if warm else []) \
         + [(STRATEGIES[0] if sigma == first else sigma, forces, False) for sigma in STRATEGIES[1:]]

@@ -1361,10 +1361,9 @@ def test_a_small_frictionless_problem_near_its_warm_start_is_solved_by_the_plain
     """From a warm start near the solution of a small frictionless problem, plain Newton (the
     plain try, PLAIN_TRY) takes the answer to round-off in one iteration, where the proximal
     loop spends one iteration per weight (WARM_DENSE_WEIGHT, then a tenth of it, ..., then the
-    finish); from a warm start
-    already at tol, the finish takes it there. No plain try on the sparse lane, with friction
-    cones, or where the block at the warm start is singular by its count (the jammed hexagonal
-    box)."""
+    finish); from a warm start already at tol, the finish takes it there. No plain try on the
+    sparse lane, with friction cones, or where the block at the warm start is singular by its
+    count (the jammed hexagonal box)."""
     original = load_cases()["glued_chain_anchored"].problem
     chain = original.normalized()
     solution = plain_try_strategies(chain, np.zeros(chain.n_rows)).forces
