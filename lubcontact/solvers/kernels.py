@@ -734,7 +734,8 @@ def sparse_jacobian_rows_2d(indptr, indices, data, rho, lower, upper, box, cone_
 def compressed_transpose(size, pointers, indices, values):
     """The transpose of a square sparse matrix of ``size`` rows in compressed arrays
     (``pointers``, ``indices``, ``values``: CSR gives CSC, and back), by a counting sort, the
-    indices of each new row sorted and 32-bit (SuperLU's): ``(pointers, indices, values)``."""
+    indices of each new row sorted and 32-bit (SuperLU's): ``(pointers, indices, values)``;
+    ``values`` empty: the pattern's transpose alone, its values empty."""
     count = pointers[size]
     new_pointers = np.zeros(size + 1, dtype=np.int32)
     for k in range(count):
@@ -743,11 +744,14 @@ def compressed_transpose(size, pointers, indices, values):
         new_pointers[a + 1] += new_pointers[a]
     filled = new_pointers[:-1].astype(np.int64)
     new_indices = np.empty(count, dtype=np.int32)
-    new_values = np.empty(count)
+    with_values = values.size > 0
+    new_values = np.empty(count if with_values else 0)
     for a in range(size):                       # in order: each new row's indices sorted
         for k in range(pointers[a], pointers[a + 1]):
             place = filled[indices[k]]
-            new_indices[place], new_values[place] = a, values[k]
+            new_indices[place] = a
+            if with_values:
+                new_values[place] = values[k]
             filled[indices[k]] += 1
     return new_pointers, new_indices, new_values
 
@@ -950,16 +954,19 @@ def permuted_csc(indptr, indices, data, order):
 
 
 @numba.njit(cache=True)
-def elimination_tree(indptr, indices):
-    """The elimination tree of a symmetric pattern in compressed arrays (``indptr``,
-    ``indices``; only the entries above the diagonal are read): ``parent`` (n,), -1 at a root
-    (Liu's algorithm with path compression)."""
+def elimination_tree(indptr, indices, row_ptr, row_idx):
+    """The elimination tree of ``A + A^T``'s pattern, ``A`` square, from its columns (``indptr``,
+    ``indices``) and its rows (``row_ptr``, ``row_idx``: ``A^T``'s columns); only the entries
+    above the diagonal of ``A + A^T`` are read (column ``k``'s and row ``k``'s before ``k``, an
+    entry met twice where ``A`` stores both): ``parent`` (n,), -1 at a root (Liu's algorithm
+    with path compression)."""
     n = indptr.size - 1
     parent = np.full(n, -1, dtype=np.int64)
     ancestor = np.full(n, -1, dtype=np.int64)
     for k in range(n):
-        for e in range(indptr[k], indptr[k + 1]):
-            i = indices[e]
+        for e in range(indptr[k] + row_ptr[k], indptr[k + 1] + row_ptr[k + 1]):
+            i = np.int64(indices[e - row_ptr[k]]) if e < indptr[k + 1] + row_ptr[k] \
+                else np.int64(row_idx[e - indptr[k + 1]])       # column k's, then row k's
             while i != -1 and i < k:
                 above = ancestor[i]
                 ancestor[i] = k
@@ -1008,47 +1015,65 @@ def symmetrised_pattern(indptr, indices):
 @numba.njit(cache=True)
 def static_pattern(indptr, indices):
     """Patterns that hold ``L`` and ``U`` in ``A = L U`` without pivoting, ``A`` square in
-    compressed arrays: ``L``'s is the Cholesky factor's of ``A + A^T``'s pattern
-    (:func:`symmetrised_pattern`; row ``k`` of ``L``: the subtree of the elimination tree that
-    column ``k`` reaches), ``U``'s its transpose. The reduced Newton blocks are symmetric in
-    pattern but where ``W`` stores an entry and not its mirror (a product that came out exactly
-    0: contacts at right angles on one grain, a lattice). Returns ``(L_indptr, L_indices,
-    U_indptr, U_indices)``, CSC, each column's rows sorted: ``L``'s diagonal first, ``U``'s
-    last."""
+    compressed arrays: ``L``'s is the Cholesky factor's of ``A + A^T``'s pattern, ``U``'s its
+    transpose. The reduced Newton blocks are symmetric in pattern but where ``W`` stores an
+    entry and not its mirror (a product that came out exactly 0: contacts at right angles on
+    one grain, a lattice). Column ``j`` of ``L`` holds ``j``, the rows below it of column ``j``
+    and of row ``j`` of ``A``, and the rows but ``j`` of its children's columns in the elimination
+    tree (:func:`elimination_tree`), each once: one pass over the columns in order, each reading
+    its children's columns written before it (walking the tree's row subtrees twice instead, to
+    count then to place, which sorts the rows, took a fifth longer: 2.5-2.8 against 2.0-2.3 ms
+    on 12 000-grain gluey blocks, docs/records/benchmarks.md). Returns ``(L_indptr, L_indices, U_indptr,
+    U_indices)``, CSC: ``L``'s diagonal first in each column, the other rows unordered (the
+    factorisation and the solves scatter a column whatever its order); ``U``'s rows sorted, its
+    diagonal last."""
     n = indptr.size - 1
-    pointers, rows = symmetrised_pattern(indptr, indices)
-    parent = elimination_tree(pointers, rows)
-    mark = np.full(n, -1, dtype=np.int64)
-    counts = np.ones(n, dtype=np.int64)                 # the diagonal
-    for k in range(n):
-        mark[k] = k
-        for e in range(pointers[k], pointers[k + 1]):
-            i = rows[e]
-            while i < k and mark[i] != k:
-                counts[i] += 1
-                mark[i] = k
-                i = parent[i]
+    row_ptr, row_idx, _ = compressed_transpose(n, indptr, indices, np.zeros(0))
+    parent = elimination_tree(indptr, indices, row_ptr, row_idx)
+    first_child = np.full(n, -1, dtype=np.int64)
+    next_child = np.full(n, -1, dtype=np.int64)
+    for c in range(n - 1, -1, -1):                      # each node's children, in order
+        if parent[c] != -1:
+            next_child[c] = first_child[parent[c]]
+            first_child[parent[c]] = c
     lower_ptr = np.zeros(n + 1, dtype=np.int64)
+    lower_idx = np.empty(2 * (indptr[n] + n), dtype=np.uint32)   # unsigned: no wrap-around checks
+    mark = np.full(n, -1, dtype=np.int64)
+    size = 0
     for j in range(n):
-        lower_ptr[j + 1] = lower_ptr[j] + counts[j]
-    lower_idx = np.empty(lower_ptr[n], dtype=np.uint32)    # unsigned: no wrap-around checks
-    filled = lower_ptr[:-1].copy()
-    for j in range(n):
-        lower_idx[filled[j]] = j
-        filled[j] += 1
-    mark[:] = -1
-    for k in range(n):                                  # rows in order: each column sorted
-        mark[k] = k
-        for e in range(pointers[k], pointers[k + 1]):
-            i = rows[e]
-            while i < k and mark[i] != k:
-                lower_idx[filled[i]] = k
-                filled[i] += 1
-                mark[i] = k
-                i = parent[i]
-    if lower_idx.size >= 2**31:
+        most = size + 1 + indptr[j + 1] - indptr[j] + row_ptr[j + 1] - row_ptr[j]
+        c = first_child[j]
+        while c != -1:
+            most += lower_ptr[c + 1] - lower_ptr[c]
+            c = next_child[c]
+        if most > lower_idx.size:                       # room for this column at worst
+            grown = np.empty(max(2 * lower_idx.size, most), dtype=np.uint32)
+            grown[:size] = lower_idx[:size]
+            lower_idx = grown
+        mark[j] = j
+        lower_idx[size] = j
+        size += 1
+        for e in range(indptr[j] + row_ptr[j], indptr[j + 1] + row_ptr[j + 1]):
+            i = np.int64(indices[e - row_ptr[j]]) if e < indptr[j + 1] + row_ptr[j] \
+                else np.int64(row_idx[e - indptr[j + 1]])       # column j's, then row j's
+            if i > j and mark[i] != j:
+                mark[i] = j
+                lower_idx[size] = i
+                size += 1
+        c = first_child[j]
+        while c != -1:
+            for q in range(lower_ptr[c] + 1, lower_ptr[c + 1]):
+                i = np.int64(lower_idx[q])
+                if i != j and mark[i] != j:
+                    mark[i] = j
+                    lower_idx[size] = i
+                    size += 1
+            c = next_child[c]
+        lower_ptr[j + 1] = size
+    if size >= 2**31:
         raise ValueError("static_pattern: more than 2^31 entries in L (32-bit pointers of U)")
-    upper_ptr, upper_idx, _ = compressed_transpose(n, lower_ptr, lower_idx, np.zeros(lower_idx.size))
+    lower_idx = lower_idx[:size].copy()
+    upper_ptr, upper_idx, _ = compressed_transpose(n, lower_ptr, lower_idx, np.zeros(0))
     return lower_ptr, lower_idx, upper_ptr, upper_idx
 
 

@@ -961,6 +961,9 @@ def test_the_static_lu_has_the_fill_of_symbolic_elimination_and_solves(symmetric
         below = np.flatnonzero(filled[k + 1:, k]) + k + 1
         right = np.flatnonzero(filled[k, k + 1:]) + k + 1
         filled[np.ix_(below, right)] = True
+    assert np.array_equal(lower_idx[lower_ptr[:-1]], np.arange(n))              # L's diagonal first
+    assert all(np.all(np.diff(upper_idx[upper_ptr[j]:upper_ptr[j + 1]].astype(int)) > 0)
+               and upper_idx[upper_ptr[j + 1] - 1] == j for j in range(n))     # U's sorted, diagonal last
     lower = sp.csc_matrix((np.ones(lower_idx.size), lower_idx, lower_ptr), shape=(n, n)).toarray() != 0
     upper = sp.csc_matrix((np.ones(upper_idx.size), upper_idx, upper_ptr), shape=(n, n)).toarray() != 0
     assert np.array_equal(lower, upper.T)
