@@ -980,7 +980,7 @@ def elimination_tree(indptr, indices, row_ptr, row_idx):
 def symmetrised_pattern(indptr, indices):
     """The part above the diagonal of ``A + A^T``'s pattern, ``A`` square in compressed arrays:
     column ``k`` holds the rows ``i < k`` with an entry at ``(i, k)`` or ``(k, i)``, once each
-    (what the elimination tree and the row subtrees read)."""
+    (what :func:`~lubcontact.solvers.ordering.approximate_minimum_degree` reads)."""
     n = indptr.size - 1
     pointers = np.zeros(n + 1, dtype=np.int64)
     for j in range(n):                                  # entry (r, j) goes to column max(r, j)
