@@ -25,10 +25,3 @@ def settling_step():
     reference = solve_coulomb(problem, "clarabel", tol=1e-10, tol_fp=1e-10, max_outer=500)
     assert reference.success and problem.n_contacts >= 30
     return problem, reference
-
-
-@pytest.fixture(scope="session")
-def crowded_settling_step():
-    """The 42nd step of the same pile: 116 rows on 180 degrees of freedom, some of the sticking
-    rows' blocks singular though not by their count."""
-    return settling_pile_problem(41)
