@@ -187,7 +187,7 @@ small 2D problem (the dense lane) without friction cones, unless plain Newton's 
 singular by its count there (the plain try, :func:`_strategies`; then at most
 :data:`FINISH_ITERATIONS` more to round-off); :data:`STRATEGIES` follow from the warm start
 where they did not reach ``tol``. From the previous step's forces of a small frictionless pile
-the proximal loop spends an iteration per weight (1e-3, 1e-4, ...), where plain
+the proximal loop spends an iteration per weight (1e-3, 1e-4, ..., then the finish), where plain
 Newton converges fast: on 300 steps of 20- and 40-grain settling piles, in 1-5
 iterations (1 on most) against 1-7. Not with friction cones: with exact Coulomb it converged
 within 5 iterations on 88 of the 20-grain pile's 300 steps and stalled on 92, and plain Newton
@@ -238,31 +238,33 @@ KEPT_FACTORISATIONS = 2
 that cycle between two pieces."""
 
 FINISH_ITERATIONS = 2
-"""Plain Newton iterations, at most, after the plain try converged (kept where they lower the
-error; they stop at :data:`ROUND_OFF`): quadratic convergence takes a small frictionless pile's
-answer from ``tol`` to round-off, from where the next step of a pile at rest has no iteration
+"""Plain Newton iterations, at most, after the proximal loop or the plain try converged on a
+problem without friction cones (kept where they lower the error; they stop at
+:data:`ROUND_OFF`). There the Alart-Curnier function is piecewise linear, and once the active set
+has settled a plain Newton step lands on the solution: round-off in one iteration where the
+block is regular (none on the sparse lane where it is singular by its count:
+:meth:`AlartCurnier.hyperstatic`), from where the next step of a pile at rest has no iteration
 to do. Where the error's floor is above ``ROUND_OFF`` the first runs for nothing, and the second
 only after a first that gained (:data:`FINISH_GAIN`): on ``heavy_on_light_stack`` from near its
 solution the plain try takes 2 iterations where plain Newton alone takes 1, to the same FCLIB
 error near 1e-12 (3 before the gain was asked for).
 
-A proximal loop stops at ``tol``, without them: after it they lowered the error tenfold on few
-solves, where plain Newton's block at the answer is singular or nearly so (more contact rows
-than degrees of freedom), for a Newton iteration on every solve. On 150 steps each of the
+None with friction cones, where the loop's answer at ``tol`` is the answer: there they lowered
+the error tenfold on few solves, for a Newton iteration on every one. On 150 steps each of the
 settling frictional piles of ``bench small`` (10, 20 and 40 grains, exact Coulomb, tol 1e-8) they
 gained on 1, 6 and 22 solves and cost 7-15 % of a solve; on 25 steps of a developed 12 000-grain
 gluey flow (tol 1e-6) they gained on 7 and cost 6-9 % of the median step
-(docs/records/benchmarks.md, "no plain finish after the proximal loop")."""
+(docs/records/benchmarks.md, "no plain finish with friction cones")."""
 ROUND_OFF = 1e-14
-"""FCLIB error at which the plain try's finishing iterations stop: round-off (where the block is
-regular the first takes the answer there, and a second would factorise again for nothing;
+"""FCLIB error at which those plain iterations stop: round-off (where the block is regular the
+first takes the answer there, and a second would factorise again for nothing;
 docs/records/benchmarks.md, "the finish stops at round-off")."""
 FINISH_GAIN = 0.1
 """A plain iteration of the finish is followed by the next only where it lowered the FCLIB error
 below this fraction of its start's (and not to :data:`ROUND_OFF`): from ``tol`` quadratic
 convergence gains decades in one iteration, and where it gains less the block is singular
 there though not by its count. On 40-grain frictional piles at rest (142 rows, 120 degrees of
-freedom, 112 rows of ``W`` in the block), when proximal loops ended with the finish too, its
+freedom, 112 rows of ``W`` in the block), when problems with friction cones had it too, its
 block had singular values of 1e-16 and its two iterations left the error where it was on half
 the steps (docs/records/benchmarks.md, "the finish stops where it gains nothing"). Each
 iteration is a Newton phase of its own: the second's line search is monotone from the first's
@@ -309,10 +311,10 @@ stops just below ``tol``, and on 6 of 40 steps of a developed dry 2 000-grain fl
 plain Newton iterations after it did not lower its FCLIB error (5e-7 to 8e-7), leaving
 velocities 2e-5 to 8e-5 from the exact ones (from the warm start Newton's iterates end at
 round-off). None where plain Newton's block at those forces is singular by its count (a pile
-at rest: :meth:`AlartCurnier.hyperstatic`). That polish stops at its target, as every proximal
-loop does (no plain finishing iterations past it, :data:`FINISH_ITERATIONS`: when two always
-ran they took 13 % of a 12 000-grain dry step), so an answer from the joint phase is at FCLIB
-error ``JOINT_FINISH tol`` or below, not always at round-off."""
+at rest: :meth:`AlartCurnier.hyperstatic`). That polish stops at its target (no plain
+finishing iterations past it, :data:`FINISH_ITERATIONS`, none with friction cones: when two
+always ran they took 13 % of a 12 000-grain dry step), so an answer from the joint phase is at
+FCLIB error ``JOINT_FINISH tol`` or below, not always at round-off."""
 JOINT_START_ITERATIONS = 2000
 """Cap on the iterations of the joint phase before the Newton phases (``joint``)."""
 
@@ -969,7 +971,7 @@ def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = 5
     if joined_start and phase.status == CONVERGED and phase.error > JOINT_FINISH * tol \
             and not function.hyperstatic(forces):
         finish = _proximal_newton(function, unshifted, forces, JOINT_FINISH * tol, POLISH_ITERATIONS,
-                                  STRATEGIES[0])
+                                  STRATEGIES[0], finish=False)
         iterations += finish.iterations
         info["newton_iterations"] += finish.iterations
         history = np.concatenate([history, finish.history[1:]])
@@ -1057,8 +1059,8 @@ def _strategies(function: AlartCurnier, unshifted: ConicProblem, forces: np.ndar
     First, on a small 2D problem without friction cones, from a warm start at which plain
     Newton's block is not singular by its count (:meth:`AlartCurnier.singular_at`), and where
     ``max_iter`` leaves the strategies room (more than twice :data:`PLAIN_TRY`), the plain try:
-    at most :data:`PLAIN_TRY` plain Newton iterations from ``forces``, finished to round-off
-    (:data:`FINISH_ITERATIONS`, after the plain try only)."""
+    at most :data:`PLAIN_TRY` plain Newton iterations from ``forces``, finished to round-off as a
+    proximal loop is (:data:`FINISH_ITERATIONS`); plain Newton as a strategy has no finish."""
     best, history, tried = None, [], []
     iterations = gradient_steps = proximal_steps = 0
     warm = bool(forces.any())
@@ -1076,7 +1078,7 @@ def _strategies(function: AlartCurnier, unshifted: ConicProblem, forces: np.ndar
     for sigma, start, is_plain_try in starts:
         budget = PLAIN_TRY if is_plain_try else max_iter - iterations
         phase = _proximal_newton(function, unshifted, start, tol, budget, sigma,
-                                 finish=is_plain_try)
+                                 finish=sigma > 0 or is_plain_try)
         if is_plain_try and phase.status != CONVERGED:
             phase.status = STALLED                  # its cap, not the solve's max_iter
         tried.append((sigma, "warm" if start is forces and warm else "cold"))
@@ -1095,7 +1097,7 @@ def _strategies(function: AlartCurnier, unshifted: ConicProblem, forces: np.ndar
 
 
 def _proximal_newton(function: AlartCurnier, unshifted: ConicProblem, forces: np.ndarray,
-                     tol: float, max_iter: int, sigma: float, finish: bool = False) -> _Phase:
+                     tol: float, max_iter: int, sigma: float, finish: bool = True) -> _Phase:
     """Proximal-point iterations, each solved by Newton, until the FCLIB error is below ``tol``.
 
     Each outer iteration solves (approximately: ``|phi_sigma|`` down by
@@ -1118,10 +1120,14 @@ def _proximal_newton(function: AlartCurnier, unshifted: ConicProblem, forces: np
     nothing and a smaller one not solved in :data:`INNER_CAP` iterations until
     the phase stalled (docs/records/benchmarks.md, "creeping beds"). The best
     iterate is what the phase returns. The phase stalls by :class:`_StallRule`.
-    The phase stops at ``tol``. With ``finish`` (the plain try's, :func:`_strategies`), one that
-    converged ends with at most :data:`FINISH_ITERATIONS` plain Newton iterations, quadratic
-    there: from ``tol`` to round-off (:data:`ROUND_OFF`) in one or two factorisations, the
-    second only after a first that gained (:data:`FINISH_GAIN`).
+    With ``finish``, a phase that converged on a problem without friction cones ends with at most
+    :data:`FINISH_ITERATIONS` plain Newton iterations, exact there once the active set has
+    settled (unless the block is singular by its count, :meth:`AlartCurnier.hyperstatic`): from
+    ``tol`` to round-off (:data:`ROUND_OFF`) in one or two factorisations, the second only after
+    a first that gained (:data:`FINISH_GAIN`). With friction cones, and without ``finish``, it
+    stops at ``tol``. :func:`_strategies` asks for it after a proximal loop and after the plain
+    try, not after plain Newton as a strategy (on two hard cases its iterations did not reach
+    round-off); the polish to :data:`JOINT_FINISH` ``tol`` does not (that is its target).
     """
     scale = sigma * function.typical
     decrease = UNION_SIGMA_DECREASE if function.flow_lane and not function.convex else SIGMA_DECREASE
@@ -1166,7 +1172,9 @@ def _proximal_newton(function: AlartCurnier, unshifted: ConicProblem, forces: np
             break
     if best[0] <= tol:
         status = CONVERGED
-        if finish and best[0] > ROUND_OFF:      # the loop stops at tol; plain Newton is quadratic here
+        # the loop stops at tol; without friction cones a plain Newton step is exact from here
+        if finish and not function.cone_n.size and best[0] > ROUND_OFF \
+                and not function.hyperstatic(best[1]):
             function.set_proximal(0.0, best[1])
             start = best
             for _ in range(FINISH_ITERATIONS):       # one at a time: each must gain (FINISH_GAIN)

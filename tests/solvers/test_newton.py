@@ -1317,20 +1317,26 @@ def plain_finishes(problem, lane, monkeypatch, **options):
 
 
 @pytest.mark.parametrize("lane", ["compiled", "sparse"])
-def test_a_proximal_loop_stops_at_tol_without_a_plain_finish(settling_step, lane, monkeypatch):
-    """newton-ac's answer from its proximal loop is the loop's, at tol: no plain Newton phase to
-    round-off after it (FINISH_ITERATIONS, the plain try's only; on this step one took the answer
-    there, but on the settling frictional piles of bench small such a phase lowered the error
-    tenfold on 1-14 % of the solves, for a Newton iteration on every one)."""
+def test_a_plain_finish_follows_the_proximal_loop_only_without_friction_cones(settling_step, lane,
+                                                                               monkeypatch):
+    """With friction cones newton-ac's answer is its proximal loop's, at tol: no plain Newton phase
+    to round-off after it (FINISH_ITERATIONS; on this step one took the answer there, but on the
+    settling frictional piles of bench small such a phase lowered the error tenfold on 1-14 % of
+    the solves, for a Newton iteration on every one). Without friction cones the Alart-Curnier
+    function is piecewise linear, and from the loop's answer one plain step lands on the
+    solution (the glued chain, from zero forces)."""
     problem, reference = settling_step
     result, finishes = plain_finishes(problem, lane, monkeypatch, tol=1e-6,
                                       warm_start=reference.forces * (1.0 + 1e-3))
     assert result.success and finishes == []
-    assert result.info["strategies"] == [(newton.WARM_DENSE_WEIGHT if lane == "compiled"
-                                          else newton.WARM_SPARSE_WEIGHT, "warm")]
     error = coulomb_error(problem.normalized(), result.forces / result.force_scale)
     assert newton.ROUND_OFF < error <= 1e-6
     assert velocity_error(problem, result.velocities, reference.velocities) <= 1e-6
+    chain = load_cases()["glued_chain_anchored"].problem
+    result, finishes = plain_finishes(chain, lane, monkeypatch, tol=1e-8)
+    assert result.success and [finish.iterations for finish in finishes] == [1]
+    assert finishes[0].history[0] > newton.ROUND_OFF >= finishes[0].history[-1]
+    assert coulomb_error(chain.normalized(), result.forces / result.force_scale) <= newton.ROUND_OFF
 
 
 def test_the_plain_trys_finish_stops_after_an_iteration_that_gains_nothing(monkeypatch):
@@ -1360,8 +1366,8 @@ def test_a_small_frictionless_problem_near_its_warm_start_is_solved_by_the_plain
         settling_step, monkeypatch):
     """From a warm start near the solution of a small frictionless problem, plain Newton (the
     plain try, PLAIN_TRY) takes the answer to round-off in one iteration, where the proximal
-    loop spends one iteration per weight (WARM_DENSE_WEIGHT, then a tenth of it, ...); from a
-    warm start already at tol, the plain try's finish takes it there. No plain try on the
+    loop spends one iteration per weight (WARM_DENSE_WEIGHT, then a tenth of it, ..., then the
+    finish); from a warm start already at tol, the finish takes it there. No plain try on the
     sparse lane, with friction cones, or where the block at the warm start is singular by its
     count (the jammed hexagonal box)."""
     original = load_cases()["glued_chain_anchored"].problem
