@@ -264,11 +264,11 @@ FINISH_GAIN = 0.1
 below this fraction of its start's (and not to :data:`ROUND_OFF`): from ``tol`` quadratic
 convergence gains decades in one iteration, and where it gains less the block is singular
 there though not by its count. On 40-grain frictional piles at rest (142 rows, 120 degrees of
-freedom, 112 rows of ``W`` in the block), when problems with friction cones had it too, its
-block had singular values of 1e-16 and its two iterations left the error where it was on half
-the steps (docs/records/benchmarks.md, "the finish stops where it gains nothing"). Each
-iteration is a Newton phase of its own: the second's line search is monotone from the first's
-iterate."""
+freedom, 112 rows of ``W`` in the block), when proximal loops with friction cones were finished
+too, the finish's block had singular values of 1e-16 and its two iterations left the error
+where it was on half the steps (docs/records/benchmarks.md, "the finish stops where it gains
+nothing"). Each iteration is a Newton phase of its own: the second's line search is monotone
+from the first's iterate."""
 
 FALLBACKS_2D = ("nsgs", "apgd-jacobi")
 FALLBACKS_UNION = ("nsgs",)

@@ -202,7 +202,7 @@ def test_a_stuck_proximal_step_raises_the_weight_a_hundredfold(monkeypatch):
 
     monkeypatch.setattr(newton, "_newton_phase", scripted_phase)
     phase = _proximal_newton(function, problem, start, 1e-10, 50, sigma=1e-3)
-    # stuck: x100; progress, not solved: x10; solved (below tol: no finish)
+    # stuck: x100; progress, not solved: x10; solved (friction cones: no plain finish)
     assert np.allclose(weights, [1e-3, 1e-1, 1.0]) and phase.status == CONVERGED
 
 
