@@ -953,6 +953,17 @@ def permuted_csc(indptr, indices, data, order):
     return compressed_transpose(m, row_ptr, row_col, row_val)   # then its columns
 
 
+@numba.njit(cache=True, inline="always")
+def column_or_row_entry(indptr, indices, row_ptr, row_idx, k, e):
+    """Entry ``e`` of column ``k``'s rows, then row ``k``'s columns, of a square matrix given by its
+    columns (``indptr``, ``indices``) and its rows (``row_ptr``, ``row_idx``): ``e`` runs over
+    ``range(indptr[k] + row_ptr[k], indptr[k + 1] + row_ptr[k + 1])``, one range for both (the
+    two index arrays differ in type, so no tuple of them types). A signed index."""
+    if e < indptr[k + 1] + row_ptr[k]:
+        return np.int64(indices[e - row_ptr[k]])
+    return np.int64(row_idx[e - indptr[k + 1]])
+
+
 @numba.njit(cache=True)
 def elimination_tree(indptr, indices, row_ptr, row_idx):
     """The elimination tree of ``A + A^T``'s pattern, ``A`` square, from its columns (``indptr``,
@@ -965,8 +976,7 @@ def elimination_tree(indptr, indices, row_ptr, row_idx):
     ancestor = np.full(n, -1, dtype=np.int64)
     for k in range(n):
         for e in range(indptr[k] + row_ptr[k], indptr[k + 1] + row_ptr[k + 1]):
-            i = np.int64(indices[e - row_ptr[k]]) if e < indptr[k + 1] + row_ptr[k] \
-                else np.int64(row_idx[e - indptr[k + 1]])       # column k's, then row k's
+            i = column_or_row_entry(indptr, indices, row_ptr, row_idx, k, e)
             while i != -1 and i < k:
                 above = ancestor[i]
                 ancestor[i] = k
@@ -1054,8 +1064,7 @@ def static_pattern(indptr, indices):
         lower_idx[size] = j
         size += 1
         for e in range(indptr[j] + row_ptr[j], indptr[j + 1] + row_ptr[j + 1]):
-            i = np.int64(indices[e - row_ptr[j]]) if e < indptr[j + 1] + row_ptr[j] \
-                else np.int64(row_idx[e - indptr[j + 1]])       # column j's, then row j's
+            i = column_or_row_entry(indptr, indices, row_ptr, row_idx, j, e)
             if i > j and mark[i] != j:
                 mark[i] = j
                 lower_idx[size] = i
