@@ -231,20 +231,26 @@ problems (docs/records/benchmarks.md, "newton-ac on developed flows"); 0.1 gaine
 took up to 5 times more Newton iterations on some flow steps."""
 
 RECENTRE_WINDOW = 6
+RECENTRE_UNTIL = 100.0
 """On a 2D problem of the sparse lane with friction cones (a flow's step) the proximal loop first
 takes one Newton iteration per subproblem, re-centred at its result at the same weight (a
-regularised Newton method), until its best FCLIB error did not fall by :data:`STALL_FACTOR`
-over the last ``RECENTRE_WINDOW`` iterations; from there each subproblem is solved as
-:data:`INNER_REDUCTION` says (0: never re-centred so). Solving each subproblem spent Newton
-iterations driving ``|phi_sigma|`` down at a centre whose own error no longer moved. Newton
-iterations summed over captured steps of developed flows (exact Coulomb, tol 1e-6), each
-subproblem solved against re-centred: gluey 12 000 grains (70 consecutive steps) 1 957 against
-1 328, 8 000 grains (40) 1 118 against 633; dry 12 000 grains (25) 785 against 403. A weight
-following the error (``beta`` times it) took more, and without the window some steps cycled on
-a kink for hundreds of iterations. Not without friction cones, where the proximal loop's plain
-finish is exact once the active set has settled (a frictionless 200-grain pile: 14 Newton
-iterations re-centred against 10) (docs/records/benchmarks.md, "newton-ac: one Newton iteration
-per proximal centre on flows")."""
+regularised Newton method), while its best FCLIB error halves (by :data:`STALL_FACTOR`) within
+``RECENTRE_WINDOW`` iterations and is above ``RECENTRE_UNTIL`` ``tol`` (not at all from a start
+below it: the polish after a fallback or the joint phase); from there the weight
+falls to the iterate's FCLIB error (in units of the median diagonal of ``W``) where that is
+smaller, and each subproblem is solved as :data:`INNER_REDUCTION` says (``RECENTRE_WINDOW``
+0: never re-centred). Solving each subproblem from the warm start spent Newton iterations
+driving ``|phi_sigma|`` down at a centre whose own error no longer moved. Re-centred to ``tol``
+at a fixed weight, the answers were as far from the nearest exact ones as the solved loop's at
+a hundredth of the ``tol`` (velocities about 100 times the FCLIB error from Clarabel's, against
+20): the error left in soft modes, which a fixed weight resolves slowly. Newton iterations
+summed over captured steps of developed flows (exact Coulomb), each subproblem solved against
+re-centred so: gluey 12 000 grains (70 consecutive steps) 1 957 against 1 388 at tol 1e-6, 2 061
+against 1 704 at 1e-7; the velocities of eight 4 000-grain steps at tol 1e-7 at most 4.5e-6 from
+Clarabel's (median 1.3e-6) against 1.9e-6 (median 4.9e-9). Not without friction cones, where
+the proximal loop's plain finish is exact once the active set has settled (a frictionless
+200-grain pile: 14 Newton iterations re-centred against 10) (docs/records/benchmarks.md,
+"newton-ac: one Newton iteration per proximal centre on flows")."""
 
 POLISH_ITERATIONS = 10
 """Proximal Newton iterations tried from the fallback's result (kept where they lower the error)."""
@@ -1137,7 +1143,7 @@ def _proximal_newton(function: AlartCurnier, unshifted: ConicProblem, forces: np
     the phase stalled (docs/records/benchmarks.md, "creeping beds"). The best
     iterate is what the phase returns. The phase stalls by :class:`_StallRule`.
     On a flow's step (:data:`RECENTRE_WINDOW`) each subproblem first gets one Newton iteration,
-    re-centred at its result at the same weight, until the error stops halving.
+    re-centred at its result at the same weight, until the error stops halving or nears ``tol``.
     With ``finish``, a phase that converged on a problem without friction cones ends with at most
     :data:`FINISH_ITERATIONS` plain Newton iterations, exact there once the active set has
     settled (unless the block is singular by its count, :meth:`AlartCurnier.hyperstatic`): from
@@ -1155,14 +1161,16 @@ def _proximal_newton(function: AlartCurnier, unshifted: ConicProblem, forces: np
     status = MAX_ITER
     floor, floor_error = 0.0, np.inf                # the largest weight that failed lately
     rule = _StallRule(tol)
-    recentring = RECENTRE_WINDOW > 0 and function.flow_lane and function.cone_n.size > 0 and scale > 0
+    recentring = RECENTRE_WINDOW > 0 and function.flow_lane and function.cone_n.size > 0 and scale > 0 \
+        and error > RECENTRE_UNTIL * tol
     while best[0] > tol and iterations < max_iter:
         if rule.stalled(history, best[0]):
             status = STALLED
             break
-        if recentring and len(history) > RECENTRE_WINDOW \
-                and min(history[-RECENTRE_WINDOW:]) > STALL_FACTOR * min(history[:-RECENTRE_WINDOW]):
-            recentring = False              # no longer halving: solve each subproblem from here
+        if recentring and (best[0] <= RECENTRE_UNTIL * tol or (len(history) > RECENTRE_WINDOW and min(
+                history[-RECENTRE_WINDOW:]) > STALL_FACTOR * min(history[:-RECENTRE_WINDOW]))):
+            recentring = False              # near tol, or no longer halving: solve subproblems
+            scale = max(min(scale, error * function.typical), SIGMA_MIN * function.typical)
         centre_error = error
         function.set_proximal(scale, forces)
         if recentring:
