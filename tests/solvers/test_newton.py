@@ -168,7 +168,7 @@ def test_a_creeping_bed_converges_by_the_proximal_loop_without_fallback():
 
 def test_a_creeping_bed_from_a_capped_joint_phase_converges_in_fewer_newton_iterations():
     """The joint phase ends at its iteration cap on the creeping bed's step, nearer Coulomb's law
-    than the warm start: Newton starts from it (76 iterations against 151 from the warm start;
+    than the warm start: Newton starts from it (75 iterations against 188 from the warm start;
     70 against 221 where each subproblem is solved, RECENTRE_WINDOW 0) and converges to tol
     without fallback."""
     with np.load(Path(__file__).parent / "data" / "creeping-bed-step.npz") as data:
@@ -180,7 +180,7 @@ def test_a_creeping_bed_from_a_capped_joint_phase_converges_in_fewer_newton_iter
     joined = results[5]
     assert joined.status == CONVERGED and scaled_coulomb_error(problem, joined.forces) <= 1e-6
     assert joined.joint_iterations == newton.JOINT_START_ITERATIONS
-    assert joined.info["newton_iterations"] < 0.6 * results[0].info["newton_iterations"]
+    assert joined.info["newton_iterations"] < results[0].info["newton_iterations"] / 2
 
 
 @pytest.mark.parametrize("path", [Path(__file__).parents[1] / "flow" / "data" / "gluey-flow-step.npz",
