@@ -1167,8 +1167,8 @@ def _proximal_newton(function: AlartCurnier, unshifted: ConicProblem, forces: np
         if rule.stalled(history, best[0]):
             status = STALLED
             break
-        if recentring and (best[0] <= RECENTRE_UNTIL * tol or (len(history) > RECENTRE_WINDOW and min(
-                history[-RECENTRE_WINDOW:]) > STALL_FACTOR * min(history[:-RECENTRE_WINDOW]))):
+        if recentring and (best[0] <= RECENTRE_UNTIL * tol
+                           or not _halved_over(history, best[0], RECENTRE_WINDOW)):
             recentring = False              # near tol, or no longer halving: solve subproblems
             scale = max(min(scale, error * function.typical), SIGMA_MIN * function.typical)
         centre_error = error
@@ -1243,17 +1243,21 @@ class _StallRule:
         """Whether the phase whose FCLIB errors are ``history`` (one per iteration, the start
         first) and whose best error is ``best`` (at most every entry of ``history``) has
         stalled."""
-        count = len(history)
-        if count <= STALL_WINDOW:
-            return False
-        before = min(history[:-STALL_WINDOW])
-        if not best > STALL_FACTOR * before:          # halved over the window: progress
+        if _halved_over(history, best, STALL_WINDOW):    # progress (or too few iterations to tell)
             self.deadline = None
             return False
+        count, before = len(history), min(history[:-STALL_WINDOW])
         if self.deadline is None:                     # before >= best > 0 from here on
             self.deadline = count + STALL_HORIZON * STALL_WINDOW
         windows_left = (self.deadline - count) / STALL_WINDOW
         return best * (best / before) ** windows_left > self.tol
+
+
+def _halved_over(history: list[float], best: float, window: int) -> bool:
+    """Whether ``best``, the least of ``history`` (FCLIB errors, one per iteration, the start
+    first), is at most :data:`STALL_FACTOR` times the least before the last ``window``
+    iterations (True while there are no more than ``window``)."""
+    return len(history) <= window or not best > STALL_FACTOR * min(history[:-window])
 
 
 @dataclass
