@@ -831,8 +831,10 @@ def reduced_newton_system_2d(indptr, indices, data, rho, lower, upper, box, cone
     -------
     tuple
         ``(kept, B_indptr, B_indices, B_data, rhs, base, sliding, normal, slope)``: the plain
-        rows (m,), sorted; the block ``B`` (m x m) of their equations in CSC arrays with sorted
-        32-bit row indices in each column (:func:`compressed_transpose` of its rows); ``rhs``
+        rows (m,), sorted; the block ``B`` (m x m) of their equations in CSR arrays, 32-bit,
+        each row's columns once, its diagonal first, the others in ``W``'s order (the
+        factorisation's permutation sorts them: :func:`permuted_columns`; transposed to CSC
+        here first, the block took 0.42 ms more at 12 000 grains, 7 ms at 10^5); ``rhs``
         (m,); the direction on the other rows (n,): ``-phi`` on identity rows, ``c_t`` on the
         sliding rows ``sliding``, whose normal rows are ``normal`` and whose folded
         coefficients ``mu s`` are ``slope``. With ``B x = rhs`` solved, ``d = base``,
@@ -877,8 +879,8 @@ def reduced_newton_system_2d(indptr, indices, data, rho, lower, upper, box, cone
             scratch[column] = 0.0
         count += size
         row_ptr[a + 1] = count
-    B_indptr, B_indices, B_data = compressed_transpose(n_kept, row_ptr, row_col, row_val)
-    return kept, B_indptr, B_indices, B_data, rhs, base, sliding, normal, slope
+    return (kept, row_ptr.astype(np.int32), row_col[:count].view(np.int32), row_val[:count], rhs,
+            base, sliding, normal, slope)
 
 
 @numba.njit(cache=True)
@@ -927,30 +929,37 @@ def carried_order(indptr, indices, rows, ordered_rows, positions, limit):
 
 
 @numba.njit(cache=True)
-def permuted_csc(indptr, indices, data, order):
-    """``A[order][:, order]`` of a CSC matrix ``A`` (``indptr``, ``indices``, ``data``; ``order`` a
-    permutation of its rows) as CSC arrays with sorted row indices, 32-bit (SuperLU's). Two
-    counting sorts, by new row then by new column, each reading its input in order (gathering
-    the columns in the new order and sorting each took three times as long: their reads jump
-    about memory)."""
-    m, nnz = order.size, indptr[order.size]
+def permuted_columns(indptr, indices, data, order):
+    """``A[order][:, order]`` of a square ``A`` given by its rows (CSR arrays ``indptr``,
+    ``indices``, ``data``; ``order`` a permutation of its rows) as CSC arrays with sorted 32-bit
+    row indices (SuperLU's), and ``|A|_inf`` (the largest row sum of ``|a_ij|``, the static LU's
+    backward error's scale): ``(pointers, indices, values, norm)``. One counting sort: the rows
+    read in their new order write each column's entries in increasing row (from CSC arrays, a
+    sort by new row, then one by new column, and the norm by a ``bincount`` of its own took
+    1.6 ms against 0.5 on a 20 000-row block of a 12 000-grain gluey step)."""
+    m = order.size
     renumber = np.empty(m, dtype=np.int64)
     for c in range(m):
         renumber[order[c]] = c
-    row_ptr = np.zeros(m + 1, dtype=np.int64)              # the permuted matrix's rows
-    for e in range(nnz):
-        row_ptr[renumber[indices[e]] + 1] += 1
-    for r in range(m):
-        row_ptr[r + 1] += row_ptr[r]
-    filled = row_ptr[:-1].copy()
-    row_col = np.empty(nnz, dtype=np.int64)
-    row_val = np.empty(nnz)
-    for j in range(m):
-        for e in range(indptr[j], indptr[j + 1]):
-            r = renumber[indices[e]]
-            row_col[filled[r]], row_val[filled[r]] = renumber[j], data[e]
-            filled[r] += 1
-    return compressed_transpose(m, row_ptr, row_col, row_val)   # then its columns
+    pointers = np.zeros(m + 1, dtype=np.int32)
+    for e in range(indptr[m]):
+        pointers[renumber[indices[e]] + 1] += 1
+    for c in range(m):
+        pointers[c + 1] += pointers[c]
+    filled = pointers[:-1].astype(np.int64)
+    rows = np.empty(indptr[m], dtype=np.int32)
+    values = np.empty(indptr[m])
+    norm = 0.0
+    for r in range(m):                          # new row r, in order: each column's rows sorted
+        i = order[r]
+        total = 0.0
+        for e in range(indptr[i], indptr[i + 1]):
+            place = filled[renumber[indices[e]]]
+            rows[place], values[place] = r, data[e]
+            filled[renumber[indices[e]]] += 1
+            total += abs(data[e])
+        norm = max(norm, total)
+    return pointers, rows, values, norm
 
 
 @numba.njit(cache=True, inline="always")

@@ -589,7 +589,7 @@ class AlartCurnier:
         sliding tangential row's unknown is its normal row's times ``mu s`` plus a constant,
         so the factorised block loses those rows (on developed 2D flows a ninth to a fifth of
         the active rows: docs/records/benchmarks.md, "the sliding rows eliminated"), and it is
-        assembled in CSC form directly, without the rows of ``J``.
+        assembled by rows (CSR) directly, without the rows of ``J``.
         """
         if not self.compiled_rows:
             J, active, plain = self.jacobian(y)
@@ -600,8 +600,7 @@ class AlartCurnier:
                                                 self.tangent_rows, self.cone_mu, self.unilateral,
                                                 self.sigma, y, phi)
         if kept.size:
-            block = sp.csc_matrix((data, indices, indptr), shape=(kept.size, kept.size))
-            block.has_sorted_indices = True
+            block = sp.csr_matrix((data, indices, indptr), shape=(kept.size, kept.size))
             solved = _block_solve(block, rhs, kept, self.factorisations,
                                   self.singular_by_count(kept.size))
             if solved is None:
@@ -682,7 +681,7 @@ class _Factorisations:
     """
 
     def __init__(self, carry: bool = False):
-        self.kept: list[tuple[sp.csc_matrix, spla.SuperLU, np.ndarray | None]] = []
+        self.kept: list[tuple[sp.spmatrix, spla.SuperLU | _StaticLU, np.ndarray | None]] = []
         self.reused = 0
         self.carry = carry
         self.carried = 0
@@ -691,9 +690,10 @@ class _Factorisations:
         self.positions: np.ndarray | None = None           # their places in the order
         self.fill = 0.0             # the ordered block's factor entries per block entry
 
-    def solve(self, matrix: sp.csc_matrix, rhs: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    def solve(self, matrix: sp.spmatrix, rhs: np.ndarray, rows: np.ndarray) -> np.ndarray:
         """``matrix^-1 rhs``, factorising ``matrix`` unless it is kept; ``rows``: the rows of
-        the system the block's rows are, sorted."""
+        the system the block's rows are, sorted. ``matrix``: CSC or CSR (a 2D block, by rows:
+        :meth:`AlartCurnier.newton_direction`; SuperLU's own order takes CSC)."""
         for position, (kept, _, _) in enumerate(self.kept):
             if _same_matrix(kept, matrix):
                 self.reused += 1
@@ -709,8 +709,8 @@ class _Factorisations:
             self.ordered_rows, self.positions = rows, factors.perm_c
             self.fill = factors.nnz / matrix.nnz
         else:
-            permuted = _permuted(matrix, order)
-            factors = _StaticLU.factorise(permuted)
+            permuted, norm = _permuted(matrix, order)
+            factors = _StaticLU.factorise(permuted, norm)
             if factors is None:
                 factors = spla.splu(permuted, **ORDERED_LU)
                 self.pivoted += 1
@@ -736,7 +736,7 @@ class _Factorisations:
             solved = _ordered_solve(factors, order, rhs)
         return solved
 
-    def _carried_order(self, matrix: sp.csc_matrix, rows: np.ndarray) -> np.ndarray | None:
+    def _carried_order(self, matrix: sp.spmatrix, rows: np.ndarray) -> np.ndarray | None:
         """The last ordered block's elimination order for ``matrix`` (a permutation of its
         rows: :func:`~lubcontact.solvers.kernels.carried_order`, each new row just after the
         last of its old neighbours, its column's rows in ``W``'s symmetric pattern; placed
@@ -764,21 +764,21 @@ class _StaticLU:
     counts the entries of both factors, the diagonal twice (SuperLU's counts its supernodes'
     storage: the same on these blocks, within 1 %)."""
 
-    def __init__(self, matrix: sp.csc_matrix, pattern: tuple, lower: np.ndarray, upper: np.ndarray):
-        self.matrix, self.pattern, self.lower, self.upper = matrix, pattern, lower, upper
+    def __init__(self, matrix: sp.csc_matrix, norm: float, pattern: tuple, lower: np.ndarray,
+                 upper: np.ndarray):
+        self.matrix, self.norm, self.pattern = matrix, norm, pattern
+        self.lower, self.upper = lower, upper
         self.nnz = lower.size + upper.size
-        self.norm = float(np.bincount(matrix.indices, weights=np.abs(matrix.data),
-                                      minlength=matrix.shape[0]).max(initial=0.0))   # |A|_inf
 
     @classmethod
-    def factorise(cls, matrix: sp.csc_matrix) -> _StaticLU | None:
-        """The factors of ``matrix`` (CSC, square), or None where a pivot is below ``1e-14``
-        times its largest entry (SuperLU then factorises it, pivoting)."""
+    def factorise(cls, matrix: sp.csc_matrix, norm: float) -> _StaticLU | None:
+        """The factors of ``matrix`` (CSC, square; ``norm``: its ``|A|_inf``), or None where a
+        pivot is below ``1e-14`` times its largest entry (SuperLU then factorises it, pivoting)."""
         indptr, indices, data = csr_arrays(matrix)      # unsigned: no wrap-around checks
         compiled = _kernels()
         pattern = tuple(positions(array) for array in compiled.static_pattern(indptr, indices))
         lower, upper, failed = compiled.static_lu(indptr, indices, data, *pattern)
-        return None if failed >= 0 else cls(matrix, pattern, lower, upper)
+        return None if failed >= 0 else cls(matrix, norm, pattern, lower, upper)
 
     def solve(self, rhs: np.ndarray) -> np.ndarray:
         """``matrix^-1 rhs``."""
@@ -796,15 +796,16 @@ class _StaticLU:
         return bool(residual <= STATIC_LU_BACKWARD_ERROR * scale)
 
 
-def _permuted(matrix: sp.csc_matrix, order: np.ndarray) -> sp.csc_matrix:
-    """``matrix[order][:, order]`` (``order``: a permutation of its rows) with sorted 32-bit
-    indices, as SuperLU takes it (:func:`~lubcontact.solvers.kernels.permuted_csc`: 0.96 ms a
-    block of a 12 000-grain gluey flow against 1.4 ms for scipy's column gather and two
-    conversions, docs/records/benchmarks.md)."""
-    indptr, indices, data = _kernels().permuted_csc(*csr_arrays(matrix), positions(order))
+def _permuted(matrix: sp.spmatrix, order: np.ndarray) -> tuple[sp.csc_matrix, float]:
+    """``matrix[order][:, order]`` (``order``: a permutation of its rows) in CSC form with sorted
+    32-bit indices, as SuperLU takes it, and ``|matrix|_inf``, from its rows
+    (:func:`~lubcontact.solvers.kernels.permuted_columns`; a 2D block comes by rows, another
+    matrix is converted first)."""
+    indptr, indices, data, norm = _kernels().permuted_columns(*csr_arrays(sp.csr_matrix(matrix)),
+                                                              positions(order))
     permuted = sp.csc_matrix((data, indices, indptr), shape=matrix.shape)
     permuted.has_sorted_indices = True
-    return permuted
+    return permuted, float(norm)
 
 
 def _places(order: np.ndarray) -> np.ndarray:
@@ -825,8 +826,9 @@ def _ordered_solve(factors: spla.SuperLU, order: np.ndarray | None, rhs: np.ndar
     return solved
 
 
-def _same_matrix(first: sp.csc_matrix, second: sp.csc_matrix) -> bool:
-    """Whether two CSC matrices store the same entries in the same order."""
+def _same_matrix(first: sp.spmatrix, second: sp.spmatrix) -> bool:
+    """Whether two compressed matrices (both CSC, or both CSR) store the same entries in the same
+    order."""
     return (first.shape == second.shape and first.nnz == second.nnz
             and np.array_equal(first.data, second.data)
             and np.array_equal(first.indices, second.indices)
@@ -853,7 +855,7 @@ def _newton_direction(J: sp.csr_matrix | np.ndarray, active: np.ndarray,
     return direction
 
 
-def _block_solve(block: sp.csc_matrix | np.ndarray, rhs: np.ndarray, rows: np.ndarray,
+def _block_solve(block: sp.spmatrix | np.ndarray, rhs: np.ndarray, rows: np.ndarray,
                  factorisations: _Factorisations, singular: bool = False) -> np.ndarray | None:
     """``block^-1 rhs`` for the active block of a Newton system (``rows``: the system's rows it
     holds, sorted), or None when every regularisation fails.
@@ -888,8 +890,8 @@ def _block_solve(block: sp.csc_matrix | np.ndarray, rhs: np.ndarray, rows: np.nd
                         continue
                     solved = dense_lu_solve(factors, rhs)
                 else:
-                    matrix = block if delta == 0 else \
-                        (block + delta * sp.identity(rows.size, format="csc")).tocsc()
+                    matrix = block if delta == 0 else (block + delta * sp.identity(
+                        rows.size, format=block.format)).asformat(block.format)
                     solved = factorisations.solve(matrix, rhs, rows)
         except (RuntimeError, spla.MatrixRankWarning):
             continue

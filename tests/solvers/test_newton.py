@@ -760,7 +760,8 @@ def solves_the_whole_newton_system(J, active, phi, direction):
 def eliminated_sliding_rows(function, points):
     """Check the sparse lane's reduced Newton system (kernels.reduced_newton_system_2d) of
     ``function`` at each of ``points`` (forces): a block of as many rows as J has rows of
-    diag(rho) (W + sigma I), with sorted row indices in each column, and a direction that solves
+    diag(rho) (W + sigma I), by rows, each row's columns once and its diagonal first, and a
+    direction that solves
     the whole system (:func:`solves_the_whole_newton_system`). Returns the sliding rows
     eliminated at each point, and whether any of them has an entry of W in a kept row (its
     column folded into its normal's)."""
@@ -776,8 +777,11 @@ def eliminated_sliding_rows(function, points):
             function.cone_n, function.tangent_rows, function.cone_mu, function.unilateral,
             function.sigma, y, phi)
         assert kept.size == plain and sliding.size == np.count_nonzero(active) - plain
-        block = sp.csc_matrix((data, indices, indptr), shape=(kept.size, kept.size))
-        assert block.has_canonical_format
+        block = sp.csr_matrix((data, indices, indptr), shape=(kept.size, kept.size))
+        canonical = block.copy()
+        canonical.sum_duplicates()
+        assert canonical.nnz == block.nnz
+        assert np.array_equal(indices[indptr[:-1]], np.arange(kept.size))
         assert np.count_nonzero(block.diagonal()) == kept.size or function.sigma == 0
         eliminated.append(sliding)
         folded = folded or function.W[kept][:, sliding].nnz > 0
@@ -1020,8 +1024,8 @@ def test_the_static_lu_has_the_fill_of_symbolic_elimination_and_solves(symmetric
     entries above the diagonal dropped (a pattern not symmetric, as ``W``'s where a product came
     out exactly 0) they hold them (those of ``A + A^T``). Either way L U is the matrix to
     rounding and the solve's residual is at rounding; its norm (for the backward error) is
-    ``|A|_inf``. Through newton._StaticLU, which hands the kernels unsigned index arrays, as the
-    Newton phases do."""
+    ``|A|_inf``, as newton._permuted gives it. Through newton._StaticLU, which hands the kernels
+    unsigned index arrays, as the Newton phases do."""
     side = 9
     n = side * side
     grid = sp.diags([np.ones(n - 1), np.ones(n - side)], [1, side], shape=(n, n))
@@ -1034,7 +1038,7 @@ def test_the_static_lu_has_the_fill_of_symbolic_elimination_and_solves(symmetric
         dropped = upper[rng.choice(len(upper), size=len(upper) // 4, replace=False)]
         dense[dropped[:, 0], dropped[:, 1]] = 0.0
     matrix = sp.csc_matrix(dense)
-    factors = newton._StaticLU.factorise(matrix)
+    factors = newton._StaticLU.factorise(*newton._permuted(matrix, np.arange(n)))   # the same order
     lower_ptr, lower_idx, upper_ptr, upper_idx = factors.pattern
     assert lower_idx.dtype == upper_idx.dtype == np.uint32
     filled = dense != 0
@@ -1067,7 +1071,7 @@ def test_a_carried_block_without_a_stable_static_lu_is_factorised_by_superlu():
     also where its pattern is not symmetric; a zero pivot, or a tiny one whose solve misses
     STATIC_LU_BACKWARD_ERROR (1e-12 on a symmetric 2 x 2's diagonal: a backward error of 1e-5),
     hands it to SuperLU, which pivots: the direction is then at rounding."""
-    assert newton._StaticLU.factorise(sp.csc_matrix(np.array([[0.0, 1.0], [1.0, 0.0]]))) is None
+    assert newton._StaticLU.factorise(sp.csc_matrix(np.array([[0.0, 1.0], [1.0, 0.0]])), 1.0) is None
     rows, rhs = np.arange(2), np.array([1.0, 1.0])
     kept = newton._Factorisations(carry=True)
     kept.solve(sp.csc_matrix(np.array([[2.0, 1.0], [1.0, 3.0]])), rhs, rows)      # ordered
@@ -1075,7 +1079,7 @@ def test_a_carried_block_without_a_stable_static_lu_is_factorised_by_superlu():
     kept.solve(stable, rhs, rows)
     assert kept.carried == 1 and kept.pivoted == 0 and isinstance(kept.kept[0][1], newton._StaticLU)
     tiny = sp.csc_matrix(np.array([[1e-12, 1.0], [1.0, 1e-12]]))
-    static = newton._StaticLU.factorise(tiny)
+    static = newton._StaticLU.factorise(*newton._permuted(tiny, rows))
     assert static is not None and not static.accurate(static.solve(rhs), rhs)
     solved = kept.solve(tiny, rhs, rows)
     assert kept.carried == 2 and kept.pivoted == 1 and isinstance(kept.kept[0][1], spla.SuperLU)
@@ -1143,24 +1147,28 @@ def test_the_carried_order_is_a_stable_sort_of_the_places(seed):
     assert carried and np.array_equal(order, [0, 1, 2, 3, 4])
 
 
-def test_a_block_permuted_for_its_carried_order_is_scipys_permutation_with_sorted_indices():
-    """``_permuted`` gives ``matrix[order][:, order]`` entry for entry, its indices sorted (so
-    that SuperLU's call does not sort them again) and 32-bit (SuperLU's), also from a matrix
-    whose indices are not sorted."""
-    matrix = sp.random(500, 500, density=0.02, random_state=6, format="csc")
+@pytest.mark.parametrize("form", ["csr", "csc"])
+def test_a_block_permuted_for_its_carried_order_is_scipys_permutation_with_sorted_indices(form):
+    """``_permuted`` gives ``matrix[order][:, order]`` in CSC form entry for entry, its indices
+    sorted (so that SuperLU's call does not sort them again) and 32-bit (SuperLU's), and
+    ``|matrix|_inf``, from a matrix by rows (a 2D block) or by columns, also one whose indices
+    are not sorted."""
+    matrix = sp.random(500, 500, density=0.02, random_state=6, format=form)
     rng = np.random.default_rng(6)
     order = rng.permutation(500)
     expected = matrix[order][:, order].tocsc()
     expected.sort_indices()
-    for column in range(0, 500, 7):          # unsorted input indices give the same block
-        start, end = matrix.indptr[column], matrix.indptr[column + 1]
+    for line in range(0, 500, 7):            # unsorted input indices give the same block
+        start, end = matrix.indptr[line], matrix.indptr[line + 1]
         shuffle = start + rng.permutation(end - start)
         matrix.indices[start:end], matrix.data[start:end] = \
             matrix.indices[shuffle].copy(), matrix.data[shuffle].copy()
-    permuted = newton._permuted(matrix, order)
+    permuted, norm = newton._permuted(matrix, order)
+    assert sp.isspmatrix_csc(permuted)
     assert permuted.indices.dtype == permuted.indptr.dtype == np.int32
     for name in ("indptr", "indices", "data"):
         assert np.array_equal(getattr(permuted, name), getattr(expected, name))
+    assert norm == pytest.approx(np.abs(matrix.toarray()).sum(axis=1).max(), rel=1e-14)
 
 
 @pytest.fixture(scope="module")
@@ -1219,7 +1227,7 @@ def test_a_block_singular_by_its_count_of_sticking_rows_skips_the_failed_factori
     outcomes.clear()                    # the sparse lane's reduced system counts alike
     static = newton._StaticLU.factorise             # (in 2D its fresh blocks: the static LU)
     monkeypatch.setattr(newton._StaticLU, "factorise", classmethod(
-        lambda cls, matrix: outcomes.append("factorised") or static(matrix)))
+        lambda cls, matrix, norm: outcomes.append("factorised") or static(matrix, norm)))
     function.set_proximal(0.0, answer.forces / scaled.scaling.force)
     direction = function.newton_direction(y, phi)
     assert outcomes == ["factorised"] and np.isfinite(direction).all()
