@@ -218,7 +218,7 @@ def scripted_recentring(monkeypatch, errors):
     errors = iter(errors(centre))
     calls, previous = [], [centre]
 
-    def phase(function, unshifted, forces, tol, max_iter, inner_tol=0.0):
+    def phase(function, unshifted, forces, tol, max_iter, inner_tol=0.0, **known):
         error = next(errors)
         calls.append((function.sigma / function.typical, max_iter, inner_tol > 0,
                       float(np.abs(function.center).sum())))
@@ -269,7 +269,7 @@ def test_a_stuck_proximal_step_raises_the_weight_a_hundredfold(monkeypatch):
     outcomes = iter([(False, centre), (False, 0.5 * centre), (True, 1e-12), (False, 1e-12)])
     weights = []
 
-    def scripted_phase(function, unshifted, forces, tol, max_iter, inner_tol=0.0):
+    def scripted_phase(function, unshifted, forces, tol, max_iter, inner_tol=0.0, **known):
         weights.append(function.sigma / function.typical)
         solved, error = next(outcomes)
         return newton._Phase(forces=forces, status=MAX_ITER, iterations=1, error=error,
@@ -300,7 +300,7 @@ def test_the_proximal_weight_falls_slower_on_a_gluey_sparse_problem(name, factor
     errors = iter([centre / 2, centre / 4, centre / 8, 1e-12])
     weights = []
 
-    def solved_phase(function, unshifted, forces, tol, max_iter, inner_tol=0.0):
+    def solved_phase(function, unshifted, forces, tol, max_iter, inner_tol=0.0, **known):
         weights.append(function.sigma / function.typical)
         error = next(errors)
         return newton._Phase(forces=forces, status=MAX_ITER, iterations=1, error=error,
@@ -323,7 +323,7 @@ def test_the_proximal_weight_stops_rising_at_its_ceiling(monkeypatch):
     centre = function.coulomb_error(problem, start)
     weights = []
 
-    def stuck_phase(function, unshifted, forces, tol, max_iter, inner_tol=0.0):
+    def stuck_phase(function, unshifted, forces, tol, max_iter, inner_tol=0.0, **known):
         weights.append(function.sigma / function.typical)
         return newton._Phase(forces=forces, status=MAX_ITER, iterations=1, error=centre,
                              history=np.array([centre]), gradient_steps=0, solved=False,
@@ -1375,9 +1375,9 @@ def test_the_polish_to_joint_finish_tol_stops_at_its_target(settling_step, monke
     targets = []
     phase = newton._newton_phase
 
-    def spy(function, unshifted, forces, tol, max_iter, inner_tol=0.0):
+    def spy(function, unshifted, forces, tol, max_iter, inner_tol=0.0, **known):
         targets.append(tol)
-        return phase(function, unshifted, forces, tol, max_iter, inner_tol)
+        return phase(function, unshifted, forces, tol, max_iter, inner_tol, **known)
 
     monkeypatch.setattr(newton, "_newton_phase", spy)
     result = solve_coulomb(problem, "newton-ac", tol=1e-6, joint=5)
@@ -1396,8 +1396,8 @@ def plain_finishes(problem, lane, monkeypatch, **options):
     finishes = []
     phase = newton._newton_phase
 
-    def spy(function, unshifted, forces, tol, max_iter, inner_tol=0.0):
-        out = phase(function, unshifted, forces, tol, max_iter, inner_tol)
+    def spy(function, unshifted, forces, tol, max_iter, inner_tol=0.0, **known):
+        out = phase(function, unshifted, forces, tol, max_iter, inner_tol, **known)
         if function.sigma == 0.0 and tol == newton.ROUND_OFF:
             finishes.append(out)
         return out
