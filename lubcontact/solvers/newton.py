@@ -115,6 +115,13 @@ ORDERED_LU = {**SPARSE_LU, "permc_spec": "NATURAL"}
 from an earlier block, or a 2D block's own: :class:`_Factorisations`) where the static LU's
 pivots were not good enough: no ordering of its own."""
 
+FACTOR_PRODUCT_SHARE = 0.5
+"""On the sparse lane of a 2D problem whose ``W = L^T L`` comes with its factor, the products
+``W x`` of the residual and the line search go through ``L`` (two compiled products) where ``L``
+and ``L^T`` together hold at most this share of ``W``'s entries: on 25 captured dry 12 000-grain
+steps (0.41 of them) 0.315-0.316 s per step against 0.348-0.354, the same Newton iterations; on
+gluey ones (0.58) 0.281-0.291 against 0.275-0.287, no gain (docs/records/benchmarks.md)."""
+
 NEW_ROWS_LIMIT = 0.01
 """An active block whose rows are all but this fraction rows of the block last ordered afresh
 is factorised in that block's elimination order (:class:`_Factorisations`), not ordered again."""
@@ -396,6 +403,9 @@ class AlartCurnier:
         kernels of the sparse lane (``compiled_rows``): numba checks every signed index for
         wrap-around, and the reduced Newton system took 4.4 ms instead of 5.2 on a 12 000-grain
         gluey step (51 879 rows) with them.
+    factor_arrays : tuple of ndarray or None
+        On the sparse lane, the CSR arrays of ``W``'s factor ``L`` and of ``L^T`` and a work
+        vector, where the products ``W x`` go through them (:meth:`product`); None otherwise.
     tangent_rows : ndarray of int, shape (nf,)
         ``cone_t``'s one column (planar problems only).
     q_scale : float
@@ -444,8 +454,14 @@ class AlartCurnier:
         self.flow_lane = self.planar and not self.dense
         self.convex = cones.is_convex
         self.compiled_rows = self.flow_lane
+        self.factor_arrays = None
         if self.compiled_rows:
             self.w_arrays = csr_arrays(self.W)
+            factor = problem.delassus_factor
+            if factor is not None and 2 * factor.nnz <= FACTOR_PRODUCT_SHARE * self.W.nnz:
+                factor = sp.csr_matrix(factor)
+                self.factor_arrays = (*csr_arrays(factor), *csr_arrays(factor.T.tocsr()),
+                                      np.empty(factor.shape[0]))
         self.q_scale = 1.0 + float(np.sqrt(self.q @ self.q))
         if self.planar:             # one tangential row per contact, as the kernels take them
             self.tangent_rows = projector.planar_tangent
@@ -458,6 +474,15 @@ class AlartCurnier:
         a diagonal)."""
         return self.rho[:, None] * self.W if self.dense else sp.diags(self.rho) @ self.W
 
+    def product(self, vector: np.ndarray) -> np.ndarray:
+        """``W x`` (n_rows,), through the factor where :attr:`factor_arrays` holds it
+        (:data:`FACTOR_PRODUCT_SHARE`)."""
+        if self.factor_arrays is None:
+            return self.W @ vector
+        out = np.empty(self.n_rows)
+        _kernels().apply_operator(*self.factor_arrays, vector, out)
+        return out
+
     def set_proximal(self, sigma: float, center: np.ndarray) -> None:
         """Solve the proximal problem ``W + sigma I``, ``q - sigma center`` from now on (0: the problem)."""
         self.sigma, self.center = float(sigma), np.array(center, dtype=float)
@@ -468,7 +493,7 @@ class AlartCurnier:
         ``W r + q`` (the problem's, without the proximal term; computed here when not given),
         each shape (n_rows,)."""
         if velocity is None:
-            velocity = self.W @ forces + self.q
+            velocity = self.product(forces) + self.q
         if self.compiled_rows:                # one pass (kernels.alart_curnier_2d), the same values
             phi, y = np.empty(self.n_rows), np.empty(self.n_rows)
             _kernels().alart_curnier_2d(self.rho, self.lower, self.upper, self.cone_n,
@@ -495,7 +520,7 @@ class AlartCurnier:
         ``unshifted`` (this function's problem without its shift), from the velocity ``W r + q``
         (:meth:`residual`'s, computed here when not given); compiled on a 2D problem."""
         if velocity is None:
-            velocity = self.W @ forces + self.q
+            velocity = self.product(forces) + self.q
         if self.planar:
             return float(_kernels().coulomb_error_2d(forces, velocity, self.lower, self.upper,
                                                      self.cone_n, self.tangent_rows, self.cone_mu,
@@ -1366,7 +1391,7 @@ def _line_search(function: AlartCurnier, forces: np.ndarray, velocity: np.ndarra
         return None
     alpha = 1.0
     with np.errstate(over="ignore", invalid="ignore"):   # a trial too far: rejected below
-        change = function.W @ direction
+        change = function.product(direction)
         for _ in range(MAX_HALVINGS):
             trial = forces + alpha * direction
             phi, _, _ = function.residual(trial, velocity + alpha * change)

@@ -205,6 +205,34 @@ def test_a_flow_step_takes_fewer_newton_iterations_re_centred_after_each(path, m
     assert re_centred < 0.9 * solved
 
 
+def test_the_products_go_through_the_factor_where_it_has_under_half_the_entries_of_w(monkeypatch):
+    """On the sparse lane the products ``W x`` go through ``W = L^T L``'s factor where ``L`` and
+    ``L^T`` together hold at most FACTOR_PRODUCT_SHARE of ``W``'s entries (a dense dry flow's
+    step: 0.41 of them), else through ``W``: the creeping bed's step (0.65) takes ``W``; with the
+    share raised it takes the factor, whose products agree with ``W``'s to rounding, and the step
+    converges in the same 188 Newton iterations."""
+    with np.load(Path(__file__).parent / "data" / "creeping-bed-step.npz") as data:
+        problem = StepProblem.from_arrays(data)
+        warm_start, warm_shift = data["warm_start"], data["warm_shift"]
+    scaled = problem.normalized()
+    share = 2 * scaled.delassus_factor.nnz / scaled.delassus.nnz
+    assert newton.FACTOR_PRODUCT_SHARE < share < 1.0
+    assert AlartCurnier(scaled).factor_arrays is None
+    settings = SolveSettings(method="newton-ac", tol=1e-6, exact_coulomb=True,
+                             options={"fallback": None})
+    plain = settings.solve(problem, warm_start, warm_shift)
+    monkeypatch.setattr(newton, "FACTOR_PRODUCT_SHARE", 1.0)
+    function = AlartCurnier(scaled)
+    assert function.flow_lane and function.factor_arrays is not None
+    vector = np.random.default_rng(3).normal(size=scaled.n_rows)
+    expected = function.W @ vector
+    assert np.abs(function.product(vector) - expected).max() <= 1e-13 * np.abs(expected).max()
+    factored = settings.solve(problem, warm_start, warm_shift)
+    assert plain.status == factored.status == CONVERGED
+    assert plain.info["newton_iterations"] == factored.info["newton_iterations"] == 188
+    assert scaled_coulomb_error(problem, factored.forces) <= 1e-6
+
+
 def scripted_recentring(monkeypatch, errors):
     """``_proximal_newton`` on a flow-lane problem from zero forces (tol 1e-10, sigma 1e-3), each
     Newton phase scripted to take one iteration to the next of ``errors``; the centre's FCLIB
