@@ -71,6 +71,10 @@ class ConicProblem(Protocol):
         """``L`` with ``W = L^T L`` when known (a step problem), else None."""
 
     @property
+    def delassus_factor_transpose(self) -> sp.csr_matrix | None:
+        """``L^T`` in CSR form when ``L`` is known, else None."""
+
+    @property
     def delassus_rank_bound(self) -> int:
         """An upper bound on the rank of ``W``."""
 
@@ -157,5 +161,6 @@ class ConicProblemMixin:
         return other
 
 
-MATRICES = ("delassus", "delassus_factor", "jacobian_transpose", "dense_jacobian", "dense_delassus")
+MATRICES = ("delassus", "delassus_factor", "delassus_factor_transpose", "jacobian_transpose",
+            "dense_jacobian", "dense_delassus")
 """Cached matrices of a problem, independent of its shift and cones."""

@@ -123,6 +123,11 @@ class LocalProblem(ConicProblemMixin):
         """No factor ``W = L^T L`` is known for a problem given by ``W``."""
         return None
 
+    @property
+    def delassus_factor_transpose(self) -> None:
+        """No factor, so no transpose of it (:attr:`delassus_factor`)."""
+        return None
+
     @cached_property
     def dense_delassus(self) -> np.ndarray:
         """``W`` as a dense array, shape (n_rows, n_rows) (for small problems)."""

@@ -108,12 +108,17 @@ class StepProblem(ConicProblemMixin):
         return factor
 
     @cached_property
+    def delassus_factor_transpose(self) -> sp.csr_matrix:
+        """``L^T = dt H M^-1/2`` (n_rows x n_dof) in CSR form: ``H``'s columns scaled, ``H``
+        itself on a normalised problem (no transposition)."""
+        weight = self._factor_weight
+        return self.jacobian if weight is None else diagonal_scaled(self.jacobian, columns=weight)
+
+    @cached_property
     def delassus(self) -> sp.csr_matrix:
         """``W = dt^2 H M^-1 H^T`` (sparse, n_rows x n_rows), as the product of the CSR forms of
         ``L^T`` and ``L`` (no conversion)."""
-        weight = self._factor_weight
-        left = self.jacobian if weight is None else diagonal_scaled(self.jacobian, columns=weight)
-        return sp.csr_matrix(left @ self.delassus_factor)
+        return sp.csr_matrix(self.delassus_factor_transpose @ self.delassus_factor)
 
     @cached_property
     def dense_jacobian(self) -> tuple[np.ndarray, np.ndarray]:

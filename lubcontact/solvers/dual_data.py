@@ -277,7 +277,7 @@ def prepare(problem: ConicProblem, scaling: bool, operator: str = "auto",
     offset = scale * problem.offset
     if has_factor and operator != "matrix":
         factor = diagonal_scaled(problem.delassus_factor, columns=scale)
-        transposed = factor.T.tocsr()
+        transposed = diagonal_scaled(problem.delassus_factor_transpose, rows=scale)
         return DualData(apply=lambda z: transposed @ (factor @ z), offset=offset, scale=scale,
                         jacobi=jacobi, project=problem.cones.projector, factor=factor,
                         factor_transpose=transposed)

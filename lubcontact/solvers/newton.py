@@ -459,8 +459,8 @@ class AlartCurnier:
             self.w_arrays = csr_arrays(self.W)
             factor = problem.delassus_factor
             if factor is not None and 2 * factor.nnz <= FACTOR_PRODUCT_SHARE * self.W.nnz:
-                factor = sp.csr_matrix(factor)
-                self.factor_arrays = (*csr_arrays(factor), *csr_arrays(factor.T.tocsr()),
+                self.factor_arrays = (*csr_arrays(factor),
+                                      *csr_arrays(problem.delassus_factor_transpose),
                                       np.empty(factor.shape[0]))
         self.q_scale = 1.0 + float(np.sqrt(self.q @ self.q))
         if self.planar:             # one tangential row per contact, as the kernels take them
