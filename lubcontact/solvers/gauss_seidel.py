@@ -96,7 +96,8 @@ def nonsmooth_gauss_seidel(problem: ConicProblem, *, tol: float, max_iter: int =
     forces[box] = np.clip(forces[box], projector.lower[box], projector.upper[box])
     factor = None if small else problem.delassus_factor
     # the rows the sweeps read: of W, or of F^T (W = F^T F) on a large step problem
-    rows = dense_csr_arrays(W) if small else W if factor is None else factor.T.tocsr()
+    rows = dense_csr_arrays(W) if small else W if factor is None else \
+        problem.delassus_factor_transpose
     arrays = (*csr_arrays(rows), q, projector.lower, projector.upper, box_rows, diagonal[box_rows],
               cone_n, cone_t, mu, unilateral, local)
     setup_time = time.perf_counter() - start

@@ -119,8 +119,9 @@ FACTOR_PRODUCT_SHARE = 0.5
 """On the sparse lane of a 2D problem whose ``W = L^T L`` comes with its factor, the products
 ``W x`` of the residual and the line search go through ``L`` (two compiled products) where ``L``
 and ``L^T`` together hold at most this share of ``W``'s entries: on 25 captured dry 12 000-grain
-steps (0.41 of them) 0.315-0.316 s per step against 0.348-0.354, the same Newton iterations; on
-gluey ones (0.58) 0.281-0.291 against 0.275-0.287, no gain (docs/records/benchmarks.md)."""
+steps (0.41 of them) a mean of 0.315-0.316 s per step against 0.348-0.354 through ``W``, the
+same Newton iterations; on 30 gluey ones (0.58) 0.281-0.291 against 0.275-0.287, no gain
+(docs/records/benchmarks.md, "fewer passes per Newton iteration")."""
 
 NEW_ROWS_LIMIT = 0.01
 """An active block whose rows are all but this fraction rows of the block last ordered afresh
@@ -457,10 +458,10 @@ class AlartCurnier:
         self.factor_arrays = None
         if self.compiled_rows:
             self.w_arrays = csr_arrays(self.W)
-            factor = problem.delassus_factor
-            if factor is not None and 2 * factor.nnz <= FACTOR_PRODUCT_SHARE * self.W.nnz:
-                self.factor_arrays = (*csr_arrays(factor),
-                                      *csr_arrays(problem.delassus_factor_transpose),
+            factor, transpose = problem.delassus_factor, problem.delassus_factor_transpose
+            if factor is not None and \
+                    factor.nnz + transpose.nnz <= FACTOR_PRODUCT_SHARE * self.W.nnz:
+                self.factor_arrays = (*csr_arrays(factor), *csr_arrays(transpose),
                                       np.empty(factor.shape[0]))
         self.q_scale = 1.0 + float(np.sqrt(self.q @ self.q))
         if self.planar:             # one tangential row per contact, as the kernels take them
@@ -854,7 +855,8 @@ def _ordered_solve(factors: spla.SuperLU, order: np.ndarray | None, rhs: np.ndar
 def _same_matrix(first: sp.spmatrix, second: sp.spmatrix) -> bool:
     """Whether two compressed matrices (both CSC, or both CSR) store the same entries in the same
     order."""
-    return (first.shape == second.shape and first.nnz == second.nnz
+    return (first.format == second.format and first.shape == second.shape
+            and first.nnz == second.nnz
             and np.array_equal(first.data, second.data)
             and np.array_equal(first.indices, second.indices)
             and np.array_equal(first.indptr, second.indptr))
@@ -915,8 +917,8 @@ def _block_solve(block: sp.spmatrix | np.ndarray, rhs: np.ndarray, rows: np.ndar
                         continue
                     solved = dense_lu_solve(factors, rhs)
                 else:
-                    matrix = block if delta == 0 else (block + delta * sp.identity(
-                        rows.size, format=block.format)).asformat(block.format)
+                    matrix = block if delta == 0 else \
+                        block + delta * sp.identity(rows.size, format=block.format)
                     solved = factorisations.solve(matrix, rhs, rows)
         except (RuntimeError, spla.MatrixRankWarning):
             continue

@@ -23,7 +23,7 @@ special handling of dense rows (none in contact networks; a row next to all othe
 order quadratic in time: 0.4 s for a 20 000-row star) and aggressive absorption beyond the
 elements whose rows all lie in the new one. The lists and the per-row arrays hold 32-bit
 integers (the marks 64-bit: they count up by pivot and by candidate supervariable): the same
-orders, 11 % faster than with 64-bit ones (195 against 220 ms for the 43 blocks of three
+orders in 11 % less time than with 64-bit ones (195 against 220 ms for the 43 blocks of three
 12 000-grain gluey steps, docs/records/benchmarks.md).
 """
 from __future__ import annotations
@@ -91,8 +91,15 @@ def approximate_minimum_degree(pointers: np.ndarray, rows: np.ndarray) -> np.nda
     -------
     ndarray of int64, shape (n,)
         The rows in elimination order: factorise ``A[order][:, order]``.
+
+    Raises
+    ------
+    ValueError
+        Where the lists (both triangles and four entries a row) would hold 2^30 entries or
+        more: their places are 32-bit; or where no row is left to pick (not met on a valid
+        pattern).
     """
-    if 2 * rows.size + 4 * pointers.size >= 2**30:
+    if 4 * rows.size + 4 * pointers.size + 16 >= 2**30:
         raise ValueError("approximate_minimum_degree: more than 2^30 entries in the lists "
                          "(32-bit)")
     pointers, neighbours = _both_triangles(pointers, rows)
@@ -127,8 +134,8 @@ def approximate_minimum_degree(pointers: np.ndarray, rows: np.ndarray) -> np.nda
     bucket_head = np.full(n, -1, dtype=np.int32)
     bucket_next = np.full(n, -1, dtype=np.int32)
     copy = np.empty(n + 1, dtype=np.int32)
-    first_member = np.arange(n)                 # the rows a (super)variable stands for, linked
-    last_member = np.arange(n)
+    first_member = np.arange(n, dtype=np.int32)     # the rows a (super)variable stands for,
+    last_member = np.arange(n, dtype=np.int32)      # linked
     next_member = np.full(n, -1, dtype=np.int32)
     pivots = np.empty(n, dtype=np.int32)
     n_pivots = eliminated = least = 0

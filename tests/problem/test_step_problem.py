@@ -1,4 +1,5 @@
-"""StepProblem's matrices: the scaled copies by value, the Delassus factor with duplicate entries."""
+"""StepProblem's matrices: the scaled copies by value, the Delassus factor (and its transpose) with
+duplicate entries."""
 from dataclasses import replace
 
 import numpy as np
@@ -46,6 +47,31 @@ def test_a_jacobian_with_duplicate_entries_gives_the_same_delassus_and_jacobi_sc
     assert halves.jacobian.nnz == 2 * whole.jacobian.nnz       # stored twice
     assert np.allclose(halves.delassus.toarray(), whole.delassus.toarray(), rtol=1e-14, atol=0)
     assert np.allclose(jacobi_scale(halves), jacobi_scale(whole), rtol=1e-14, atol=0)
+
+
+@pytest.mark.parametrize("duplicates", [False, True])
+def test_the_factor_transpose_is_the_factor_transposed_and_copies_share_it(duplicates):
+    """``delassus_factor_transpose`` is ``L^T`` (``W = L^T L``) in CSR form, in physical units and
+    normalised (where it is ``H`` itself, no copy), also from a Jacobian whose entries are stored
+    twice as halves (which ``L^T`` keeps and a product sums); ``W`` is ``L^T L``; a copy with
+    another shift shares it."""
+    problem = _frictional_problem(11)
+    if duplicates:
+        source = problem.jacobian.tocoo()
+        problem = replace(problem, jacobian=sp.csr_matrix(
+            _with_duplicates(source.data, source.row, source.col, source.shape),
+            shape=source.shape))
+    for case in (problem, problem.normalized()):
+        transpose, factor = case.delassus_factor_transpose, case.delassus_factor
+        assert sp.isspmatrix_csr(transpose)
+        assert np.allclose(transpose.toarray(), factor.T.toarray(), rtol=1e-15, atol=0)
+        assert np.allclose(case.delassus.toarray(), (factor.T @ factor).toarray(), rtol=1e-14,
+                           atol=1e-14 * abs(case.delassus).max())
+        shifted = case.with_shift(np.zeros(case.n_contacts))
+        assert shifted.delassus_factor_transpose is transpose
+    scaled = problem.normalized()
+    assert scaled.delassus_factor_transpose is scaled.jacobian
+    assert problem.delassus_factor_transpose.nnz == problem.jacobian.nnz
 
 
 def _with_duplicates(values, rows, cols, shape):

@@ -210,27 +210,64 @@ def test_the_products_go_through_the_factor_where_it_has_under_half_the_entries_
     ``L^T`` together hold at most FACTOR_PRODUCT_SHARE of ``W``'s entries (a dense dry flow's
     step: 0.41 of them), else through ``W``: the creeping bed's step (0.65) takes ``W``; with the
     share raised it takes the factor, whose products agree with ``W``'s to rounding, and the step
-    converges in the same 188 Newton iterations."""
+    converges in the same 188 Newton iterations, each product through the factor."""
+    from lubcontact.solvers import kernels
+
     with np.load(Path(__file__).parent / "data" / "creeping-bed-step.npz") as data:
         problem = StepProblem.from_arrays(data)
         warm_start, warm_shift = data["warm_start"], data["warm_shift"]
     scaled = problem.normalized()
-    share = 2 * scaled.delassus_factor.nnz / scaled.delassus.nnz
+    share = (scaled.delassus_factor.nnz + scaled.delassus_factor_transpose.nnz) / scaled.delassus.nnz
     assert newton.FACTOR_PRODUCT_SHARE < share < 1.0
     assert AlartCurnier(scaled).factor_arrays is None
     settings = SolveSettings(method="newton-ac", tol=1e-6, exact_coulomb=True,
                              options={"fallback": None})
+    calls = []
+    apply_operator = kernels.apply_operator
+    monkeypatch.setattr(kernels, "apply_operator",
+                        lambda *arrays: calls.append(1) or apply_operator(*arrays))
     plain = settings.solve(problem, warm_start, warm_shift)
+    assert calls == []
     monkeypatch.setattr(newton, "FACTOR_PRODUCT_SHARE", 1.0)
     function = AlartCurnier(scaled)
     assert function.flow_lane and function.factor_arrays is not None
     vector = np.random.default_rng(3).normal(size=scaled.n_rows)
     expected = function.W @ vector
     assert np.abs(function.product(vector) - expected).max() <= 1e-13 * np.abs(expected).max()
+    calls.clear()
     factored = settings.solve(problem, warm_start, warm_shift)
+    assert len(calls) >= 2 * factored.info["newton_iterations"]   # the search's, the residual's
     assert plain.status == factored.status == CONVERGED
     assert plain.info["newton_iterations"] == factored.info["newton_iterations"] == 188
     assert scaled_coulomb_error(problem, factored.forces) <= 1e-6
+
+
+def test_a_phase_started_where_the_last_ended_takes_its_velocity_and_error(monkeypatch):
+    """Where ``_proximal_newton`` hands a Newton phase the velocity and the FCLIB error of its
+    start (the last phase's last iterate, re-centred), they are those of its forces, to the bit,
+    as the phase would compute them: on the gluey flow's step every phase but the first is
+    handed them (eight re-centred ones of one iteration, then a subproblem), and the step takes
+    the same 10 Newton iterations."""
+    with np.load(Path(__file__).parents[1] / "flow" / "data" / "gluey-flow-step.npz") as data:
+        problem = StepProblem.from_arrays(data)
+        warm_start, warm_shift = data["warm_start"], data["warm_shift"]
+    phase = newton._newton_phase
+    handed = []
+
+    def spy(function, unshifted, forces, tol, max_iter, inner_tol=0.0, **known):
+        if known.get("velocity") is not None:
+            velocity = function.product(forces) + function.q
+            assert np.array_equal(known["velocity"], velocity)
+            assert known["error"] == function.coulomb_error(unshifted, forces, velocity)
+            handed.append(max_iter)
+        return phase(function, unshifted, forces, tol, max_iter, inner_tol, **known)
+
+    monkeypatch.setattr(newton, "_newton_phase", spy)
+    settings = SolveSettings(method="newton-ac", tol=1e-6, exact_coulomb=True,
+                             options={"fallback": None})
+    result = settings.solve(problem, warm_start, warm_shift)
+    assert result.status == CONVERGED and result.info["newton_iterations"] == 10
+    assert handed == [1] * 8 + [newton.INNER_CAP]
 
 
 def scripted_recentring(monkeypatch, errors):
@@ -789,8 +826,8 @@ def eliminated_sliding_rows(function, points):
     """Check the sparse lane's reduced Newton system (kernels.reduced_newton_system_2d) of
     ``function`` at each of ``points`` (forces): a block of as many rows as J has rows of
     diag(rho) (W + sigma I), by rows, each row's columns once and its diagonal first, and a
-    direction that solves
-    the whole system (:func:`solves_the_whole_newton_system`). Returns the sliding rows
+    direction that solves the whole system (:func:`solves_the_whole_newton_system`). Returns the
+    sliding rows
     eliminated at each point, and whether any of them has an entry of W in a kept row (its
     column folded into its normal's)."""
     from lubcontact.solvers.kernels import reduced_newton_system_2d
