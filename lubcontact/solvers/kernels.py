@@ -879,8 +879,10 @@ def reduced_newton_system_2d(indptr, indices, data, rho, lower, upper, box, cone
             scratch[column] = 0.0
         count += size
         row_ptr[a + 1] = count
-    return (kept, row_ptr, row_col[:count].view(np.int32), row_val[:count], rhs, base, sliding,
-            normal, slope)
+    # copies of the entries written: the buffers hold a row of W each (four times the block on
+    # a dense dry flow), and the factorisations kept hold the block
+    return (kept, row_ptr, row_col[:count].copy().view(np.int32), row_val[:count].copy(), rhs,
+            base, sliding, normal, slope)
 
 
 @numba.njit(cache=True)
