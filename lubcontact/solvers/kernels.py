@@ -957,9 +957,9 @@ def permuted_columns(indptr, indices, data, order):
         i = order[r]
         total = 0.0
         for e in range(indptr[i], indptr[i + 1]):
-            place = filled[renumber[indices[e]]]
-            rows[place], values[place] = r, data[e]
-            filled[renumber[indices[e]]] += 1
+            column = renumber[indices[e]]
+            rows[filled[column]], values[filled[column]] = r, data[e]
+            filled[column] += 1
             total += abs(data[e])
         norm = max(norm, total)
     return pointers, rows, values, norm
