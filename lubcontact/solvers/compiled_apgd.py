@@ -85,6 +85,18 @@ def csr_arrays(matrix: sp.csr_matrix | tuple[np.ndarray, np.ndarray, np.ndarray]
     return positions(indptr), positions(indices), values
 
 
+def operator_arrays(matrix: sp.csr_matrix | tuple[np.ndarray, np.ndarray, np.ndarray],
+                    transpose: sp.csr_matrix | None = None) -> tuple[np.ndarray, ...]:
+    """The operator ``W x`` as the kernels take it (:func:`~.kernels.apply_operator`): ``W``'s
+    CSR arrays (``matrix``, or their triple) with empty ones for the transpose; or, with
+    ``transpose``, ``matrix`` as ``W``'s factor ``F`` (``W = F^T F``), the CSR arrays of ``F``
+    and ``F^T`` and a work vector for ``F x``."""
+    if transpose is None:
+        empty = np.zeros(0, dtype=np.uint32)
+        return (*csr_arrays(matrix), empty, empty, np.zeros(0), np.zeros(0))
+    return (*csr_arrays(matrix), *csr_arrays(transpose), np.empty(matrix.shape[0]))
+
+
 def is_box(cones: Cones) -> bool:
     """True when K is a box (no friction cone): the fused kernel applies."""
     return cones.projector.friction_normal.size == 0
@@ -143,12 +155,9 @@ def run_apgd_cones(data: DualData, cones: Cones, z: np.ndarray, tol: float, max_
     if check_every < 1:
         raise ValueError(f"check_every: must be >= 1, got {check_every}")
     kernel = cone_kernel()
-    if data.matrix is None and data.factor is not None:
-        operator = (*csr_arrays(data.factor), *csr_arrays(data.factor_transpose),
-                    np.empty(data.factor.shape[0]))
-    else:
-        empty = np.zeros(0, dtype=np.uint32)
-        operator = (*csr_arrays(data.sparse_arrays()), empty, empty, np.zeros(0), np.zeros(0))
+    operator = operator_arrays(data.factor, data.factor_transpose) \
+        if data.matrix is None and data.factor is not None else \
+        operator_arrays(data.sparse_arrays())
     projector = cones.projector
     lipschitz = initial_lipschitz(data, z)
     streaming = z.size >= STREAMING_ROWS if streaming is None else streaming

@@ -61,6 +61,26 @@ def apply_operator(indptr, indices, values, t_indptr, t_indices, t_values, scrat
         matvec(t_indptr, t_indices, t_values, scratch, out)
 
 
+@numba.njit(cache=True)
+def rows_product(indptr, indices, values, t_indptr, t_indices, t_values, scratch, x, rows):
+    """``(W x)[rows]`` (``rows`` sorted, or in any order), the operator as in
+    :func:`apply_operator`: ``W``'s rows ``rows``, or ``F^T``'s after ``F x``. A reduced Newton
+    system's right-hand side reads its kept rows (a fifth of ``W``'s on a dense dry flow)."""
+    out = np.empty(rows.size)
+    if t_indptr.size == 0:
+        row_indptr, row_indices, row_values, vector = indptr, indices, values, x
+    else:
+        matvec(indptr, indices, values, x, scratch)
+        row_indptr, row_indices, row_values, vector = t_indptr, t_indices, t_values, scratch
+    for a in range(rows.size):
+        i = rows[a]
+        total = 0.0
+        for k in range(row_indptr[i], row_indptr[i + 1]):
+            total += row_values[k] * vector[row_indices[k]]
+        out[a] = total
+    return out
+
+
 @numba.njit(cache=True, inline="always")
 def loop_arrays(indptr, indices, values, t_indptr, t_indices, t_values, scratch, z0, max_iter):
     """Work arrays of an APGD loop started at ``z0`` (the operator as in :func:`apply_operator`).
@@ -810,79 +830,124 @@ def fold_sliding_rows_2d(rows, first_col, first_val, second_col, second_val, phi
 
 
 @numba.njit(cache=True)
-def reduced_newton_system_2d(indptr, indices, data, rho, lower, upper, box, cone_n, cone_t,
-                             cone_mu, unilateral, sigma, y, phi):
-    """The Newton system ``J d = -phi`` at ``y`` with ``W`` in CSR form, reduced to its plain
-    rows (:func:`is_plain_row`): the identity rows and the sliding tangential rows eliminated.
+def reduced_block_2d(indptr, indices, data, rho, sigma, kept, target, factor, hop_ptr, hop_idx,
+                     back_ptr, back_idx, last_into, last_factor, last_slot, last_kept, last_ptr,
+                     last_col, last_val):
+    """The block ``B`` of the 2D Newton system ``J d = -phi`` reduced to its plain rows
+    (:func:`is_plain_row`), with ``W`` in CSR form, from :func:`fold_sliding_rows_2d`'s
+    ``kept``, ``target`` and ``factor``; each row taken from the last block's where none of the
+    columns of ``W`` that it reads changed its fold.
 
     A 2D sliding tangential row ``t`` of a contact whose normal row is ``n`` has ``G``'s entries
     0 at ``(t, t)`` and ``mu s`` (``s`` the sliding sign) at ``(t, n)``; its normal row is plain
     (pushed, or bilateral), so ``J_t - mu s J_n = e_t - mu s e_n`` and ``d_t = mu s d_n + c_t``
-    with ``c_t = -phi_t + mu s phi_n``: its column folds into the normal's. Every remaining row
-    is ``rho_i (W + sigma I)_i``: the block has ``W``'s entries on the kept rows, each folded
-    column adding its sliding partner's (a contact's two rows of ``W`` share a pattern, but
-    for entries that the product forming ``W`` left out as exact zeros: contacts at right
-    angles on one grain), and
-    its diagonal always stored. In 2D every active row that is not plain
-    (:func:`is_plain_row`) is a sliding tangential row, and its normal row is plain: one that
-    is not could not be folded, and raises ``ValueError`` (:func:`fold_sliding_rows_2d`).
+    with ``c_t = -phi_t + mu s phi_n``: its column folds into the normal's. Every kept row is
+    ``rho_i (W + sigma I)_i``: the block has ``W``'s entries on the kept rows, each folded
+    column adding its sliding partner's (a contact's two rows of ``W`` share a pattern, but for
+    entries that the product forming ``W`` left out as exact zeros: contacts at right angles on
+    one grain), and its diagonal always stored. The right-hand side,
+    ``-phi_i - rho_i (W base)_i`` on the kept rows (``base`` zero on them:
+    :func:`fold_sliding_rows_2d`'s ``outer``), is one product, not formed here
+    (:func:`rows_product`).
+
+    The rows of ``B`` without ``rho`` and ``sigma`` (``F``: ``W``'s kept rows, folded) are kept
+    between calls (the ``last_`` arrays; empty at the first). Row ``i`` of ``F`` reads the
+    columns ``j`` of ``W``'s row ``i``; it is the last one, its columns renumbered, where each
+    such column folds into the same row with the same factor as at the last call. The rows that
+    may read a changed column ``j`` are found in two hops: ``j``'s entries in ``hop`` (the rows
+    of ``L^T``: the degrees of freedom of ``j``'s contact, ``W = L^T L``), then theirs in
+    ``back`` (the rows of ``L``): rows of ``W``'s pattern and more, so no exact zero of ``W`` is
+    missed. With ``hop_ptr`` empty every row is read from ``W``.
 
     Returns
     -------
     tuple
-        ``(kept, B_indptr, B_indices, B_data, rhs, base, sliding, normal, slope)``: the plain
-        rows (m,), sorted; the block ``B`` (m x m) of their equations in CSR arrays, 32-bit,
-        each row's columns once, its diagonal first, the others in ``W``'s order (the
-        factorisation's permutation sorts them: :func:`permuted_columns`; transposed to CSC
-        here first, the block took 0.42 ms more at 12 000 grains, 7 ms at 10^5); ``rhs``
-        (m,); the direction on the other rows (n,): ``-phi`` on identity rows, ``c_t`` on the
-        sliding rows ``sliding``, whose normal rows are ``normal`` and whose folded
-        coefficients ``mu s`` are ``slope``. With ``B x = rhs`` solved, ``d = base``,
-        ``d[kept] = x``, then ``d[sliding] += slope * d[normal]``.
+        ``(row_ptr, columns, values)``: ``B`` (m x m) in CSR arrays, 32-bit, each row's columns
+        once, its diagonal first, the others in ``W``'s order (the factorisation's permutation
+        sorts them: :func:`permuted_columns`; transposed to CSC here first, the block took 0.42
+        ms more at 12 000 grains, 7 ms at 10^5); then the state for the next call,
+        ``(into, slot, folded)``: per column of ``W`` (n,) the system's row it folds into
+        (-1 for none), per row its place in ``kept`` (-1 for none), and ``F``'s values (``F``
+        has ``B``'s ``row_ptr`` and ``columns``). Where no row is read from ``W`` and ``kept``
+        is the last call's, ``F``'s arrays are the last ones.
     """
-    rows, first_col, first_val, second_col, second_val = generalised_jacobian_2d(
-        lower, upper, box, cone_n, cone_t, cone_mu, unilateral, y)
-    kept, target, factor, outer, base, sliding, normal, slope = fold_sliding_rows_2d(
-        rows, first_col, first_val, second_col, second_val, phi)
-    n_kept = kept.size
-    # the block's rows (CSR, accumulated in a scratch row), returned as they are
+    n, m = target.size, kept.size
+    slot = np.full(n, -1, dtype=np.int32)
+    into = np.full(n, -1, dtype=np.int32)
+    for a in range(m):
+        slot[kept[a]] = a
+    for j in range(n):
+        if target[j] < m:
+            into[j] = kept[target[j]]
+    fresh = np.ones(n, dtype=np.bool_)      # the rows read from W
+    same_rows = False                       # kept as at the last call
+    if last_into.size == n and hop_ptr.size > 0:
+        fresh[:] = False
+        for j in range(n):
+            if into[j] != last_into[j] or factor[j] != last_factor[j]:
+                for e in range(hop_ptr[j], hop_ptr[j + 1]):
+                    k = hop_idx[e]
+                    for f in range(back_ptr[k], back_ptr[k + 1]):
+                        fresh[back_idx[f]] = True
+        same_rows = last_kept.size == m
+        for a in range(m):
+            i = kept[a]
+            fresh[i] = fresh[i] or last_slot[i] < 0
+            same_rows = same_rows and last_kept[a] == i
     capacity = 0
+    any_fresh = False
     for i in kept:
-        capacity += indptr[i + 1] - indptr[i] + 1
-    row_ptr = np.zeros(n_kept + 1, dtype=np.int32)
-    row_col = np.empty(capacity, dtype=np.uint32)          # unsigned: no wrap-around checks
-    row_val = np.empty(capacity)
-    rhs = np.empty(n_kept)
-    scratch = np.zeros(n_kept + 1)          # the last: where an identity row's entries go
-    seen = np.full(n_kept + 1, -1)
-    pattern = np.empty(n_kept + 1, dtype=np.int64)
-    count = 0
-    for a in range(n_kept):
-        i = kept[a]
-        seen[a], scratch[a], pattern[0] = a, sigma, a          # the diagonal, always stored
-        seen[n_kept] = a                                        # never a column of the block
-        size = 1
-        outside = 0.0                           # W_i base on the columns not kept
-        for k in range(indptr[i], indptr[i + 1]):
-            j = indices[k]
-            outside += data[k] * outer[j]
-            column = target[j]
-            pattern[size] = column
-            size += seen[column] != a
-            seen[column] = a
-            scratch[column] += data[k] * factor[j]
-        rhs[a] = -phi[i] - rho[i] * outside
-        for k in range(size):
-            column = pattern[k]
-            row_col[count + k] = column
-            row_val[count + k] = rho[i] * scratch[column]
-            scratch[column] = 0.0
-        count += size
-        row_ptr[a + 1] = count
-    # copies of the entries written: the buffers hold a row of W each (four times the block on
-    # a dense dry flow), and the factorisations kept hold the block
-    return (kept, row_ptr, row_col[:count].copy().view(np.int32), row_val[:count].copy(), rhs,
-            base, sliding, normal, slope)
+        if fresh[i]:
+            capacity += indptr[i + 1] - indptr[i] + 1
+            any_fresh = True
+        else:
+            capacity += last_ptr[last_slot[i] + 1] - last_ptr[last_slot[i]]
+    if same_rows and not any_fresh:
+        row_ptr, columns, folded = last_ptr, last_col, last_val
+    else:
+        row_ptr = np.zeros(m + 1, dtype=np.int32)
+        columns = np.empty(capacity, dtype=np.int32)
+        folded = np.empty(capacity)
+        scratch = np.zeros(m + 1)           # the last: where an identity row's entries go
+        seen = np.full(m + 1, -1)
+        pattern = np.empty(m + 1, dtype=np.int64)
+        count = 0
+        for a in range(m):
+            i = kept[a]
+            if fresh[i]:
+                seen[a], pattern[0] = a, a      # the diagonal, always stored
+                seen[m] = a                     # never a column of the block
+                size = 1
+                for k in range(indptr[i], indptr[i + 1]):
+                    j = indices[k]
+                    column = target[j]
+                    pattern[size] = column
+                    size += seen[column] != a
+                    seen[column] = a
+                    scratch[column] += data[k] * factor[j]
+                for k in range(size):
+                    column = pattern[k]
+                    columns[count + k], folded[count + k] = column, scratch[column]
+                    scratch[column] = 0.0
+            else:
+                start = last_ptr[last_slot[i]]
+                size = last_ptr[last_slot[i] + 1] - start
+                for k in range(size):
+                    column = last_col[start + k]
+                    columns[count + k] = column if same_rows else slot[last_kept[column]]
+                    folded[count + k] = last_val[start + k]
+            count += size
+            row_ptr[a + 1] = count
+        # the buffers hold a row of W for each row read from it (four times the block on a
+        # dense dry flow), and the factorisations kept hold the block
+        columns, folded = columns[:count].copy(), folded[:count].copy()
+    values = np.empty(folded.size)
+    for a in range(m):
+        scale = rho[kept[a]]
+        for k in range(row_ptr[a], row_ptr[a + 1]):
+            values[k] = scale * folded[k]
+        values[row_ptr[a]] = scale * (folded[row_ptr[a]] + sigma)
+    return row_ptr, columns, values, into, slot, folded
 
 
 @numba.njit(cache=True)

@@ -83,7 +83,7 @@ from ..problem.cones import Cones
 from ..problem.conic import ConicProblem
 from ..problem.metrics import coulomb_error
 from ..problem.step import diagonal_scaled
-from .compiled_apgd import csr_arrays, joint_applies, joint_coulomb_apgd, positions
+from .compiled_apgd import csr_arrays, joint_applies, joint_coulomb_apgd, operator_arrays, positions
 from .coulomb import solve_coulomb
 from .dual_data import DENSE_LIMIT, dense_lu, dense_lu_solve, is_small
 from .registry import ALL_CONES, NEWTON, register, solver_info
@@ -407,6 +407,9 @@ class AlartCurnier:
     factor_arrays : tuple of ndarray or None
         On the sparse lane, the CSR arrays of ``W``'s factor ``L`` and of ``L^T`` and a work
         vector, where the products ``W x`` go through them (:meth:`product`); None otherwise.
+    reduced_blocks : _ReducedBlocks or None
+        On the sparse lane of a 2D problem, the last reduced Newton block's rows, reused by the
+        next (:meth:`reduced_system`); None elsewhere.
     tangent_rows : ndarray of int, shape (nf,)
         ``cone_t``'s one column (planar problems only).
     q_scale : float
@@ -455,14 +458,14 @@ class AlartCurnier:
         self.flow_lane = self.planar and not self.dense
         self.convex = cones.is_convex
         self.compiled_rows = self.flow_lane
-        self.factor_arrays = None
+        self.factor_arrays = self.reduced_blocks = None
         if self.compiled_rows:
             self.w_arrays = csr_arrays(self.W)
             factor, transpose = problem.delassus_factor, problem.delassus_factor_transpose
             if factor is not None and \
                     factor.nnz + transpose.nnz <= FACTOR_PRODUCT_SHARE * self.W.nnz:
-                self.factor_arrays = (*csr_arrays(factor), *csr_arrays(transpose),
-                                      np.empty(factor.shape[0]))
+                self.factor_arrays = operator_arrays(factor, transpose)
+            self.reduced_blocks = _ReducedBlocks(self.w_arrays, self.rho, factor, transpose)
         self.q_scale = 1.0 + float(np.sqrt(self.q @ self.q))
         if self.planar:             # one tangential row per contact, as the kernels take them
             self.tangent_rows = projector.planar_tangent
@@ -483,6 +486,14 @@ class AlartCurnier:
         out = np.empty(self.n_rows)
         _kernels().apply_operator(*self.factor_arrays, vector, out)
         return out
+
+    def product_rows(self, vector: np.ndarray, rows: np.ndarray) -> np.ndarray:
+        """``(W x)[rows]`` (rows.size,) on the sparse lane of a 2D problem (``compiled_rows``),
+        through the factor where :attr:`factor_arrays` holds it, else from ``W``'s rows
+        ``rows`` (:func:`~lubcontact.solvers.kernels.rows_product`)."""
+        operator = self.factor_arrays if self.factor_arrays is not None else \
+            operator_arrays(self.w_arrays)
+        return _kernels().rows_product(*operator, vector, rows)
 
     def set_proximal(self, sigma: float, center: np.ndarray) -> None:
         """Solve the proximal problem ``W + sigma I``, ``q - sigma center`` from now on (0: the problem)."""
@@ -611,22 +622,17 @@ class AlartCurnier:
         or None where every regularisation of the active block fails.
 
         On the sparse lane of a 2D problem (``compiled_rows``) the system is reduced to its
-        plain rows first (:func:`~lubcontact.solvers.kernels.reduced_newton_system_2d`): a
-        sliding tangential row's unknown is its normal row's times ``mu s`` plus a constant,
-        so the factorised block loses those rows (on developed 2D flows a ninth to a fifth of
-        the active rows: docs/records/benchmarks.md, "the sliding rows eliminated"), and it is
-        assembled by rows (CSR) directly, without the rows of ``J``.
+        plain rows first (:meth:`reduced_system`): a sliding tangential row's unknown is its
+        normal row's times ``mu s`` plus a constant, so the factorised block loses those rows
+        (on developed 2D flows a ninth to a fifth of the active rows: docs/records/benchmarks.md,
+        "the sliding rows eliminated"), and it is assembled by rows (CSR) directly, without the
+        rows of ``J``.
         """
         if not self.compiled_rows:
             J, active, plain = self.jacobian(y)
             return _newton_direction(J, active, phi, self.factorisations, self.singular_by_count(plain))
-        kept, indptr, indices, data, rhs, direction, sliding, normal, slope = \
-            _kernels().reduced_newton_system_2d(*self.w_arrays, self.rho,
-                                                self.lower, self.upper, self.box, self.cone_n,
-                                                self.tangent_rows, self.cone_mu, self.unilateral,
-                                                self.sigma, y, phi)
+        kept, block, rhs, direction, sliding, normal, slope = self.reduced_system(y, phi)
         if kept.size:
-            block = sp.csr_matrix((data, indices, indptr), shape=(kept.size, kept.size))
             solved = _block_solve(block, rhs, kept, self.factorisations,
                                   self.singular_by_count(kept.size))
             if solved is None:
@@ -634,6 +640,34 @@ class AlartCurnier:
             direction[kept] = solved
         direction[sliding] += slope * direction[normal]
         return direction
+
+    def reduced_system(self, y: np.ndarray, phi: np.ndarray) -> tuple[
+            np.ndarray, sp.csr_matrix, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The Newton system ``J d = -phi`` at ``y`` reduced to its plain rows, on the sparse lane
+        of a 2D problem (``compiled_rows``): the identity rows and the sliding tangential rows
+        eliminated (:func:`~lubcontact.solvers.kernels.fold_sliding_rows_2d`), the block's rows
+        reused from the last call where their columns' folds are the same
+        (:class:`_ReducedBlocks`).
+
+        Returns
+        -------
+        tuple
+            ``(kept, block, rhs, base, sliding, normal, slope)``: the plain rows (m,), sorted;
+            the block ``B`` (m x m, CSR, each row's columns once, its diagonal first) of their
+            equations and ``rhs`` (m,), ``-phi - rho W base`` on them; the direction on the
+            other rows (n_rows,): ``-phi`` on identity rows, ``c_t`` on the sliding rows
+            ``sliding``, whose normal rows are ``normal`` and whose folded coefficients ``mu s``
+            are ``slope``. With ``B x = rhs`` solved, ``d = base``, ``d[kept] = x``, then
+            ``d[sliding] += slope * d[normal]``.
+        """
+        kernels = _kernels()
+        kept, target, factor, outer, base, sliding, normal, slope = kernels.fold_sliding_rows_2d(
+            *kernels.generalised_jacobian_2d(self.lower, self.upper, self.box, self.cone_n,
+                                             self.tangent_rows, self.cone_mu, self.unilateral, y),
+            phi)
+        rhs = -phi[kept] - self.rho[kept] * self.product_rows(outer, kept)
+        block = self.reduced_blocks.block(kept, target, factor, self.sigma)
+        return kept, block, rhs, base, sliding, normal, slope
 
     def hyperstatic(self, forces: np.ndarray) -> bool:
         """Whether plain Newton's active block at ``forces`` is singular by its count of sticking
@@ -672,6 +706,47 @@ class AlartCurnier:
         singular (43 200 active rows of a 12 800-grain deposited layer: 1.8 s against 0.17 s),
         so it is regularised at once (:func:`_block_solve`)."""
         return self.sigma == 0.0 and plain > self.rank_bound
+
+
+class _ReducedBlocks:
+    """The folded rows of the last reduced Newton block of a 2D problem on the sparse lane
+    (:func:`~lubcontact.solvers.kernels.reduced_block_2d`), so that the next block reads from
+    ``W`` only the rows whose columns changed their fold: on a developed flow a Newton iteration
+    changes a few (0-17 of 684 448 columns on a dry 10^5-grain step), and reading the kept rows
+    of ``W`` was a third of that step. The rows that may read a changed column are found through
+    ``W``'s factor ``L`` (``W = L^T L``), so where a problem gives ``W`` alone every block is read
+    from ``W`` whole.
+
+    Parameters
+    ----------
+    w_arrays : tuple of ndarray
+        ``W``'s CSR arrays (:attr:`AlartCurnier.w_arrays`).
+    rho : ndarray, shape (n_rows,)
+        The rows' steps.
+    factor, transpose : scipy.sparse.csr_matrix or None
+        ``L`` (n_dof x n_rows) and ``L^T``; None where the problem has no factor.
+    """
+
+    def __init__(self, w_arrays: tuple[np.ndarray, np.ndarray, np.ndarray], rho: np.ndarray,
+                 factor: sp.csr_matrix | None, transpose: sp.csr_matrix | None):
+        self.w_arrays, self.rho = w_arrays, rho
+        none = np.empty(0, dtype=np.uint32)
+        self.hops = (none, none, none, none) if factor is None else \
+            (*csr_arrays(transpose)[:2], *csr_arrays(factor)[:2])
+        empty = np.empty(0, dtype=np.int32)
+        self.last: tuple[np.ndarray, ...] = (empty, np.empty(0), empty, np.empty(0, dtype=np.int64),
+                                             empty, empty, np.empty(0))
+
+    def block(self, kept: np.ndarray, target: np.ndarray, factor: np.ndarray,
+              sigma: float) -> sp.csr_matrix:
+        """The reduced block ``B`` (m x m, CSR) at the fold ``kept``, ``target``, ``factor``
+        (:func:`~lubcontact.solvers.kernels.fold_sliding_rows_2d`) and the proximal weight
+        ``sigma``; its folded rows kept for the next call."""
+        row_ptr, columns, values, into, slot, folded = \
+            _kernels().reduced_block_2d(*self.w_arrays, self.rho, sigma, kept, target, factor,
+                                        *self.hops, *self.last)
+        self.last = (into, factor, slot, kept, row_ptr, columns, folded)
+        return sp.csr_matrix((values, columns, row_ptr), shape=(kept.size, kept.size))
 
 
 class _Factorisations:

@@ -823,26 +823,21 @@ def solves_the_whole_newton_system(J, active, phi, direction):
 
 
 def eliminated_sliding_rows(function, points):
-    """Check the sparse lane's reduced Newton system (kernels.reduced_newton_system_2d) of
+    """Check the sparse lane's reduced Newton system (AlartCurnier.reduced_system) of
     ``function`` at each of ``points`` (forces): a block of as many rows as J has rows of
     diag(rho) (W + sigma I), by rows, each row's columns once and its diagonal first, and a
     direction that solves the whole system (:func:`solves_the_whole_newton_system`). Returns the
     sliding rows
     eliminated at each point, and whether any of them has an entry of W in a kept row (its
     column folded into its normal's)."""
-    from lubcontact.solvers.kernels import reduced_newton_system_2d
-
     assert function.compiled_rows
     eliminated, folded = [], False
     for forces in points:
         phi, y, _ = function.residual(forces)
         J, active, plain = function.jacobian(y)
-        kept, indptr, indices, data, *_, sliding, _, _ = reduced_newton_system_2d(
-            *function.w_arrays, function.rho, function.lower, function.upper, function.box,
-            function.cone_n, function.tangent_rows, function.cone_mu, function.unilateral,
-            function.sigma, y, phi)
+        kept, block, *_, sliding, _, _ = function.reduced_system(y, phi)
         assert kept.size == plain and sliding.size == np.count_nonzero(active) - plain
-        block = sp.csr_matrix((data, indices, indptr), shape=(kept.size, kept.size))
+        indptr, indices = block.indptr, block.indices
         canonical = block.copy()
         canonical.sum_duplicates()
         assert canonical.nnz == block.nnz
@@ -928,6 +923,90 @@ def test_the_sliding_rows_of_union_contacts_fold_into_their_bilateral_normal_row
     assert all(rows.size for rows in eliminated) and folded
     assert np.isin(function.cone_n[np.searchsorted(function.tangent_rows, eliminated[0])],
                    union_normal).all()
+
+
+def same_csr(first, second):
+    """Whether two CSR matrices have the same arrays, entry for entry."""
+    return (np.array_equal(first.indptr, second.indptr)
+            and np.array_equal(first.indices, second.indices)
+            and np.array_equal(first.data, second.data))
+
+
+def reduced_block_fold(function, forces):
+    """``(kept, target, factor, outer)`` of the sparse lane's reduced Newton system at
+    ``forces`` (kernels.fold_sliding_rows_2d)."""
+    from lubcontact.solvers import kernels
+
+    phi, y, _ = function.residual(forces)
+    return kernels.fold_sliding_rows_2d(*kernels.generalised_jacobian_2d(
+        function.lower, function.upper, function.box, function.cone_n, function.tangent_rows,
+        function.cone_mu, function.unilateral, y), phi)[:4]
+
+
+def gluey_flow_function():
+    """AlartCurnier of the gluey + friction flow step (1 635 rows, the sparse lane) and its
+    warm start, normalised."""
+    with np.load(Path(__file__).parents[1] / "flow" / "data" / "gluey-flow-step.npz") as data:
+        problem = StepProblem.from_arrays(data).normalized()
+        start = data["warm_start"] / problem.scaling.force
+    return AlartCurnier(problem), start
+
+
+def test_a_reduced_block_rereads_from_w_only_the_rows_whose_columns_changed_their_fold():
+    """The sparse lane's reduced Newton blocks built from the last block's rows (_ReducedBlocks
+    with W's factor) equal those read from W whole, entry for entry, along points of a gluey +
+    friction flow step where a few contacts change state from one to the next, and as sigma
+    changes. With the last block's folded rows doubled, every row that reads a column of W whose
+    fold changed (or that was not kept) is still right, and the rest come out doubled: they were
+    taken from the last block, not read from W."""
+    function, start = gluey_flow_function()
+    blocks = function.reduced_blocks
+    whole = newton._ReducedBlocks(function.w_arrays, function.rho, None, None)
+    assert blocks.hops[0].size and not whole.hops[0].size
+    pattern = function.W.tocsr(copy=True)
+    pattern.data[:] = 1.0
+    rng = np.random.default_rng(11)
+    forces, sigma = start.copy(), 1e-3 * function.typical
+    taken = reread = 0
+    for _ in range(6):
+        moved = rng.random(forces.size) < 0.02
+        forces = np.where(moved, forces * (1 + rng.normal(size=forces.size)), forces)
+        kept, target, factor, _ = reduced_block_fold(function, forces)
+        expected = whole.block(kept, target, factor, sigma)
+        last = blocks.last
+        assert same_csr(blocks.block(kept, target, factor, sigma), expected)
+        after = blocks.last
+        blocks.last = (*last[:6], 2 * last[6])
+        doubled = blocks.block(kept, target, factor, sigma)
+        blocks.last = after
+        if last[0].size:
+            changed = (after[0] != last[0]) | (factor != last[1])
+            needed = (pattern[kept] @ changed > 0) | ~np.isin(kept, last[3])
+            starts, ends = expected.indptr[:-1], expected.indptr[1:]
+            right = np.array([np.array_equal(doubled.data[i:j], expected.data[i:j])
+                              for i, j in zip(starts, ends)])
+            assert right[needed].all() and np.array_equal(doubled.indices, expected.indices)
+            for i, j in zip(starts[~right], ends[~right]):      # off the diagonal: exactly 2x
+                assert np.array_equal(doubled.data[i + 1:j], 2 * expected.data[i + 1:j])
+            taken += np.count_nonzero(~right)
+            reread += np.count_nonzero(right)
+        sigma *= 0.5
+    assert taken > 0 and reread > 0
+
+
+@pytest.mark.parametrize("share", [None, 1.0])
+def test_a_reduced_right_hand_side_reads_the_kept_rows_of_w_or_of_its_factor(share, monkeypatch):
+    """``AlartCurnier.product_rows``: ``(W x)[rows]`` from W's rows, or through its factor where
+    the products go through it (FACTOR_PRODUCT_SHARE raised), to rounding."""
+    if share is not None:
+        monkeypatch.setattr(newton, "FACTOR_PRODUCT_SHARE", share)
+    function, start = gluey_flow_function()
+    assert (function.factor_arrays is not None) == (share is not None)
+    kept, _, _, outer = reduced_block_fold(function, start)
+    expected = (function.W @ outer)[kept]
+    assert np.abs(outer).max() > 0 and kept.size
+    assert np.abs(function.product_rows(outer, kept) - expected).max() <= \
+        1e-13 * np.abs(expected).max()
 
 
 @pytest.mark.parametrize("name", COMPILED_CASES)

@@ -114,11 +114,7 @@ def test_a_fresh_2d_block_is_factorised_in_this_order_by_the_static_lu(monkeypat
     assert function.compiled_rows and not function.dense
     function.set_proximal(1e-3 * function.typical, start)
     phi, y, _ = function.residual(start)
-    kept, indptr, indices, values, rhs, *_ = kernels.reduced_newton_system_2d(
-        *function.w_arrays, function.rho, function.lower, function.upper, function.box,
-        function.cone_n, function.tangent_rows, function.cone_mu, function.unilateral,
-        function.sigma, y, phi)
-    block = sp.csr_matrix((values, indices, indptr), shape=(kept.size, kept.size))
+    kept, block, rhs, *_ = function.reduced_system(y, phi)
     calls = []
     monkeypatch.setattr(newton.spla, "splu", lambda *args, **kwargs: calls.append(1))
     factorisations = newton._Factorisations(carry=True)
