@@ -62,21 +62,17 @@ def apply_operator(indptr, indices, values, t_indptr, t_indices, t_values, scrat
 
 
 @numba.njit(cache=True)
-def rows_product(indptr, indices, values, t_indptr, t_indices, t_values, scratch, x, rows):
-    """``(W x)[rows]`` (``rows`` sorted, or in any order), the operator as in
-    :func:`apply_operator`: ``W``'s rows ``rows``, or ``F^T``'s after ``F x``. A reduced Newton
-    system's right-hand side reads its kept rows (a fifth of ``W``'s on a dense dry flow)."""
+def factor_rows_product(indptr, indices, values, t_indptr, t_indices, t_values, scratch, x, rows):
+    """``(W x)[rows]`` with ``W = F^T F`` (the arguments as :func:`apply_operator` takes them
+    with the factor): ``F x``, then the rows ``rows`` of ``F^T`` (short: a contact row's degrees
+    of freedom)."""
+    matvec(indptr, indices, values, x, scratch)
     out = np.empty(rows.size)
-    if t_indptr.size == 0:
-        row_indptr, row_indices, row_values, vector = indptr, indices, values, x
-    else:
-        matvec(indptr, indices, values, x, scratch)
-        row_indptr, row_indices, row_values, vector = t_indptr, t_indices, t_values, scratch
     for a in range(rows.size):
         i = rows[a]
         total = 0.0
-        for k in range(row_indptr[i], row_indptr[i + 1]):
-            total += row_values[k] * vector[row_indices[k]]
+        for k in range(t_indptr[i], t_indptr[i + 1]):
+            total += t_values[k] * scratch[t_indices[k]]
         out[a] = total
     return out
 
@@ -830,9 +826,9 @@ def fold_sliding_rows_2d(rows, first_col, first_val, second_col, second_val, phi
 
 
 @numba.njit(cache=True)
-def reduced_block_2d(indptr, indices, data, rho, sigma, kept, target, factor, hop_ptr, hop_idx,
-                     back_ptr, back_idx, last_into, last_factor, last_slot, last_kept, last_ptr,
-                     last_col, last_val):
+def reduced_block_2d(indptr, indices, data, rho, sigma, kept, target, factor, outer, with_rhs,
+                     hop_ptr, hop_idx, back_ptr, back_idx, last_into, last_factor, last_slot,
+                     last_kept, last_ptr, last_col, last_val):
     """The block ``B`` of the 2D Newton system ``J d = -phi`` reduced to its plain rows
     (:func:`is_plain_row`), with ``W`` in CSR form, from :func:`fold_sliding_rows_2d`'s
     ``kept``, ``target`` and ``factor``; each row taken from the last block's where none of the
@@ -845,10 +841,11 @@ def reduced_block_2d(indptr, indices, data, rho, sigma, kept, target, factor, ho
     ``rho_i (W + sigma I)_i``: the block has ``W``'s entries on the kept rows, each folded
     column adding its sliding partner's (a contact's two rows of ``W`` share a pattern, but for
     entries that the product forming ``W`` left out as exact zeros: contacts at right angles on
-    one grain), and its diagonal always stored. The right-hand side,
-    ``-phi_i - rho_i (W base)_i`` on the kept rows (``base`` zero on them:
-    :func:`fold_sliding_rows_2d`'s ``outer``), is one product, not formed here
-    (:func:`rows_product`).
+    one grain), and its diagonal always stored. The right-hand side is
+    ``-phi_i - rho_i (W outer)_i`` on the kept rows (:func:`fold_sliding_rows_2d`'s ``outer``,
+    zero on them); ``(W outer)[kept]`` is read here with the rows of ``W`` (``with_rhs``), or
+    through ``W``'s factor (:func:`factor_rows_product`), where the products go through it: on
+    a dense dry flow reading the kept rows of ``W`` for it took twice as long.
 
     The rows of ``B`` without ``rho`` and ``sigma`` (``F``: ``W``'s kept rows, folded) are kept
     between calls (the ``last_`` arrays; empty at the first). Row ``i`` of ``F`` reads the
@@ -857,31 +854,37 @@ def reduced_block_2d(indptr, indices, data, rho, sigma, kept, target, factor, ho
     may read a changed column ``j`` are found in two hops: ``j``'s entries in ``hop`` (the rows
     of ``L^T``: the degrees of freedom of ``j``'s contact, ``W = L^T L``), then theirs in
     ``back`` (the rows of ``L``): rows of ``W``'s pattern and more, so no exact zero of ``W`` is
-    missed. With ``hop_ptr`` empty every row is read from ``W``.
+    missed. With ``hop_ptr`` empty every row is read from ``W`` and nothing is kept for the next
+    call (``into`` and ``slot`` empty, ``B``'s values written at once in ``F``'s place): where most
+    rows change from one Newton iteration to the next (gluey flows), the bookkeeping cost more
+    than the rows saved (docs/records/benchmarks.md, "the reduced block's rows reused").
 
     Returns
     -------
     tuple
-        ``(row_ptr, columns, values)``: ``B`` (m x m) in CSR arrays, 32-bit, each row's columns
-        once, its diagonal first, the others in ``W``'s order (the factorisation's permutation
-        sorts them: :func:`permuted_columns`; transposed to CSC here first, the block took 0.42
-        ms more at 12 000 grains, 7 ms at 10^5); then the state for the next call,
+        ``(row_ptr, columns, values, outside)``: ``B`` (m x m) in CSR arrays, 32-bit, each row's
+        columns once, its diagonal first, the others in ``W``'s order (the factorisation's
+        permutation sorts them: :func:`permuted_columns`; transposed to CSC here first, the
+        block took 0.42 ms more at 12 000 grains, 7 ms at 10^5); ``(W outer)[kept]`` (m,;
+        empty unless ``with_rhs``); then the state for the next call,
         ``(into, slot, folded)``: per column of ``W`` (n,) the system's row it folds into
         (-1 for none), per row its place in ``kept`` (-1 for none), and ``F``'s values (``F``
         has ``B``'s ``row_ptr`` and ``columns``). Where no row is read from ``W`` and ``kept``
         is the last call's, ``F``'s arrays are the last ones.
     """
     n, m = target.size, kept.size
-    slot = np.full(n, -1, dtype=np.int32)
-    into = np.full(n, -1, dtype=np.int32)
-    for a in range(m):
-        slot[kept[a]] = a
-    for j in range(n):
-        if target[j] < m:
-            into[j] = kept[target[j]]
+    reuse = hop_ptr.size > 0
+    slot = np.full(n if reuse else 0, -1, dtype=np.int32)
+    into = np.full(n if reuse else 0, -1, dtype=np.int32)
+    if reuse:
+        for a in range(m):
+            slot[kept[a]] = a
+        for j in range(n):
+            if target[j] < m:
+                into[j] = kept[target[j]]
     fresh = np.ones(n, dtype=np.bool_)      # the rows read from W
     same_rows = False                       # kept as at the last call
-    if last_into.size == n and hop_ptr.size > 0:
+    if reuse and last_into.size == n:
         fresh[:] = False
         for j in range(n):
             if into[j] != last_into[j] or factor[j] != last_factor[j]:
@@ -902,52 +905,72 @@ def reduced_block_2d(indptr, indices, data, rho, sigma, kept, target, factor, ho
             any_fresh = True
         else:
             capacity += last_ptr[last_slot[i] + 1] - last_ptr[last_slot[i]]
-    if same_rows and not any_fresh:
+    shared = same_rows and not any_fresh    # F's arrays are the last ones
+    if shared:
         row_ptr, columns, folded = last_ptr, last_col, last_val
     else:
         row_ptr = np.zeros(m + 1, dtype=np.int32)
         columns = np.empty(capacity, dtype=np.int32)
         folded = np.empty(capacity)
-        scratch = np.zeros(m + 1)           # the last: where an identity row's entries go
-        seen = np.full(m + 1, -1)
-        pattern = np.empty(m + 1, dtype=np.int64)
-        count = 0
-        for a in range(m):
-            i = kept[a]
-            if fresh[i]:
-                seen[a], pattern[0] = a, a      # the diagonal, always stored
-                seen[m] = a                     # never a column of the block
-                size = 1
+    scratch = np.zeros(m + 1)               # the last: where an identity row's entries go
+    seen = np.full(m + 1, -1)
+    pattern = np.empty(m + 1, dtype=np.int64)
+    outside = np.zeros(m)
+    count = 0
+    for a in range(m):
+        i = kept[a]
+        if fresh[i]:
+            seen[a], pattern[0] = a, a          # the diagonal, always stored
+            seen[m] = a                         # never a column of the block
+            size = 1
+            total = 0.0
+            for k in range(indptr[i], indptr[i + 1]):
+                j = indices[k]
+                total += data[k] * outer[j]
+                column = target[j]
+                pattern[size] = column
+                size += seen[column] != a
+                seen[column] = a
+                scratch[column] += data[k] * factor[j]
+            if not reuse:                       # B's values at once: F is not kept
+                scratch[a] += sigma
+            scale = rho[i] if not reuse else 1.0
+            for k in range(size):
+                column = pattern[k]
+                columns[count + k], folded[count + k] = column, scale * scratch[column]
+                scratch[column] = 0.0
+            outside[a] = total
+        else:
+            if with_rhs:
+                total = 0.0
                 for k in range(indptr[i], indptr[i + 1]):
-                    j = indices[k]
-                    column = target[j]
-                    pattern[size] = column
-                    size += seen[column] != a
-                    seen[column] = a
-                    scratch[column] += data[k] * factor[j]
-                for k in range(size):
-                    column = pattern[k]
-                    columns[count + k], folded[count + k] = column, scratch[column]
-                    scratch[column] = 0.0
-            else:
-                start = last_ptr[last_slot[i]]
-                size = last_ptr[last_slot[i] + 1] - start
-                for k in range(size):
-                    column = last_col[start + k]
-                    columns[count + k] = column if same_rows else slot[last_kept[column]]
-                    folded[count + k] = last_val[start + k]
-            count += size
-            row_ptr[a + 1] = count
+                    total += data[k] * outer[indices[k]]
+                outside[a] = total
+            if shared:
+                continue
+            start = last_ptr[last_slot[i]]
+            size = last_ptr[last_slot[i] + 1] - start
+            for k in range(size):
+                column = last_col[start + k]
+                columns[count + k] = column if same_rows else slot[last_kept[column]]
+                folded[count + k] = last_val[start + k]
+        count += size
+        row_ptr[a + 1] = count
+    if not shared:
         # the buffers hold a row of W for each row read from it (four times the block on a
         # dense dry flow), and the factorisations kept hold the block
         columns, folded = columns[:count].copy(), folded[:count].copy()
+    if not with_rhs:
+        outside = outside[:0]           # the fresh rows' only
+    if not reuse:
+        return row_ptr, columns, folded, outside, into, slot, folded
     values = np.empty(folded.size)
     for a in range(m):
-        scale = rho[kept[a]]
-        for k in range(row_ptr[a], row_ptr[a + 1]):
+        scale, first = rho[kept[a]], row_ptr[a]
+        values[first] = scale * (folded[first] + sigma)
+        for k in range(first + 1, row_ptr[a + 1]):
             values[k] = scale * folded[k]
-        values[row_ptr[a]] = scale * (folded[row_ptr[a]] + sigma)
-    return row_ptr, columns, values, into, slot, folded
+    return row_ptr, columns, values, outside, into, slot, folded
 
 
 @numba.njit(cache=True)

@@ -408,8 +408,9 @@ class AlartCurnier:
         On the sparse lane, the CSR arrays of ``W``'s factor ``L`` and of ``L^T`` and a work
         vector, where the products ``W x`` go through them (:meth:`product`); None otherwise.
     reduced_blocks : _ReducedBlocks or None
-        On the sparse lane of a 2D problem, the last reduced Newton block's rows, reused by the
-        next (:meth:`reduced_system`); None elsewhere.
+        On the sparse lane of a 2D problem, its reduced Newton blocks (:meth:`reduced_system`),
+        each reusing the last one's rows where the products go through ``W``'s factor; None
+        elsewhere.
     tangent_rows : ndarray of int, shape (nf,)
         ``cone_t``'s one column (planar problems only).
     q_scale : float
@@ -465,7 +466,10 @@ class AlartCurnier:
             if factor is not None and \
                     factor.nnz + transpose.nnz <= FACTOR_PRODUCT_SHARE * self.W.nnz:
                 self.factor_arrays = operator_arrays(factor, transpose)
-            self.reduced_blocks = _ReducedBlocks(self.w_arrays, self.rho, factor, transpose)
+            reused = self.factor_arrays is not None
+            self.reduced_blocks = _ReducedBlocks(self.w_arrays, self.rho,
+                                                 factor if reused else None,
+                                                 transpose if reused else None)
         self.q_scale = 1.0 + float(np.sqrt(self.q @ self.q))
         if self.planar:             # one tangential row per contact, as the kernels take them
             self.tangent_rows = projector.planar_tangent
@@ -486,14 +490,6 @@ class AlartCurnier:
         out = np.empty(self.n_rows)
         _kernels().apply_operator(*self.factor_arrays, vector, out)
         return out
-
-    def product_rows(self, vector: np.ndarray, rows: np.ndarray) -> np.ndarray:
-        """``(W x)[rows]`` (rows.size,) on the sparse lane of a 2D problem (``compiled_rows``),
-        through the factor where :attr:`factor_arrays` holds it, else from ``W``'s rows
-        ``rows`` (:func:`~lubcontact.solvers.kernels.rows_product`)."""
-        operator = self.factor_arrays if self.factor_arrays is not None else \
-            operator_arrays(self.w_arrays)
-        return _kernels().rows_product(*operator, vector, rows)
 
     def set_proximal(self, sigma: float, center: np.ndarray) -> None:
         """Solve the proximal problem ``W + sigma I``, ``q - sigma center`` from now on (0: the problem)."""
@@ -665,9 +661,12 @@ class AlartCurnier:
             *kernels.generalised_jacobian_2d(self.lower, self.upper, self.box, self.cone_n,
                                              self.tangent_rows, self.cone_mu, self.unilateral, y),
             phi)
-        rhs = -phi[kept] - self.rho[kept] * self.product_rows(outer, kept)
-        block = self.reduced_blocks.block(kept, target, factor, self.sigma)
-        return kept, block, rhs, base, sliding, normal, slope
+        through_factor = self.factor_arrays is not None
+        block, outside = self.reduced_blocks.block(kept, target, factor, self.sigma, outer,
+                                                   not through_factor)
+        if through_factor:
+            outside = kernels.factor_rows_product(*self.factor_arrays, outer, kept)
+        return kept, block, -phi[kept] - self.rho[kept] * outside, base, sliding, normal, slope
 
     def hyperstatic(self, forces: np.ndarray) -> bool:
         """Whether plain Newton's active block at ``forces`` is singular by its count of sticking
@@ -709,13 +708,19 @@ class AlartCurnier:
 
 
 class _ReducedBlocks:
-    """The folded rows of the last reduced Newton block of a 2D problem on the sparse lane
-    (:func:`~lubcontact.solvers.kernels.reduced_block_2d`), so that the next block reads from
-    ``W`` only the rows whose columns changed their fold: on a developed flow a Newton iteration
-    changes a few (0-17 of 684 448 columns on a dry 10^5-grain step), and reading the kept rows
-    of ``W`` was a third of that step. The rows that may read a changed column are found through
-    ``W``'s factor ``L`` (``W = L^T L``), so where a problem gives ``W`` alone every block is read
-    from ``W`` whole.
+    """The reduced Newton blocks of a 2D problem on the sparse lane
+    (:func:`~lubcontact.solvers.kernels.reduced_block_2d`), with the folded rows of the last one
+    kept where ``W``'s factor is given, so that the next block reads from ``W`` only the rows
+    whose columns changed their fold: late in a dense dry flow's step a Newton iteration changes
+    a few (0-17 of 684 448 columns at 10^5 grains), and reading the kept rows of ``W`` was a
+    third of that step. The rows that may read a changed column are found through the factor
+    ``L`` (``W = L^T L``).
+
+    :class:`AlartCurnier` gives the factor where its products go through it
+    (:data:`FACTOR_PRODUCT_SHARE`: ``W`` dense against its factor, each row of ``W`` long): on
+    gluey flows most rows change in the first Newton iterations of a step, and the bookkeeping
+    cost more than the rows it saved (docs/records/benchmarks.md, "the reduced block's rows
+    reused").
 
     Parameters
     ----------
@@ -724,7 +729,7 @@ class _ReducedBlocks:
     rho : ndarray, shape (n_rows,)
         The rows' steps.
     factor, transpose : scipy.sparse.csr_matrix or None
-        ``L`` (n_dof x n_rows) and ``L^T``; None where the problem has no factor.
+        ``L`` (n_dof x n_rows) and ``L^T``; None: every block read from ``W`` whole.
     """
 
     def __init__(self, w_arrays: tuple[np.ndarray, np.ndarray, np.ndarray], rho: np.ndarray,
@@ -737,16 +742,18 @@ class _ReducedBlocks:
         self.last: tuple[np.ndarray, ...] = (empty, np.empty(0), empty, np.empty(0, dtype=np.int64),
                                              empty, empty, np.empty(0))
 
-    def block(self, kept: np.ndarray, target: np.ndarray, factor: np.ndarray,
-              sigma: float) -> sp.csr_matrix:
-        """The reduced block ``B`` (m x m, CSR) at the fold ``kept``, ``target``, ``factor``
-        (:func:`~lubcontact.solvers.kernels.fold_sliding_rows_2d`) and the proximal weight
-        ``sigma``; its folded rows kept for the next call."""
-        row_ptr, columns, values, into, slot, folded = \
+    def block(self, kept: np.ndarray, target: np.ndarray, factor: np.ndarray, sigma: float,
+              outer: np.ndarray, with_rhs: bool) -> tuple[sp.csr_matrix, np.ndarray]:
+        """The reduced block ``B`` (m x m, CSR) at the fold ``kept``, ``target``, ``factor``,
+        ``outer`` (:func:`~lubcontact.solvers.kernels.fold_sliding_rows_2d`) and the proximal
+        weight ``sigma``, and ``(W outer)[kept]`` (m,) where ``with_rhs`` (else empty: the caller
+        takes it through ``W``'s factor); its folded rows kept for the next call."""
+        row_ptr, columns, values, outside, into, slot, folded = \
             _kernels().reduced_block_2d(*self.w_arrays, self.rho, sigma, kept, target, factor,
-                                        *self.hops, *self.last)
-        self.last = (into, factor, slot, kept, row_ptr, columns, folded)
-        return sp.csr_matrix((values, columns, row_ptr), shape=(kept.size, kept.size))
+                                        outer, with_rhs, *self.hops, *self.last)
+        if into.size:
+            self.last = (into, factor, slot, kept, row_ptr, columns, folded)
+        return sp.csr_matrix((values, columns, row_ptr), shape=(kept.size, kept.size)), outside
 
 
 class _Factorisations:

@@ -952,13 +952,16 @@ def gluey_flow_function():
     return AlartCurnier(problem), start
 
 
-def test_a_reduced_block_rereads_from_w_only_the_rows_whose_columns_changed_their_fold():
+def test_a_reduced_block_rereads_from_w_only_the_rows_whose_columns_changed_their_fold(
+        monkeypatch):
     """The sparse lane's reduced Newton blocks built from the last block's rows (_ReducedBlocks
-    with W's factor) equal those read from W whole, entry for entry, along points of a gluey +
-    friction flow step where a few contacts change state from one to the next, and as sigma
-    changes. With the last block's folded rows doubled, every row that reads a column of W whose
-    fold changed (or that was not kept) is still right, and the rest come out doubled: they were
-    taken from the last block, not read from W."""
+    with W's factor) equal those read from W whole, entry for entry, with the same ``(W
+    outer)[kept]``, along points of a gluey + friction flow step where a few contacts change
+    state from one to the next, and as sigma changes. With the last block's folded rows
+    doubled, every row that reads a column of W whose fold changed (or that was not kept) is
+    still right, and the rest come out doubled: they were taken from the last block, not read
+    from W. (The rows are reused where the products go through W's factor: raised share.)"""
+    monkeypatch.setattr(newton, "FACTOR_PRODUCT_SHARE", 1.0)
     function, start = gluey_flow_function()
     blocks = function.reduced_blocks
     whole = newton._ReducedBlocks(function.w_arrays, function.rho, None, None)
@@ -971,13 +974,15 @@ def test_a_reduced_block_rereads_from_w_only_the_rows_whose_columns_changed_thei
     for _ in range(6):
         moved = rng.random(forces.size) < 0.02
         forces = np.where(moved, forces * (1 + rng.normal(size=forces.size)), forces)
-        kept, target, factor, _ = reduced_block_fold(function, forces)
-        expected = whole.block(kept, target, factor, sigma)
+        kept, target, factor, outer = reduced_block_fold(function, forces)
+        fold = (kept, target, factor, sigma, outer, True)
+        expected, expected_outside = whole.block(*fold)
         last = blocks.last
-        assert same_csr(blocks.block(kept, target, factor, sigma), expected)
+        block, outside = blocks.block(*fold)
+        assert same_csr(block, expected) and np.array_equal(outside, expected_outside)
         after = blocks.last
         blocks.last = (*last[:6], 2 * last[6])
-        doubled = blocks.block(kept, target, factor, sigma)
+        doubled, _ = blocks.block(*fold)
         blocks.last = after
         if last[0].size:
             changed = (after[0] != last[0]) | (factor != last[1])
@@ -994,19 +999,49 @@ def test_a_reduced_block_rereads_from_w_only_the_rows_whose_columns_changed_thei
     assert taken > 0 and reread > 0
 
 
+@pytest.mark.parametrize("share", [0.0, 1.0])
+def test_a_reduced_block_is_w_folded_on_its_kept_rows_scaled_by_rho(share, monkeypatch):
+    """The sparse lane's reduced Newton block is ``rho_i (W_ij factor_j + sigma delta)`` summed
+    into column ``target_j``, read whole (share 0) or from the last block's rows (share 1), at
+    points where contacts change state: on the gluey flow's step in physical units, where rho
+    is far from 1 (on a normalised problem it is about 1)."""
+    monkeypatch.setattr(newton, "FACTOR_PRODUCT_SHARE", share)
+    with np.load(Path(__file__).parents[1] / "flow" / "data" / "gluey-flow-step.npz") as data:
+        problem = StepProblem.from_arrays(data)
+        start = data["warm_start"]
+    function = AlartCurnier(problem)
+    assert function.compiled_rows and (function.factor_arrays is not None) == (share == 1.0)
+    assert np.abs(np.log10(function.rho)).min() > 1
+    W = function.W.toarray()
+    rng = np.random.default_rng(2)
+    sigma = 1e-3 * function.typical
+    for scale in (0.0, 0.01, 0.02):
+        forces = start * (1 + scale * rng.normal(size=start.size))
+        kept, target, factor, outer = reduced_block_fold(function, forces)
+        block, _ = function.reduced_blocks.block(kept, target, factor, sigma, outer, True)
+        expected = np.zeros((kept.size, kept.size + 1))
+        for a, i in enumerate(kept):
+            np.add.at(expected[a], target, W[i] * factor)
+            expected[a, a] += sigma
+        expected = function.rho[kept, None] * expected[:, :-1]
+        assert np.abs(block.toarray() - expected).max() <= 1e-13 * np.abs(expected).max()
+
+
 @pytest.mark.parametrize("share", [None, 1.0])
 def test_a_reduced_right_hand_side_reads_the_kept_rows_of_w_or_of_its_factor(share, monkeypatch):
-    """``AlartCurnier.product_rows``: ``(W x)[rows]`` from W's rows, or through its factor where
-    the products go through it (FACTOR_PRODUCT_SHARE raised), to rounding."""
+    """The sparse lane's reduced Newton system's right-hand side, ``-phi - rho W outer`` on the
+    kept rows, from W's rows, or through its factor where the products go through it
+    (FACTOR_PRODUCT_SHARE raised), to rounding."""
     if share is not None:
         monkeypatch.setattr(newton, "FACTOR_PRODUCT_SHARE", share)
     function, start = gluey_flow_function()
     assert (function.factor_arrays is not None) == (share is not None)
     kept, _, _, outer = reduced_block_fold(function, start)
-    expected = (function.W @ outer)[kept]
+    phi, y, _ = function.residual(start)
+    expected = -phi[kept] - function.rho[kept] * (function.W @ outer)[kept]
     assert np.abs(outer).max() > 0 and kept.size
-    assert np.abs(function.product_rows(outer, kept) - expected).max() <= \
-        1e-13 * np.abs(expected).max()
+    rhs = function.reduced_system(y, phi)[2]
+    assert np.abs(rhs - expected).max() <= 1e-13 * np.abs(expected).max()
 
 
 @pytest.mark.parametrize("name", COMPILED_CASES)
