@@ -915,7 +915,11 @@ def reduced_block_2d(indptr, indices, data, rho, sigma, kept, target, factor, ou
     scratch = np.zeros(m + 1)               # the last: where an identity row's entries go
     seen = np.full(m + 1, -1)
     pattern = np.empty(m + 1, dtype=np.int64)
-    outside = np.zeros(m)
+    # the last block's columns renumbered: a gather in an array of the last block's size
+    renumbered = np.empty(0 if same_rows or not reuse else last_kept.size, dtype=np.int32)
+    for c in range(renumbered.size):
+        renumbered[c] = slot[last_kept[c]]
+    outside = np.zeros(m if with_rhs else 0)
     count = 0
     for a in range(m):
         i = kept[a]
@@ -926,7 +930,8 @@ def reduced_block_2d(indptr, indices, data, rho, sigma, kept, target, factor, ou
             total = 0.0
             for k in range(indptr[i], indptr[i + 1]):
                 j = indices[k]
-                total += data[k] * outer[j]
+                if with_rhs:
+                    total += data[k] * outer[j]
                 column = target[j]
                 pattern[size] = column
                 size += seen[column] != a
@@ -939,7 +944,8 @@ def reduced_block_2d(indptr, indices, data, rho, sigma, kept, target, factor, ou
                 column = pattern[k]
                 columns[count + k], folded[count + k] = column, scale * scratch[column]
                 scratch[column] = 0.0
-            outside[a] = total
+            if with_rhs:
+                outside[a] = total
         else:
             if with_rhs:
                 total = 0.0
@@ -952,7 +958,7 @@ def reduced_block_2d(indptr, indices, data, rho, sigma, kept, target, factor, ou
             size = last_ptr[last_slot[i] + 1] - start
             for k in range(size):
                 column = last_col[start + k]
-                columns[count + k] = column if same_rows else slot[last_kept[column]]
+                columns[count + k] = column if same_rows else renumbered[column]
                 folded[count + k] = last_val[start + k]
         count += size
         row_ptr[a + 1] = count
@@ -960,8 +966,6 @@ def reduced_block_2d(indptr, indices, data, rho, sigma, kept, target, factor, ou
         # the buffers hold a row of W for each row read from it (four times the block on a
         # dense dry flow), and the factorisations kept hold the block
         columns, folded = columns[:count].copy(), folded[:count].copy()
-    if not with_rhs:
-        outside = outside[:0]           # the fresh rows' only
     if not reuse:
         return row_ptr, columns, folded, outside, into, slot, folded
     values = np.empty(folded.size)

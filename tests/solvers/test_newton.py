@@ -957,10 +957,11 @@ def test_a_reduced_block_rereads_from_w_only_the_rows_whose_columns_changed_thei
     """The sparse lane's reduced Newton blocks built from the last block's rows (_ReducedBlocks
     with W's factor) equal those read from W whole, entry for entry, with the same ``(W
     outer)[kept]``, along points of a gluey + friction flow step where a few contacts change
-    state from one to the next, and as sigma changes. With the last block's folded rows
-    doubled, every row that reads a column of W whose fold changed (or that was not kept) is
-    still right, and the rest come out doubled: they were taken from the last block, not read
-    from W. (The rows are reused where the products go through W's factor: raised share.)"""
+    state from one to the next, and as sigma changes (at one point alone: the last block's
+    arrays, shared). With the last block's folded rows doubled, every row that reads a column
+    of W whose fold changed (or that was not kept) is still right, and the rest come out
+    doubled: they were taken from the last block, not read from W. (The rows are reused where
+    the products go through W's factor: raised share.)"""
     monkeypatch.setattr(newton, "FACTOR_PRODUCT_SHARE", 1.0)
     function, start = gluey_flow_function()
     blocks = function.reduced_blocks
@@ -997,6 +998,11 @@ def test_a_reduced_block_rereads_from_w_only_the_rows_whose_columns_changed_thei
             reread += np.count_nonzero(right)
         sigma *= 0.5
     assert taken > 0 and reread > 0
+    # the same point at another weight: no row read from W, F's arrays the last ones
+    last = blocks.last
+    block, _ = blocks.block(*fold[:3], 3 * sigma, outer, True)
+    assert same_csr(block, whole.block(*fold[:3], 3 * sigma, outer, True)[0])
+    assert blocks.last[6] is last[6] and blocks.last[5] is last[5]
 
 
 @pytest.mark.parametrize("share", [0.0, 1.0])
