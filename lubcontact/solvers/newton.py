@@ -650,11 +650,19 @@ class AlartCurnier:
         tuple
             ``(kept, block, rhs, base, sliding, normal, slope)``: the plain rows (m,), sorted;
             the block ``B`` (m x m, CSR, each row's columns once, its diagonal first) of their
-            equations and ``rhs`` (m,), ``-phi - rho W base`` on them; the direction on the
-            other rows (n_rows,): ``-phi`` on identity rows, ``c_t`` on the sliding rows
-            ``sliding``, whose normal rows are ``normal`` and whose folded coefficients ``mu s``
-            are ``slope``. With ``B x = rhs`` solved, ``d = base``, ``d[kept] = x``, then
+            equations and ``rhs`` (m,), ``-phi - rho W outer`` on them (``outer``: ``base`` on
+            the other rows, 0 on the kept ones); the direction on the other rows (n_rows,):
+            ``-phi`` on identity rows, ``c_t`` on the sliding rows ``sliding``, whose normal
+            rows are ``normal`` and whose folded coefficients ``mu s`` are ``slope``. With
+            ``B x = rhs`` solved, ``d = base``, ``d[kept] = x``, then
             ``d[sliding] += slope * d[normal]``.
+
+        Raises
+        ------
+        ValueError
+            Where a sliding tangential row's normal row is not plain, so that its column could
+            not be folded (in 2D every active row that is not plain is a sliding tangential row
+            whose normal row is plain).
         """
         kernels = _kernels()
         kept, target, factor, outer, base, sliding, normal, slope = kernels.fold_sliding_rows_2d(
