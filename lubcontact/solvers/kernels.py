@@ -855,7 +855,8 @@ def reduced_block_2d(indptr, indices, data, rho, sigma, kept, target, factor, ou
     of ``L^T``: the degrees of freedom of ``j``'s contact, ``W = L^T L``), then theirs in
     ``back`` (the rows of ``L``): rows of ``W``'s pattern and more, so no exact zero of ``W`` is
     missed. With ``hop_ptr`` empty every row is read from ``W`` and nothing is kept for the next
-    call (``into`` and ``slot`` empty, ``B``'s values written at once in ``F``'s place): where most
+    call (``into`` and ``slot`` empty; ``B``'s values written at once in ``F``'s place, ``sigma``
+    first in the diagonal's sum, as in the former kernel, which read every row): where most
     rows change from one Newton iteration to the next (gluey flows), the bookkeeping cost more
     than the rows saved (docs/records/benchmarks.md, "the reduced block's rows reused").
 
@@ -926,6 +927,8 @@ def reduced_block_2d(indptr, indices, data, rho, sigma, kept, target, factor, ou
         if fresh[i]:
             seen[a], pattern[0] = a, a          # the diagonal, always stored
             seen[m] = a                         # never a column of the block
+            if not reuse:                       # B's values at once: F is not kept
+                scratch[a] = sigma
             size = 1
             total = 0.0
             for k in range(indptr[i], indptr[i + 1]):
@@ -937,8 +940,6 @@ def reduced_block_2d(indptr, indices, data, rho, sigma, kept, target, factor, ou
                 size += seen[column] != a
                 seen[column] = a
                 scratch[column] += data[k] * factor[j]
-            if not reuse:                       # B's values at once: F is not kept
-                scratch[a] += sigma
             scale = rho[i] if not reuse else 1.0
             for k in range(size):
                 column = pattern[k]

@@ -944,18 +944,19 @@ def reduced_block_fold(function, forces):
 
 
 def gluey_flow_function():
-    """AlartCurnier of the gluey + friction flow step (1 635 rows, the sparse lane) and its
-    warm start, normalised."""
+    """AlartCurnier of the gluey + friction flow step (1 635 rows, the sparse lane), its warm
+    start and the problem, normalised."""
     with np.load(Path(__file__).parents[1] / "flow" / "data" / "gluey-flow-step.npz") as data:
         problem = StepProblem.from_arrays(data).normalized()
         start = data["warm_start"] / problem.scaling.force
-    return AlartCurnier(problem), start
+    return AlartCurnier(problem), start, problem
 
 
 def test_a_reduced_block_rereads_from_w_only_the_rows_whose_columns_changed_their_fold(
         monkeypatch):
     """The sparse lane's reduced Newton blocks built from the last block's rows (_ReducedBlocks
-    with W's factor) equal those read from W whole, entry for entry, with the same ``(W
+    with W's factor) equal those built with no last block (every row read from W), entry for
+    entry, with the same ``(W
     outer)[kept]``, along points of a gluey + friction flow step where a few contacts change
     state from one to the next, and as sigma changes (at one point alone: the last block's
     arrays, shared). With the last block's folded rows doubled, every row that reads a column
@@ -963,10 +964,10 @@ def test_a_reduced_block_rereads_from_w_only_the_rows_whose_columns_changed_thei
     doubled: they were taken from the last block, not read from W. (The rows are reused where
     the products go through W's factor: raised share.)"""
     monkeypatch.setattr(newton, "FACTOR_PRODUCT_SHARE", 1.0)
-    function, start = gluey_flow_function()
+    function, start, problem = gluey_flow_function()
+    factors = (problem.delassus_factor, problem.delassus_factor_transpose)
     blocks = function.reduced_blocks
-    whole = newton._ReducedBlocks(function.w_arrays, function.rho, None, None)
-    assert blocks.hops[0].size and not whole.hops[0].size
+    assert blocks.hops[0].size
     pattern = function.W.tocsr(copy=True)
     pattern.data[:] = 1.0
     rng = np.random.default_rng(11)
@@ -977,6 +978,7 @@ def test_a_reduced_block_rereads_from_w_only_the_rows_whose_columns_changed_thei
         forces = np.where(moved, forces * (1 + rng.normal(size=forces.size)), forces)
         kept, target, factor, outer = reduced_block_fold(function, forces)
         fold = (kept, target, factor, sigma, outer, True)
+        whole = newton._ReducedBlocks(function.w_arrays, function.rho, *factors)  # no last rows
         expected, expected_outside = whole.block(*fold)
         last = blocks.last
         block, outside = blocks.block(*fold)
@@ -1001,6 +1003,7 @@ def test_a_reduced_block_rereads_from_w_only_the_rows_whose_columns_changed_thei
     # the same point at another weight: no row read from W, F's arrays the last ones
     last = blocks.last
     block, _ = blocks.block(*fold[:3], 3 * sigma, outer, True)
+    whole = newton._ReducedBlocks(function.w_arrays, function.rho, *factors)
     assert same_csr(block, whole.block(*fold[:3], 3 * sigma, outer, True)[0])
     assert blocks.last[6] is last[6] and blocks.last[5] is last[5]
 
@@ -1040,7 +1043,7 @@ def test_a_reduced_right_hand_side_reads_the_kept_rows_of_w_or_of_its_factor(sha
     (FACTOR_PRODUCT_SHARE raised), to rounding."""
     if share is not None:
         monkeypatch.setattr(newton, "FACTOR_PRODUCT_SHARE", share)
-    function, start = gluey_flow_function()
+    function, start, _ = gluey_flow_function()
     assert (function.factor_arrays is not None) == (share is not None)
     kept, _, _, outer = reduced_block_fold(function, start)
     phi, y, _ = function.residual(start)
