@@ -956,13 +956,12 @@ def test_a_reduced_block_rereads_from_w_only_the_rows_whose_columns_changed_thei
         monkeypatch):
     """The sparse lane's reduced Newton blocks built from the last block's rows (_ReducedBlocks
     with W's factor) equal those built with no last block (every row read from W), entry for
-    entry, with the same ``(W
-    outer)[kept]``, along points of a gluey + friction flow step where a few contacts change
-    state from one to the next, and as sigma changes (at one point alone: the last block's
-    arrays, shared). With the last block's folded rows doubled, every row that reads a column
-    of W whose fold changed (or that was not kept) is still right, and the rest come out
-    doubled: they were taken from the last block, not read from W. (The rows are reused where
-    the products go through W's factor: raised share.)"""
+    entry, with the same ``(W outer)[kept]``, along points of a gluey + friction flow step
+    where a few contacts change state from one to the next, and as sigma changes (at one point
+    alone: the last block's arrays, shared). With the last block's folded rows doubled, every
+    row that reads a column of W whose fold changed (or that was not kept) is still right, and
+    the rest come out doubled: they were taken from the last block, not read from W. (The rows
+    are reused where the products go through W's factor: raised share.)"""
     monkeypatch.setattr(newton, "FACTOR_PRODUCT_SHARE", 1.0)
     function, start, problem = gluey_flow_function()
     factors = (problem.delassus_factor, problem.delassus_factor_transpose)
