@@ -126,16 +126,20 @@ same Newton iterations; on 30 gluey ones (0.58) 0.281-0.291 against 0.275-0.287,
 NEW_ROWS_LIMIT = 0.05
 """An active block whose rows are all but this fraction rows of the block last ordered afresh
 is factorised in that block's elimination order (:class:`_Factorisations`), not ordered again.
-Against 0.01: 30-40 % fewer fresh orders, the factorisations' side 6-9 % less time on captured
-2D flow steps from 4 000 to 10^5 grains (docs/records/benchmarks.md, "orders carried further")."""
+Against 0.01 (with :data:`FILL_GROWTH`): a quarter to a third fewer fresh orders on captured 2D
+flow steps from 4 000 to 10^5 grains, the factors 1-6 % larger (docs/records/benchmarks.md,
+"orders carried further")."""
 
 STATIC_LU_BACKWARD_ERROR = 1e-11
 """A solve with :class:`_StaticLU`'s factors (no pivoting) whose normwise backward error is above
 this is done again by SuperLU with pivoting (a stable LU's is a few times the machine epsilon)."""
 
-FILL_GROWTH = 1.25
+FILL_GROWTH = 1.1
 """A factorisation in a carried order whose factors hold more than this many times the ordered
-block's, per entry of its block, ends the carrying: the next block is ordered afresh."""
+block's, per entry of its block, ends the carrying: the next block is ordered afresh. With
+:data:`NEW_ROWS_LIMIT` at 0.05, 1.25 let the factors of a gluey 10^5-grain flow's steps grow by
+8.6 % (1.2 % at 1.1) for a third fewer fresh orders (docs/records/benchmarks.md, "orders
+carried further")."""
 
 STALL_WINDOW = 60
 STALL_FACTOR = 0.5
