@@ -747,11 +747,10 @@ def sparse_jacobian_rows_2d(indptr, indices, data, rho, lower, upper, box, cone_
 
 
 @numba.njit(cache=True)
-def compressed_transpose(size, pointers, indices, values):
-    """The transpose of a square sparse matrix of ``size`` rows in compressed arrays
-    (``pointers``, ``indices``, ``values``: CSR gives CSC, and back), by a counting sort, the
-    indices of each new row sorted and 32-bit (SuperLU's): ``(pointers, indices, values)``;
-    ``values`` empty: the pattern's transpose alone, its values empty."""
+def transposed_pattern(size, pointers, indices):
+    """The pattern of the transpose of a square sparse matrix of ``size`` rows in compressed
+    arrays (``pointers``, ``indices``: CSR gives CSC, and back), by a counting sort, the indices
+    of each new row sorted and 32-bit: ``(pointers, indices)``."""
     count = pointers[size]
     new_pointers = np.zeros(size + 1, dtype=np.int32)
     for k in range(count):
@@ -760,16 +759,11 @@ def compressed_transpose(size, pointers, indices, values):
         new_pointers[a + 1] += new_pointers[a]
     filled = new_pointers[:-1].astype(np.int64)
     new_indices = np.empty(count, dtype=np.int32)
-    with_values = values.size > 0
-    new_values = np.empty(count if with_values else 0)
     for a in range(size):                       # in order: each new row's indices sorted
         for k in range(pointers[a], pointers[a + 1]):
-            place = filled[indices[k]]
-            new_indices[place] = a
-            if with_values:
-                new_values[place] = values[k]
+            new_indices[filled[indices[k]]] = a
             filled[indices[k]] += 1
-    return new_pointers, new_indices, new_values
+    return new_pointers, new_indices
 
 
 @numba.njit(cache=True)
@@ -826,9 +820,9 @@ def fold_sliding_rows_2d(rows, first_col, first_val, second_col, second_val, phi
 
 
 @numba.njit(cache=True)
-def reduced_block_2d(indptr, indices, data, rho, sigma, kept, target, factor, outer, with_rhs,
-                     hop_ptr, hop_idx, back_ptr, back_idx, last_into, last_factor, last_slot,
-                     last_kept, last_ptr, last_col, last_val):
+def reduced_block_2d(indptr, indices, data, rho, sigma, kept, target, factor, outer, hop_ptr,
+                     hop_idx, back_ptr, back_idx, last_into, last_factor, last_slot, last_kept,
+                     last_ptr, last_col, last_val):
     """The block ``B`` of the 2D Newton system ``J d = -phi`` reduced to its plain rows
     (:func:`is_plain_row`), with ``W`` in CSR form, from :func:`fold_sliding_rows_2d`'s
     ``kept``, ``target`` and ``factor``; each row taken from the last block's where none of the
@@ -843,9 +837,9 @@ def reduced_block_2d(indptr, indices, data, rho, sigma, kept, target, factor, ou
     entries that the product forming ``W`` left out as exact zeros: contacts at right angles on
     one grain), and its diagonal always stored. The right-hand side is
     ``-phi_i - rho_i (W outer)_i`` on the kept rows (:func:`fold_sliding_rows_2d`'s ``outer``,
-    zero on them); ``(W outer)[kept]`` is read here with the rows of ``W`` (``with_rhs``), or
-    through ``W``'s factor (:func:`factor_rows_product`), where the products go through it: on
-    a dense dry flow reading the kept rows of ``W`` for it took twice as long.
+    zero on them); where every row is read from ``W`` (below) ``(W outer)[kept]`` is read with
+    them, else it is taken through ``W``'s factor (:func:`factor_rows_product`): on a dense dry
+    flow reading the kept rows of ``W`` for it took twice as long.
 
     The rows of ``B`` without ``rho`` and ``sigma`` (``F``: ``W``'s kept rows, folded) are kept
     between calls (the ``last_`` arrays; empty at the first). Row ``i`` of ``F`` reads the
@@ -867,7 +861,7 @@ def reduced_block_2d(indptr, indices, data, rho, sigma, kept, target, factor, ou
         columns once, its diagonal first, the others in ``W``'s order (the factorisation's
         permutation sorts them: :func:`permuted_columns`; transposed to CSC here first, the
         block took 0.42 ms more at 12 000 grains, 7 ms at 10^5); ``(W outer)[kept]`` (m,;
-        empty unless ``with_rhs``); then the state for the next call,
+        empty where the rows are reused); then the state for the next call,
         ``(into, slot, folded)``: per column of ``W`` (n,) the system's row it folds into
         (-1 for none), per row its place in ``kept`` (-1 for none), and ``F``'s values (``F``
         has ``B``'s ``row_ptr`` and ``columns``). Where no row is read from ``W`` and ``kept``
@@ -920,7 +914,7 @@ def reduced_block_2d(indptr, indices, data, rho, sigma, kept, target, factor, ou
     renumbered = np.empty(0 if same_rows or not reuse else last_kept.size, dtype=np.int32)
     for c in range(renumbered.size):
         renumbered[c] = slot[last_kept[c]]
-    outside = np.zeros(m if with_rhs else 0)
+    outside = np.zeros(0 if reuse else m)
     count = 0
     for a in range(m):
         i = kept[a]
@@ -933,7 +927,7 @@ def reduced_block_2d(indptr, indices, data, rho, sigma, kept, target, factor, ou
             total = 0.0
             for k in range(indptr[i], indptr[i + 1]):
                 j = indices[k]
-                if with_rhs:
+                if not reuse:
                     total += data[k] * outer[j]
                 column = target[j]
                 pattern[size] = column
@@ -945,14 +939,9 @@ def reduced_block_2d(indptr, indices, data, rho, sigma, kept, target, factor, ou
                 column = pattern[k]
                 columns[count + k], folded[count + k] = column, scale * scratch[column]
                 scratch[column] = 0.0
-            if with_rhs:
+            if not reuse:
                 outside[a] = total
         else:
-            if with_rhs:
-                total = 0.0
-                for k in range(indptr[i], indptr[i + 1]):
-                    total += data[k] * outer[indices[k]]
-                outside[a] = total
             if shared:
                 continue
             start = last_ptr[last_slot[i]]
@@ -1143,7 +1132,7 @@ def static_pattern(indptr, indices):
     factorisation and the solves scatter a column whatever its order); ``U``'s rows sorted, its
     diagonal last."""
     n = indptr.size - 1
-    row_ptr, row_idx, _ = compressed_transpose(n, indptr, indices, np.zeros(0))
+    row_ptr, row_idx = transposed_pattern(n, indptr, indices)
     parent = elimination_tree(indptr, indices, row_ptr, row_idx)
     first_child = np.full(n, -1, dtype=np.int64)
     next_child = np.full(n, -1, dtype=np.int64)
@@ -1187,7 +1176,7 @@ def static_pattern(indptr, indices):
     if size >= 2**31:
         raise ValueError("static_pattern: more than 2^31 entries in L (32-bit pointers of U)")
     lower_idx = lower_idx[:size].copy()
-    upper_ptr, upper_idx, _ = compressed_transpose(n, lower_ptr, lower_idx, np.zeros(0))
+    upper_ptr, upper_idx = transposed_pattern(n, lower_ptr, lower_idx)
     return lower_ptr, lower_idx, upper_ptr, upper_idx
 
 

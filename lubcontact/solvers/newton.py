@@ -472,10 +472,7 @@ class AlartCurnier:
             if factor is not None and \
                     factor.nnz + transpose.nnz <= FACTOR_PRODUCT_SHARE * self.W.nnz:
                 self.factor_arrays = operator_arrays(factor, transpose)
-            reused = self.factor_arrays is not None
-            self.reduced_blocks = _ReducedBlocks(self.w_arrays, self.rho,
-                                                 factor if reused else None,
-                                                 transpose if reused else None)
+            self.reduced_blocks = _ReducedBlocks(self.w_arrays, self.rho, self.factor_arrays)
         self.q_scale = 1.0 + float(np.sqrt(self.q @ self.q))
         if self.planar:             # one tangential row per contact, as the kernels take them
             self.tangent_rows = projector.planar_tangent
@@ -675,11 +672,7 @@ class AlartCurnier:
             *kernels.generalised_jacobian_2d(self.lower, self.upper, self.box, self.cone_n,
                                              self.tangent_rows, self.cone_mu, self.unilateral, y),
             phi)
-        through_factor = self.factor_arrays is not None
-        block, outside = self.reduced_blocks.block(kept, target, factor, self.sigma, outer,
-                                                   not through_factor)
-        if through_factor:
-            outside = kernels.factor_rows_product(*self.factor_arrays, outer, kept)
+        block, outside = self.reduced_blocks.block(kept, target, factor, self.sigma, outer)
         return kept, block, -phi[kept] - self.rho[kept] * outside, base, sliding, normal, slope
 
     def hyperstatic(self, forces: np.ndarray) -> bool:
@@ -742,31 +735,34 @@ class _ReducedBlocks:
         ``W``'s CSR arrays (:attr:`AlartCurnier.w_arrays`).
     rho : ndarray, shape (n_rows,)
         The rows' steps.
-    factor, transpose : scipy.sparse.csr_matrix or None
-        ``L`` (n_dof x n_rows) and ``L^T``; None: every block read from ``W`` whole.
+    factor_arrays : tuple of ndarray or None
+        ``L``'s and ``L^T``'s CSR arrays and a work vector (:attr:`AlartCurnier.factor_arrays`);
+        None: every block read from ``W`` whole.
     """
 
     def __init__(self, w_arrays: tuple[np.ndarray, np.ndarray, np.ndarray], rho: np.ndarray,
-                 factor: sp.csr_matrix | None, transpose: sp.csr_matrix | None):
-        self.w_arrays, self.rho = w_arrays, rho
+                 factor_arrays: tuple[np.ndarray, ...] | None):
+        self.w_arrays, self.rho, self.factor_arrays = w_arrays, rho, factor_arrays
         none = np.empty(0, dtype=np.uint32)
-        self.hops = (none, none, none, none) if factor is None else \
-            (*csr_arrays(transpose)[:2], *csr_arrays(factor)[:2])
+        # L^T's rows (a contact row's degrees of freedom), then L's (a degree's contact rows)
+        self.hops = (none, none, none, none) if factor_arrays is None else \
+            (factor_arrays[3], factor_arrays[4], factor_arrays[0], factor_arrays[1])
         empty = np.empty(0, dtype=np.int32)
         self.last: tuple[np.ndarray, ...] = (empty, np.empty(0), empty, np.empty(0, dtype=np.int64),
                                              empty, empty, np.empty(0))
 
     def block(self, kept: np.ndarray, target: np.ndarray, factor: np.ndarray, sigma: float,
-              outer: np.ndarray, with_rhs: bool) -> tuple[sp.csr_matrix, np.ndarray]:
+              outer: np.ndarray) -> tuple[sp.csr_matrix, np.ndarray]:
         """The reduced block ``B`` (m x m, CSR) at the fold ``kept``, ``target``, ``factor``,
         ``outer`` (:func:`~lubcontact.solvers.kernels.fold_sliding_rows_2d`) and the proximal
-        weight ``sigma``, and ``(W outer)[kept]`` (m,) where ``with_rhs`` (else empty: the caller
-        takes it through ``W``'s factor); its folded rows kept for the next call."""
-        row_ptr, columns, values, outside, into, slot, folded = \
-            _kernels().reduced_block_2d(*self.w_arrays, self.rho, sigma, kept, target, factor,
-                                        outer, with_rhs, *self.hops, *self.last)
-        if into.size:
+        weight ``sigma``, and ``(W outer)[kept]`` (m,): read with the block's rows where they
+        are read whole, else through the factor; the folded rows kept for the next call."""
+        kernels = _kernels()
+        row_ptr, columns, values, outside, into, slot, folded = kernels.reduced_block_2d(
+            *self.w_arrays, self.rho, sigma, kept, target, factor, outer, *self.hops, *self.last)
+        if self.factor_arrays is not None:
             self.last = (into, factor, slot, kept, row_ptr, columns, folded)
+            outside = kernels.factor_rows_product(*self.factor_arrays, outer, kept)
         return sp.csr_matrix((values, columns, row_ptr), shape=(kept.size, kept.size)), outside
 
 

@@ -827,9 +827,8 @@ def eliminated_sliding_rows(function, points):
     ``function`` at each of ``points`` (forces): a block of as many rows as J has rows of
     diag(rho) (W + sigma I), by rows, each row's columns once and its diagonal first, and a
     direction that solves the whole system (:func:`solves_the_whole_newton_system`). Returns the
-    sliding rows
-    eliminated at each point, and whether any of them has an entry of W in a kept row (its
-    column folded into its normal's)."""
+    sliding rows eliminated at each point, and whether any of them has an entry of W in a kept
+    row (its column folded into its normal's)."""
     assert function.compiled_rows
     eliminated, folded = [], False
     for forces in points:
@@ -944,12 +943,12 @@ def reduced_block_fold(function, forces):
 
 
 def gluey_flow_function():
-    """AlartCurnier of the gluey + friction flow step (1 635 rows, the sparse lane), its warm
-    start and the problem, normalised."""
+    """AlartCurnier of the gluey + friction flow step (1 635 rows, the sparse lane) and its
+    warm start, normalised."""
     with np.load(Path(__file__).parents[1] / "flow" / "data" / "gluey-flow-step.npz") as data:
         problem = StepProblem.from_arrays(data).normalized()
         start = data["warm_start"] / problem.scaling.force
-    return AlartCurnier(problem), start, problem
+    return AlartCurnier(problem), start
 
 
 def test_a_reduced_block_rereads_from_w_only_the_rows_whose_columns_changed_their_fold(
@@ -963,8 +962,7 @@ def test_a_reduced_block_rereads_from_w_only_the_rows_whose_columns_changed_thei
     the rest come out doubled: they were taken from the last block, not read from W. (The rows
     are reused where the products go through W's factor: raised share.)"""
     monkeypatch.setattr(newton, "FACTOR_PRODUCT_SHARE", 1.0)
-    function, start, problem = gluey_flow_function()
-    factors = (problem.delassus_factor, problem.delassus_factor_transpose)
+    function, start = gluey_flow_function()
     blocks = function.reduced_blocks
     assert blocks.hops[0].size
     pattern = function.W.tocsr(copy=True)
@@ -976,8 +974,9 @@ def test_a_reduced_block_rereads_from_w_only_the_rows_whose_columns_changed_thei
         moved = rng.random(forces.size) < 0.02
         forces = np.where(moved, forces * (1 + rng.normal(size=forces.size)), forces)
         kept, target, factor, outer = reduced_block_fold(function, forces)
-        fold = (kept, target, factor, sigma, outer, True)
-        whole = newton._ReducedBlocks(function.w_arrays, function.rho, *factors)  # no last rows
+        fold = (kept, target, factor, sigma, outer)
+        whole = newton._ReducedBlocks(function.w_arrays, function.rho,       # no last rows
+                                      function.factor_arrays)
         expected, expected_outside = whole.block(*fold)
         last = blocks.last
         block, outside = blocks.block(*fold)
@@ -1001,9 +1000,9 @@ def test_a_reduced_block_rereads_from_w_only_the_rows_whose_columns_changed_thei
     assert taken > 0 and reread > 0
     # the same point at another weight: no row read from W, F's arrays the last ones
     last = blocks.last
-    block, _ = blocks.block(*fold[:3], 3 * sigma, outer, True)
-    whole = newton._ReducedBlocks(function.w_arrays, function.rho, *factors)
-    assert same_csr(block, whole.block(*fold[:3], 3 * sigma, outer, True)[0])
+    block, _ = blocks.block(*fold[:3], 3 * sigma, outer)
+    whole = newton._ReducedBlocks(function.w_arrays, function.rho, function.factor_arrays)
+    assert same_csr(block, whole.block(*fold[:3], 3 * sigma, outer)[0])
     assert blocks.last[6] is last[6] and blocks.last[5] is last[5]
 
 
@@ -1026,7 +1025,7 @@ def test_a_reduced_block_is_w_folded_on_its_kept_rows_scaled_by_rho(share, monke
     for scale in (0.0, 0.01, 0.02):
         forces = start * (1 + scale * rng.normal(size=start.size))
         kept, target, factor, outer = reduced_block_fold(function, forces)
-        block, _ = function.reduced_blocks.block(kept, target, factor, sigma, outer, True)
+        block, _ = function.reduced_blocks.block(kept, target, factor, sigma, outer)
         expected = np.zeros((kept.size, kept.size + 1))
         for a, i in enumerate(kept):
             np.add.at(expected[a], target, W[i] * factor)
@@ -1042,7 +1041,7 @@ def test_a_reduced_right_hand_side_reads_the_kept_rows_of_w_or_of_its_factor(sha
     (FACTOR_PRODUCT_SHARE raised), to rounding."""
     if share is not None:
         monkeypatch.setattr(newton, "FACTOR_PRODUCT_SHARE", share)
-    function, start, _ = gluey_flow_function()
+    function, start = gluey_flow_function()
     assert (function.factor_arrays is not None) == (share is not None)
     kept, _, _, outer = reduced_block_fold(function, start)
     phi, y, _ = function.residual(start)
