@@ -1047,39 +1047,6 @@ def permuted_columns(indptr, indices, data, order):
     return pointers, rows, values, norm
 
 
-@numba.njit(cache=True, inline="always")
-def column_or_row_entry(indptr, indices, row_ptr, row_idx, k, e):
-    """Entry ``e`` of column ``k``'s rows, then row ``k``'s columns, of a square matrix given by its
-    columns (``indptr``, ``indices``) and its rows (``row_ptr``, ``row_idx``): ``e`` runs over
-    ``range(indptr[k] + row_ptr[k], indptr[k + 1] + row_ptr[k + 1])``, one range for both (the
-    two index arrays differ in type, so no tuple of them types). A signed index."""
-    if e < indptr[k + 1] + row_ptr[k]:
-        return np.int64(indices[e - row_ptr[k]])
-    return np.int64(row_idx[e - indptr[k + 1]])
-
-
-@numba.njit(cache=True)
-def elimination_tree(indptr, indices, row_ptr, row_idx):
-    """The elimination tree of ``A + A^T``'s pattern, ``A`` square, from its columns (``indptr``,
-    ``indices``) and its rows (``row_ptr``, ``row_idx``: ``A^T``'s columns); only the entries
-    above the diagonal of ``A + A^T`` are read (column ``k``'s and row ``k``'s before ``k``, an
-    entry met twice where ``A`` stores both): ``parent`` (n,), -1 at a root (Liu's algorithm
-    with path compression)."""
-    n = indptr.size - 1
-    parent = np.full(n, -1, dtype=np.int64)
-    ancestor = np.full(n, -1, dtype=np.int64)
-    for k in range(n):
-        for e in range(indptr[k] + row_ptr[k], indptr[k + 1] + row_ptr[k + 1]):
-            i = column_or_row_entry(indptr, indices, row_ptr, row_idx, k, e)
-            while i != -1 and i < k:
-                above = ancestor[i]
-                ancestor[i] = k
-                if above == -1:
-                    parent[i] = k
-                i = above
-    return parent
-
-
 @numba.njit(cache=True)
 def symmetrised_pattern(indptr, indices):
     """The part above the diagonal of ``A + A^T``'s pattern, ``A`` square in compressed arrays:
@@ -1123,23 +1090,21 @@ def static_pattern(indptr, indices):
     transpose. The reduced Newton blocks are symmetric in pattern but where ``W`` stores an
     entry and not its mirror (a product that came out exactly 0: contacts at right angles on
     one grain, a lattice). Column ``j`` of ``L`` holds ``j``, the rows below it of column ``j``
-    and of row ``j`` of ``A``, and the rows but ``j`` of its children's columns in the elimination
-    tree (:func:`elimination_tree`), each once: one pass over the columns in order, each reading
-    its children's columns written before it (walking the tree's row subtrees twice instead, to
-    count then to place, which sorts the rows, took a fifth longer: 2.5-2.8 against 2.0-2.3 ms
-    on 12 000-grain gluey blocks, docs/records/benchmarks.md). Returns ``(L_indptr, L_indices, U_indptr,
+    and of row ``j`` of ``A``, and the rows but ``j`` of its children's columns in the
+    elimination tree, each once: one pass over the columns in order, each reading its
+    children's columns written before it, its parent the least row below ``j`` it holds (the
+    tree found on the way: a pass of its own before, by Liu's algorithm, made the patterns 1.5x
+    slower, 2.6-2.7 against 1.7-1.9 ms on 12 000-grain gluey blocks; walking the tree's row
+    subtrees twice instead, to count then to place, which sorts the rows, took a fifth longer
+    than that pass: docs/records/benchmarks.md). Returns ``(L_indptr, L_indices, U_indptr,
     U_indices)``, CSC: ``L``'s diagonal first in each column, the other rows unordered (the
     factorisation and the solves scatter a column whatever its order); ``U``'s rows sorted, its
     diagonal last."""
     n = indptr.size - 1
     row_ptr, row_idx = transposed_pattern(n, indptr, indices)
-    parent = elimination_tree(indptr, indices, row_ptr, row_idx)
-    first_child = np.full(n, -1, dtype=np.int64)
+    first_child = np.full(n, -1, dtype=np.int64)          # each column's children, in order
+    last_child = np.full(n, -1, dtype=np.int64)
     next_child = np.full(n, -1, dtype=np.int64)
-    for c in range(n - 1, -1, -1):                      # each node's children, in order
-        if parent[c] != -1:
-            next_child[c] = first_child[parent[c]]
-            first_child[parent[c]] = c
     lower_ptr = np.zeros(n + 1, dtype=np.int64)
     lower_idx = np.empty(2 * (indptr[n] + n), dtype=np.uint32)   # unsigned: no wrap-around checks
     mark = np.full(n, -1, dtype=np.int64)
@@ -1157,22 +1122,32 @@ def static_pattern(indptr, indices):
         mark[j] = j
         lower_idx[size] = j
         size += 1
-        for e in range(indptr[j] + row_ptr[j], indptr[j + 1] + row_ptr[j + 1]):
-            i = column_or_row_entry(indptr, indices, row_ptr, row_idx, j, e)
+        parent = n
+        for e in range(indptr[j], indptr[j + 1]):           # column j of A, then row j
+            i = np.int64(indices[e])
             if i > j and mark[i] != j:
-                mark[i] = j
-                lower_idx[size] = i
+                mark[i], lower_idx[size], parent = j, i, min(parent, i)
+                size += 1
+        for e in range(row_ptr[j], row_ptr[j + 1]):
+            i = np.int64(row_idx[e])
+            if i > j and mark[i] != j:
+                mark[i], lower_idx[size], parent = j, i, min(parent, i)
                 size += 1
         c = first_child[j]
         while c != -1:
             for q in range(lower_ptr[c] + 1, lower_ptr[c + 1]):
                 i = np.int64(lower_idx[q])
                 if i != j and mark[i] != j:
-                    mark[i] = j
-                    lower_idx[size] = i
+                    mark[i], lower_idx[size], parent = j, i, min(parent, i)
                     size += 1
             c = next_child[c]
         lower_ptr[j + 1] = size
+        if parent < n:                                  # j joins its parent's children
+            if first_child[parent] == -1:
+                first_child[parent] = j
+            else:
+                next_child[last_child[parent]] = j
+            last_child[parent] = j
     if size >= 2**31:
         raise ValueError("static_pattern: more than 2^31 entries in L (32-bit pointers of U)")
     lower_idx = lower_idx[:size].copy()
@@ -1196,23 +1171,22 @@ def static_lu(indptr, indices, data, lower_ptr, lower_idx, upper_ptr, upper_idx)
     for j in range(n):
         for e in range(indptr[j], indptr[j + 1]):
             work[indices[e]] += data[e]                 # entries stored twice summed
-        for e in range(upper_ptr[j], upper_ptr[j + 1]):
+        last = upper_ptr[j + 1] - 1                     # U's diagonal
+        for e in range(upper_ptr[j], last):
             k = upper_idx[e]
             value = work[k]
-            upper_val[e] = value
-            if k == j:
-                break
-            for q in range(lower_ptr[k] + 1, lower_ptr[k + 1]):
-                work[lower_idx[q]] -= lower_val[q] * value
+            upper_val[e], work[k] = value, 0.0
+            if value != 0.0:
+                for q in range(lower_ptr[k] + 1, lower_ptr[k + 1]):
+                    work[lower_idx[q]] -= lower_val[q] * value
         pivot = work[j]
+        upper_val[last], work[j] = pivot, 0.0
         if not abs(pivot) > 1e-14 * largest:
             return lower_val, upper_val, j
         lower_val[lower_ptr[j]] = 1.0
         for q in range(lower_ptr[j] + 1, lower_ptr[j + 1]):
             lower_val[q] = work[lower_idx[q]] / pivot
             work[lower_idx[q]] = 0.0
-        for e in range(upper_ptr[j], upper_ptr[j + 1]):
-            work[upper_idx[e]] = 0.0
     return lower_val, upper_val, -1
 
 
