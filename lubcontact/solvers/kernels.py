@@ -1093,8 +1093,8 @@ def static_pattern(indptr, indices):
     and of row ``j`` of ``A``, and the rows but ``j`` of its children's columns in the
     elimination tree, each once: one pass over the columns in order, each reading its
     children's columns written before it, its parent the least row below ``j`` it holds (the
-    tree found on the way: a pass of its own before, by Liu's algorithm, made the patterns 1.5x
-    slower, 2.6-2.7 against 1.7-1.9 ms on 12 000-grain gluey blocks; walking the tree's row
+    tree found on the way: a pass of its own before, by Liu's algorithm, made them 1.5-1.6x
+    slower, 2.5-2.6 against 1.55-1.7 ms on 12 000-grain gluey blocks; walking the tree's row
     subtrees twice instead, to count then to place, which sorts the rows, took a fifth longer
     than that pass: docs/records/benchmarks.md). Returns ``(L_indptr, L_indices, U_indptr,
     U_indices)``, CSC: ``L``'s diagonal first in each column, the other rows unordered (the

@@ -1202,19 +1202,23 @@ def test_an_active_block_with_few_new_rows_is_factorised_in_the_carried_order():
     assert newton._Factorisations().carry is False
 
 
-@pytest.mark.parametrize("symmetric", [True, False])
-def test_the_static_lu_has_the_fill_of_symbolic_elimination_and_solves(symmetric):
+@pytest.mark.parametrize("pattern", ["symmetric", "asymmetric", "forest"])
+def test_the_static_lu_has_the_fill_of_symbolic_elimination_and_solves(pattern):
     """On a grid's pattern (random values, randomly ordered) the patterns of
     kernels.static_pattern are those of elimination without pivoting (row ``i`` reaches column
-    ``j`` through every earlier pivot they share, done on booleans); with a quarter of the
-    entries above the diagonal dropped (a pattern not symmetric, as ``W``'s where a product came
-    out exactly 0) they hold them (those of ``A + A^T``). Either way L U is the matrix to
-    rounding and the solve's residual is at rounding; its norm (for the backward error) is
-    ``|A|_inf``, as newton._permuted gives it. Through newton._StaticLU, which hands the kernels
-    unsigned index arrays, as the Newton phases do."""
-    side = 9
-    n = side * side
-    grid = sp.diags([np.ones(n - 1), np.ones(n - side)], [1, side], shape=(n, n))
+    ``j`` through every earlier pivot they share, done on booleans); the same on two grids and
+    three isolated rows (an elimination forest: the tree is found as the columns are written);
+    with a quarter of the entries above the diagonal dropped (a pattern not symmetric, as ``W``'s
+    where a product came out exactly 0) they hold them (those of ``A + A^T``). Either way L U is
+    the matrix to rounding and the solve's residual is at rounding; its norm (for the backward
+    error) is ``|A|_inf``, as newton._permuted gives it. Through newton._StaticLU, which hands
+    the kernels unsigned index arrays, as the Newton phases do."""
+    def lattice(side):
+        size = side * side
+        return sp.diags([np.ones(size - 1), np.ones(size - side)], [1, side], shape=(size, size))
+    grid = sp.block_diag([lattice(9)] + ([lattice(5), sp.csr_matrix((3, 3))] if pattern == "forest" else []))
+    n = grid.shape[0]
+    symmetric = pattern != "asymmetric"
     rng = np.random.default_rng(8)
     order = rng.permutation(n)
     dense = (grid + grid.T + sp.identity(n)).toarray()[order][:, order]
