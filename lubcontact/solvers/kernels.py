@@ -968,14 +968,16 @@ def reduced_block_2d(indptr, indices, data, rho, sigma, kept, target, factor, ou
 
 
 @numba.njit(cache=True)
-def carried_order(indptr, indices, rows, ordered_rows, positions, limit):
+def carried_order(indptr, indices, rows, ordered_rows, positions, limit, partner):
     """The elimination order of ``newton._Factorisations`` carried to a block (its compressed
     pattern ``indptr``, ``indices``, by rows or by columns: symmetric; its rows ``rows`` of the
     system, sorted) from an ordered block (its rows ``ordered_rows``, sorted, at ``positions``
     in its order: a permutation of ``0 .. ordered_rows.size - 1``, SuperLU's ``perm_c``; a
     place beyond would write past the keys' counts, unchecked): the old rows in their order,
-    each new row just after the last of its old neighbours, one with none at the end, ties by
-    row. ``(order, True)``, ``order`` a permutation of ``0 .. m - 1`` (the block's rows); or
+    each new row just after its contact's other row where that one is old (``partner``: per row
+    of the system the other row of its contact, -1 for none; a row beyond its size has none),
+    else just after the last of its old neighbours, one with neither at the end, ties by row.
+    ``(order, True)``, ``order`` a permutation of ``0 .. m - 1`` (the block's rows); or
     ``(empty, False)`` when more than ``limit`` rows are new. By a counting sort on the keys
     ``2 p`` (an old row at ``p``) and ``2 p + 1`` (a new row after it): no comparison sort."""
     m, size = rows.size, ordered_rows.size
@@ -996,6 +998,11 @@ def carried_order(indptr, indices, rows, ordered_rows, positions, limit):
     old_key = key.copy()
     for a in range(m):
         if old_key[a] < 0:
+            other = np.int64(partner[rows[a]]) if rows[a] < partner.size else -1
+            k = np.searchsorted(ordered_rows, other) if other >= 0 else size
+            if k < size and ordered_rows[k] == other:   # its contact's other row is old
+                key[a] = 2 * positions[k] + 1
+                continue
             last = -1
             for e in range(indptr[a], indptr[a + 1]):
                 last = max(last, old_key[indices[e]])

@@ -458,11 +458,16 @@ class AlartCurnier:
         self.typical = 1.0 if nc == 0 else float(ordered[middle]) if nc % 2 else \
             float(0.5 * (ordered[middle - 1] + ordered[middle]))
         self.sigma, self.center = 0.0, np.zeros(self.n_rows)
-        self.factorisations = _Factorisations(carry=self.planar)
         # on the sparse lane, a 2D problem's Newton systems, Jacobian rows and residuals are
         # assembled compiled (a numpy sparse product G W and sum cost as much as the LU on
         # developed 2000-grain flows)
         self.flow_lane = self.planar and not self.dense
+        partner = None
+        if self.flow_lane:              # each friction contact's two rows, for carried orders
+            partner = np.full(self.n_rows, -1, dtype=np.int64)
+            partner[self.cone_n], partner[projector.planar_tangent] = \
+                projector.planar_tangent, self.cone_n
+        self.factorisations = _Factorisations(carry=self.planar, partner=partner)
         self.convex = cones.is_convex
         self.compiled_rows = self.flow_lane
         self.factor_arrays = self.reduced_blocks = None
@@ -779,9 +784,14 @@ class _Factorisations:
     The minimum-degree ordering is a third of a factorisation (8 of 22 ms on the 23 000-row
     blocks of 12 000-grain gluey flows), and late Newton iterations change a few rows of the
     block. A block whose rows are all but :data:`NEW_ROWS_LIMIT` of them rows of the last
-    ordered block is permuted by that block's order, each new row placed just after the last
-    of its neighbours in it, and factorised without ordering (:data:`ORDERED_LU`): 14-16 ms
-    with 0-10 % more fill on those blocks (docs/records/benchmarks.md). Rows of the ordered
+    ordered block is permuted by that block's order, each new row placed just after the other
+    row of its contact where that one is in it (``partner``: a tangential row that stopped
+    sliding next to its normal row, as a supervariable), else just after the last of its
+    neighbours in it, and factorised without ordering (:data:`ORDERED_LU`): 14-16 ms
+    with 0-10 % more fill on those blocks (docs/records/benchmarks.md; next to its contact's
+    other row, 1.4-3 % fewer factor entries and 0-7 % fewer fresh orders on captured 2D flow
+    steps from 4 000 to 10^5 grains, "the static patterns find the elimination tree on their
+    way"). Rows of the ordered
     block that the new one lacks are left out of the order. Where the carried order's fill grows
     past :data:`FILL_GROWTH` times the ordered block's (on a 1 600-row grid pattern with 1 % of
     its rows new, scattered: 2.0 times, 2.4 times a fresh ordering's), the next block is
@@ -796,12 +806,21 @@ class _Factorisations:
     order without factorising (12-15 ms instead, 5 % fewer factor entries:
     docs/records/benchmarks.md, "a fresh order by approximate minimum degree"). Elsewhere
     (3D) SuperLU orders and factorises with pivoting (:data:`SPARSE_LU`).
+
+    Parameters
+    ----------
+    carry : bool
+        Carry the elimination orders over (2D problems).
+    partner : ndarray of int, shape (n_rows,), optional
+        Per row of the system, the other row of its contact (-1 for none); none given: no row
+        has one.
     """
 
-    def __init__(self, carry: bool = False):
+    def __init__(self, carry: bool = False, partner: np.ndarray | None = None):
         self.kept: list[tuple[sp.spmatrix, spla.SuperLU | _StaticLU, np.ndarray | None]] = []
         self.reused = 0
         self.carry = carry
+        self.partner = np.empty(0, dtype=np.int64) if partner is None else partner
         self.carried = 0
         self.pivoted = 0            # blocks SuperLU took back from _StaticLU
         self.ordered_rows: np.ndarray | None = None        # sorted
@@ -856,16 +875,16 @@ class _Factorisations:
 
     def _carried_order(self, matrix: sp.spmatrix, rows: np.ndarray) -> np.ndarray | None:
         """The last ordered block's elimination order for ``matrix`` (a permutation of its
-        rows: :func:`~lubcontact.solvers.kernels.carried_order`, each new row just after the
-        last of its old neighbours, its column's rows in ``W``'s symmetric pattern; placed
-        before the first of them instead, the carried 12 000-grain blocks took +0-13 % fill
-        against +0-10 %), or None when more than :data:`NEW_ROWS_LIMIT` of ``rows`` are new
-        to it."""
+        rows: :func:`~lubcontact.solvers.kernels.carried_order`, each new row just after its
+        contact's other row where that one is old, else just after the last of its old
+        neighbours, its column's rows in ``W``'s symmetric pattern; placed before the first of
+        them instead, the carried 12 000-grain blocks took +0-13 % fill against +0-10 %), or
+        None when more than :data:`NEW_ROWS_LIMIT` of ``rows`` are new to it."""
         if not self.carry or self.ordered_rows is None:
             return None
         order, carried = _kernels().carried_order(matrix.indptr, matrix.indices, rows,
                                                   self.ordered_rows, self.positions,
-                                                  NEW_ROWS_LIMIT * rows.size)
+                                                  NEW_ROWS_LIMIT * rows.size, self.partner)
         return order if carried else None
 
 

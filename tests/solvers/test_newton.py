@@ -1305,8 +1305,10 @@ def test_a_new_row_of_a_carried_order_goes_just_after_its_last_old_neighbour(mon
 @pytest.mark.parametrize("seed", range(5))
 def test_the_carried_order_is_a_stable_sort_of_the_places(seed):
     """kernels.carried_order's counting sort gives the stable sort of the places: an old row at
-    its place in the ordered block, a new row half a place after its last old neighbour, one
-    with none last, ties by row (on random symmetric patterns with rows kept, dropped and new)."""
+    its place in the ordered block, a new row half a place after its contact's other row where
+    that one is old, else half a place after its last old neighbour, one with neither last, ties
+    by row (on random symmetric patterns with rows kept, dropped and new, half the rows paired
+    in contacts)."""
     from lubcontact.solvers.kernels import carried_order
 
     rng = np.random.default_rng(seed)
@@ -1317,24 +1319,53 @@ def test_the_carried_order_is_a_stable_sort_of_the_places(seed):
     dropped = np.setdiff1d(rng.choice(1000, size=40, replace=False), rows)
     ordered_rows = np.sort(np.concatenate([rows[old], dropped]))
     positions = rng.permutation(ordered_rows.size)
+    partner = np.where(np.arange(1000) < 500, np.arange(1000) ^ 1, -1)   # rows 2k and 2k + 1
     order, carried = carried_order(pattern.indptr, pattern.indices, rows, ordered_rows, positions,
-                                   0.5 * rows.size)
+                                   0.5 * rows.size, partner)
     place = np.full(rows.size, np.inf)
     place[old] = positions[np.searchsorted(ordered_rows, rows[old])]
     old_place = place.copy()
+    after_partner = 0
     for a in np.flatnonzero(~old):
+        other = partner[rows[a]]
+        if other >= 0 and other in ordered_rows:
+            place[a] = positions[np.searchsorted(ordered_rows, other)] + 0.5
+            after_partner += 1
+            continue
         neighbours = old_place[pattern.indices[pattern.indptr[a]:pattern.indptr[a + 1]]]
         if np.isfinite(neighbours).any():
             place[a] = neighbours[np.isfinite(neighbours)].max() + 0.5
     assert carried and np.array_equal(order, np.argsort(place, kind="stable"))
+    assert after_partner > 0
     assert not carried_order(pattern.indptr, pattern.indices, rows, ordered_rows, positions,
-                             0.05 * rows.size)[1]              # about 30 new rows: not carried
-    # a new row (1) whose one old neighbour (0) is first in the order, two (3, 4) with none
+                             0.05 * rows.size, partner)[1]     # about 30 new rows: not carried
+    # a new row (1) whose one old neighbour (0) is first in the order, two (3, 4) with none;
+    # with 4 paired with 2 (old, last): 4 goes after it
     small = sp.csc_matrix(np.array([[1, 1, 0, 0, 0], [1, 1, 0, 0, 0], [0, 0, 1, 0, 0],
                                     [0, 0, 0, 1, 0], [0, 0, 0, 0, 1]], dtype=float))
-    order, carried = carried_order(small.indptr, small.indices, np.arange(5), np.array([0, 2]),
-                                   np.array([0, 1]), 5.0)
-    assert carried and np.array_equal(order, [0, 1, 2, 3, 4])
+    for paired, expected in ((np.empty(0, dtype=np.int64), [0, 1, 2, 3, 4]),
+                             (np.array([-1, -1, 4, -1, 2]), [0, 1, 2, 4, 3])):
+        order, carried = carried_order(small.indptr, small.indices, np.arange(5),
+                                       np.array([0, 2]), np.array([0, 1]), 5.0, paired)
+        assert carried and np.array_equal(order, expected)
+
+
+def test_on_the_sparse_lane_the_carried_orders_pair_each_friction_contacts_two_rows():
+    """On the 2D sparse lane the factorisations know each friction contact's two rows (a new
+    row goes after its contact's other row in a carried order); a dense problem's carry no
+    pairs."""
+    with np.load(Path(__file__).parents[1] / "flow" / "data" / "gluey-flow-step.npz") as data:
+        problem = StepProblem.from_arrays(data).normalized()
+    function = AlartCurnier(problem)
+    assert function.flow_lane and function.cone_n.size > 0
+    partner = function.factorisations.partner
+    assert np.array_equal(partner[function.cone_n], function.tangent_rows)
+    assert np.array_equal(partner[function.tangent_rows], function.cone_n)
+    paired = np.zeros(problem.n_rows, dtype=bool)
+    paired[function.cone_n] = paired[function.tangent_rows] = True
+    assert np.all(partner[~paired] == -1) and paired.sum() < problem.n_rows
+    small = AlartCurnier(load_cases()["glued_infeasible"].problem.normalized())
+    assert small.dense and small.factorisations.carry and small.factorisations.partner.size == 0
 
 
 @pytest.mark.parametrize("form", ["csr", "csc"])
