@@ -999,9 +999,9 @@ def carried_order(indptr, indices, rows, ordered_rows, positions, limit, partner
     for a in range(m):
         if old_key[a] < 0:
             other = np.int64(partner[rows[a]]) if rows[a] < partner.size else -1
-            k = np.searchsorted(ordered_rows, other) if other >= 0 else size
-            if k < size and ordered_rows[k] == other:   # its contact's other row is old
-                key[a] = 2 * positions[k] + 1
+            found = np.searchsorted(ordered_rows, other) if other >= 0 else size
+            if found < size and ordered_rows[found] == other:   # its contact's other row is old
+                key[a] = 2 * positions[found] + 1
                 continue
             last = -1
             for e in range(indptr[a], indptr[a + 1]):

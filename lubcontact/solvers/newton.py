@@ -789,9 +789,9 @@ class _Factorisations:
     sliding next to its normal row, as a supervariable), else just after the last of its
     neighbours in it, and factorised without ordering (:data:`ORDERED_LU`): 14-16 ms
     with 0-10 % more fill on those blocks (docs/records/benchmarks.md; next to its contact's
-    other row, 1.4-3 % fewer factor entries and 0-7 % fewer fresh orders on captured 2D flow
-    steps from 4 000 to 10^5 grains, "the static patterns find the elimination tree on their
-    way"). Rows of the ordered
+    other row, 1.4-3.1 % fewer factor entries and 0-7 % fewer fresh orders on captured 2D flow
+    steps from 4 000 to 10^5 grains, "a new row of a carried order next to its contact's other
+    row"). Rows of the ordered
     block that the new one lacks are left out of the order. Where the carried order's fill grows
     past :data:`FILL_GROWTH` times the ordered block's (on a 1 600-row grid pattern with 1 % of
     its rows new, scattered: 2.0 times, 2.4 times a fresh ordering's), the next block is
