@@ -1354,16 +1354,14 @@ def test_on_the_sparse_lane_the_carried_orders_pair_each_friction_contacts_two_r
     """On the 2D sparse lane the factorisations know each friction contact's two rows (a new
     row goes after its contact's other row in a carried order); a dense problem's carry no
     pairs."""
-    with np.load(Path(__file__).parents[1] / "flow" / "data" / "gluey-flow-step.npz") as data:
-        problem = StepProblem.from_arrays(data).normalized()
-    function = AlartCurnier(problem)
+    function, _ = gluey_flow_function()
     assert function.flow_lane and function.cone_n.size > 0
     partner = function.factorisations.partner
     assert np.array_equal(partner[function.cone_n], function.tangent_rows)
     assert np.array_equal(partner[function.tangent_rows], function.cone_n)
-    paired = np.zeros(problem.n_rows, dtype=bool)
+    paired = np.zeros(function.n_rows, dtype=bool)
     paired[function.cone_n] = paired[function.tangent_rows] = True
-    assert np.all(partner[~paired] == -1) and paired.sum() < problem.n_rows
+    assert np.all(partner[~paired] == -1) and paired.sum() < function.n_rows
     small = AlartCurnier(load_cases()["glued_infeasible"].problem.normalized())
     assert small.dense and small.factorisations.carry and small.factorisations.partner.size == 0
 
