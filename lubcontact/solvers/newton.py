@@ -243,6 +243,16 @@ INNER_REDUCTION = 0.3
 step than solving each subproblem to 1e-3 did, and no more on any of Siconos' and FCLIB's test
 problems (docs/records/benchmarks.md, "newton-ac on developed flows"); 0.1 gained less, 0.5
 took up to 5 times more Newton iterations on some flow steps."""
+UNION_INNER_CAP = 5
+"""``INNER_CAP`` on a 2D problem of the sparse lane with UNION contacts (a gluey flow's step).
+There the hard steps' subproblems at small weights end unsolved after all ten iterations, the
+iterates cycling on a kink, before the weight rises. Newton iterations summed over captured steps
+of developed gluey flows (exact Coulomb, tol 1e-6), caps 10, 6, 5, 4, 3: 4 000 grains (30
+steps) 483, 479, 476, 474, 481; 8 000 (40) 708, 700, 689, 678, 657; 12 000 (70) 1 388, 1 347,
+1 339, 1 319, 1 292; 10^5 (6) 268, 229, 226, 222, 239; with 3, steps went to the Gauss-Seidel
+fallback at 4 000 and 10^5 grains (with 2 at 8 000, 12 000 and 10^5). Not on dry problems: the
+tests' creeping 300-grain bed ends ``inaccurate`` with a cap of 6 (docs/records/benchmarks.md,
+"a shorter proximal step on gluey flows")."""
 
 RECENTRE_WINDOW = 6
 RECENTRE_UNTIL = 100.0
@@ -403,8 +413,9 @@ class AlartCurnier:
         the residual in one pass, 6 % of a 12 000-grain gluey step).
     flow_lane, convex : bool
         A 2D problem of the sparse lane (a flow's step: :data:`WARM_SPARSE_WEIGHT`, and with
-        UNION contacts :data:`UNION_SIGMA_DECREASE`; fixed here, where ``compiled_rows`` is an
-        implementation switch); one without UNION contacts (``Cones.is_convex``).
+        UNION contacts :data:`UNION_SIGMA_DECREASE` and :data:`UNION_INNER_CAP`; fixed here,
+        where ``compiled_rows`` is an implementation switch); one without UNION contacts
+        (``Cones.is_convex``).
     w_arrays : tuple of ndarray
         ``W``'s CSR arrays with unsigned indices (:func:`~.compiled_apgd.csr_arrays`), for the
         kernels of the sparse lane (``compiled_rows``): numba checks every signed index for
@@ -1263,7 +1274,9 @@ def _proximal_newton(function: AlartCurnier, unshifted: ConicProblem, forces: np
     """Proximal-point iterations, each solved by Newton, until the FCLIB error is below ``tol``.
 
     Each outer iteration solves (approximately: ``|phi_sigma|`` down by
-    :data:`INNER_REDUCTION`, or the FCLIB error below ``tol``) the problem with
+    :data:`INNER_REDUCTION`, or the FCLIB error below ``tol``, in at most :data:`INNER_CAP`
+    Newton iterations, :data:`UNION_INNER_CAP` on a 2D sparse problem with UNION contacts) the
+    problem with
     ``W + sigma I`` and ``q - sigma r_k`` centred at the current forces
     ``r_k``: a well-posed problem even where ``W`` is rank deficient (more
     contact rows than degrees of freedom, a hyperstatic packing), whose Newton
@@ -1294,7 +1307,9 @@ def _proximal_newton(function: AlartCurnier, unshifted: ConicProblem, forces: np
     round-off); the polish to :data:`JOINT_FINISH` ``tol`` does not (that is its target).
     """
     scale = sigma * function.typical
-    decrease = UNION_SIGMA_DECREASE if function.flow_lane and not function.convex else SIGMA_DECREASE
+    gluey = function.flow_lane and not function.convex      # a gluey flow's step
+    decrease = UNION_SIGMA_DECREASE if gluey else SIGMA_DECREASE
+    cap = UNION_INNER_CAP if gluey else INNER_CAP
     error, velocity = function.coulomb_error(unshifted, forces), None
     history, best = [error], (error, forces)
     iterations = gradient_steps = proximal_steps = 0
@@ -1317,7 +1332,7 @@ def _proximal_newton(function: AlartCurnier, unshifted: ConicProblem, forces: np
         if recentring:
             inner = _newton_phase(function, unshifted, forces, tol, 1, **known)
         elif scale > 0:
-            inner = _newton_phase(function, unshifted, forces, tol, min(INNER_CAP, max_iter - iterations),
+            inner = _newton_phase(function, unshifted, forces, tol, min(cap, max_iter - iterations),
                                   inner_tol=INNER_REDUCTION * error * function.q_scale, **known)
         else:                           # plain Newton: one run, its line search's memory intact
             inner = _newton_phase(function, unshifted, forces, tol, min(STALL_WINDOW, max_iter - iterations),
