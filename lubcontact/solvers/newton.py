@@ -1273,28 +1273,24 @@ def _proximal_newton(function: AlartCurnier, unshifted: ConicProblem, forces: np
                      tol: float, max_iter: int, sigma: float, finish: bool = True) -> _Phase:
     """Proximal-point iterations, each solved by Newton, until the FCLIB error is below ``tol``.
 
-    Each outer iteration solves (approximately: ``|phi_sigma|`` down by
-    :data:`INNER_REDUCTION`, or the FCLIB error below ``tol``, in at most :data:`INNER_CAP`
-    Newton iterations, :data:`UNION_INNER_CAP` on a 2D sparse problem with UNION contacts) the
-    problem with
-    ``W + sigma I`` and ``q - sigma r_k`` centred at the current forces
-    ``r_k``: a well-posed problem even where ``W`` is rank deficient (more
-    contact rows than degrees of freedom, a hyperstatic packing), whose Newton
-    system is not singular. ``sigma`` starts at ``sigma`` times the median
+    Each outer iteration solves (approximately: ``|phi_sigma|`` down by :data:`INNER_REDUCTION`, or
+    the FCLIB error below ``tol``, in at most :data:`INNER_CAP` Newton iterations,
+    :data:`UNION_INNER_CAP` on a 2D sparse problem with UNION contacts) the problem with
+    ``W + sigma I`` and ``q - sigma r_k`` centred at the current forces ``r_k``: a well-posed
+    problem even where ``W`` is rank deficient (more contact rows than degrees of freedom, a hyperstatic
+    packing), whose Newton system is not singular. ``sigma`` starts at ``sigma`` times the median
     diagonal of ``W`` (0: plain Newton throughout), is divided by :data:`SIGMA_DECREASE`
-    (:data:`UNION_SIGMA_DECREASE` on a 2D sparse problem with UNION contacts) after an
-    outer iteration whose subproblem was solved (towards plain Newton, down to
-    :data:`SIGMA_MIN`, but not down to a weight whose subproblem was not solved
-    since the error last fell by :data:`STALL_FACTOR`) and multiplied by 10
-    after one whose was not (by :data:`STUCK_RISE` where that step did not lower the error
-    either: a stuck iterate; the phase has stalled when it would pass :data:`SIGMA_MAX`). The
-    next centre is a solved subproblem's solution
-    (Newton's last iterate) even where its FCLIB error is above the centre's:
-    re-centring at the best iterate posed the same subproblem again, and on
-    creeping beds the weight then alternated between a subproblem that moved
-    nothing and a smaller one not solved in :data:`INNER_CAP` iterations until
-    the phase stalled (docs/records/benchmarks.md, "creeping beds"). The best
-    iterate is what the phase returns. The phase stalls by :class:`_StallRule`.
+    (:data:`UNION_SIGMA_DECREASE` on a 2D sparse problem with UNION contacts) after an outer
+    iteration whose subproblem was solved (towards plain Newton, down to :data:`SIGMA_MIN`, but not
+    down to a weight whose subproblem was not solved since the error last fell by
+    :data:`STALL_FACTOR`) and multiplied by 10 after one whose was not (by :data:`STUCK_RISE` where
+    that step did not lower the error either: a stuck iterate; the phase has stalled when it would
+    pass :data:`SIGMA_MAX`). The next centre is a solved subproblem's solution (Newton's last
+    iterate) even where its FCLIB error is above the centre's: re-centring at the best iterate
+    posed the same subproblem again, and on creeping beds the weight then alternated between a
+    subproblem that moved nothing and a smaller one not solved in :data:`INNER_CAP` iterations
+    until the phase stalled (docs/records/benchmarks.md, "creeping beds"). The best iterate is what
+    the phase returns. The phase stalls by :class:`_StallRule`.
     On a flow's step (:data:`RECENTRE_WINDOW`) each subproblem first gets one Newton iteration,
     re-centred at its result at the same weight, until the error stops halving or nears ``tol``.
     With ``finish``, a phase that converged on a problem without friction cones ends with at most
