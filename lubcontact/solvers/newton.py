@@ -792,23 +792,22 @@ class _Factorisations:
     active block of the one before, or of the one before that (the iterates cycling between
     two pieces), and the factorisation was two thirds of their time.
 
-    The minimum-degree ordering is a third of a factorisation (8 of 22 ms on the 23 000-row
-    blocks of 12 000-grain gluey flows), and late Newton iterations change a few rows of the
-    block. A block whose rows are all but :data:`NEW_ROWS_LIMIT` of them rows of the last
-    ordered block is permuted by that block's order, each new row placed just after the other
-    row of its contact where that one is in it (``partner``: a tangential row that stopped
-    sliding next to its normal row, as a supervariable), else just after the last of its
-    neighbours in it, and factorised without ordering (:data:`ORDERED_LU`): 14-16 ms
-    with 0-10 % more fill on those blocks (docs/records/benchmarks.md; next to its contact's
-    other row, 1.4-3.1 % fewer factor entries and 0-7 % fewer fresh orders on captured 2D flow
-    steps from 4 000 to 10^5 grains, "a new row of a carried order next to its contact's other
-    row"). Rows of the ordered
-    block that the new one lacks are left out of the order. Where the carried order's fill grows
-    past :data:`FILL_GROWTH` times the ordered block's (on a 1 600-row grid pattern with 1 % of
-    its rows new, scattered: 2.0 times, 2.4 times a fresh ordering's), the next block is
-    ordered afresh. Only where ``carry`` is set (2D problems, whose blocks have ``W``'s
-    pattern, nearly symmetric): on a 3D Siconos file the carried orders' solves were ten
-    times less accurate and Newton took 392 iterations instead of 154.
+    The minimum-degree ordering is a third of a factorisation (8 of 22 ms on the 23 000-row blocks
+    of 12 000-grain gluey flows), and late Newton iterations change a few rows of the block. A
+    block whose rows are all but :data:`NEW_ROWS_LIMIT` of them rows of the last ordered block is
+    permuted by that block's order, each new row placed just after the other row of its contact
+    where that one is in it (``partner``: a tangential row that stopped sliding next to its normal
+    row, as a supervariable), else just after the last of its neighbours in it, and factorised
+    without ordering (:data:`ORDERED_LU`): 14-16 ms with 0-10 % more fill on those blocks
+    (docs/records/benchmarks.md; next to its contact's other row, 1.4-3.1 % fewer factor entries
+    and 0-7 % fewer fresh orders on captured 2D flow steps from 4 000 to 10^5 grains, "a new row of
+    a carried order next to its contact's other row"). Rows of the ordered block that the new one
+    lacks are left out of the order. Where the carried order's fill grows past :data:`FILL_GROWTH`
+    times the ordered block's (on a 1 600-row grid pattern with 1 % of its rows new, scattered: 2.0
+    times, 2.4 times a fresh ordering's), the next block is ordered afresh. Only where ``carry`` is
+    set (2D problems, whose blocks have ``W``'s pattern, nearly symmetric): on a 3D Siconos file
+    the carried orders' solves were ten times less accurate and Newton took 392 iterations instead
+    of 154.
 
     Where ``carry`` is set a block is also ordered afresh by an approximate minimum degree
     (:func:`~lubcontact.solvers.ordering.approximate_minimum_degree`) and factorised by
@@ -1276,8 +1275,8 @@ def _proximal_newton(function: AlartCurnier, unshifted: ConicProblem, forces: np
     Each outer iteration solves (approximately: ``|phi_sigma|`` down by :data:`INNER_REDUCTION`, or
     the FCLIB error below ``tol``, in at most :data:`INNER_CAP` Newton iterations,
     :data:`UNION_INNER_CAP` on a 2D sparse problem with UNION contacts) the problem with
-    ``W + sigma I`` and ``q - sigma r_k`` centred at the current forces ``r_k``: a well-posed
-    problem even where ``W`` is rank deficient (more contact rows than degrees of freedom, a hyperstatic
+    ``W + sigma I`` and ``q - sigma r_k`` centred at the current forces ``r_k``: a well-posed problem
+    even where ``W`` is rank deficient (more contact rows than degrees of freedom, a hyperstatic
     packing), whose Newton system is not singular. ``sigma`` starts at ``sigma`` times the median
     diagonal of ``W`` (0: plain Newton throughout), is divided by :data:`SIGMA_DECREASE`
     (:data:`UNION_SIGMA_DECREASE` on a 2D sparse problem with UNION contacts) after an outer

@@ -1353,7 +1353,7 @@ def test_the_carried_order_is_a_stable_sort_of_the_places(seed):
 
 def test_on_the_sparse_lane_the_carried_orders_pair_each_friction_contacts_two_rows():
     """On the 2D sparse lane the factorisations know each friction contact's two rows (a new
-    row goes after its contact's other row in a carried order); a dense problem's carry no
+    row goes after its contact's other row in a carried order); a dense problem's carry has no
     pairs."""
     function, _ = gluey_flow_function()
     assert function.flow_lane and function.cone_n.size > 0
