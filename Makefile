@@ -25,9 +25,10 @@ $(VENV)/.installed-test: pyproject.toml | $(BIN)/python
 demo: $(VENV)/.installed-demo
 	$(BIN)/lubcontact demo --out out
 
+# Two test workers (pytest-xdist), one per core of CI's machine (docs/guide/install.md).
 test: $(VENV)/.installed-test
 	$(BIN)/ruff check lubcontact tests examples
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q -n 2
 
 clean:
 	rm -rf $(VENV) out build *.egg-info
