@@ -969,7 +969,7 @@ def reduced_block_2d(indptr, indices, data, rho, sigma, kept, target, factor, ou
 
 @numba.njit(cache=True)
 def carried_order(indptr, indices, rows, ordered_rows, positions, limit, partner):
-    """The elimination order of ``newton._Factorisations`` carried to a block (its compressed
+    """The elimination order of ``factorisations.Factorisations`` carried to a block (its compressed
     pattern ``indptr``, ``indices``, by rows or by columns: symmetric; its rows ``rows`` of the
     system, sorted) from an ordered block (its rows ``ordered_rows``, sorted, at ``positions``
     in its order: a permutation of ``0 .. ordered_rows.size - 1``, SuperLU's ``perm_c``; a

@@ -38,8 +38,9 @@ generalised Jacobian at ``y`` (block diagonal per contact: 0 or 1 on box rows,
 y_T/|y_T|``), the Jacobian of ``phi`` is ``J = I - G + G diag(rho) W``. Rows
 where ``G`` vanishes (open contacts, zero-forced rows) are identity rows: their
 update is ``-phi`` and they are eliminated, so the LU factorisation (sparse above
-``DENSE_LIMIT`` rows: :class:`_Factorisations`) is of the active rows only. A 2D problem of up
-to ``DENSE_LIMIT`` rows runs each Newton phase in one compiled call on the dense ``W``
+``DENSE_LIMIT`` rows: :class:`~lubcontact.solvers.factorisations.Factorisations`) is of the
+active rows only. A 2D problem of up to ``DENSE_LIMIT`` rows runs each Newton phase in one
+compiled call on the dense ``W``
 (:func:`~lubcontact.solvers.kernels.newton_phase_2d`, with the numpy phase's rules); there and
 on a larger 2D problem the Newton system is solved without its sliding tangential rows: in 2D
 ``I - t t^T`` vanishes, so such a row says ``d_T = mu t d_n`` plus a constant, and its unknown
@@ -72,8 +73,7 @@ import inspect
 import time
 import warnings
 from dataclasses import dataclass, field
-from functools import cache, cached_property
-from types import ModuleType
+from functools import cached_property
 
 import numpy as np
 import scipy.sparse as sp
@@ -83,9 +83,11 @@ from ..problem.cones import Cones
 from ..problem.conic import ConicProblem
 from ..problem.metrics import coulomb_error
 from ..problem.step import diagonal_scaled
-from .compiled_apgd import csr_arrays, joint_applies, joint_coulomb_apgd, operator_arrays, positions
+from .compiled_apgd import csr_arrays, joint_applies, joint_coulomb_apgd, operator_arrays
+from .compiled_modules import kernels
 from .coulomb import solve_coulomb
 from .dual_data import DENSE_LIMIT, dense_lu, dense_lu_solve, is_small
+from .factorisations import Factorisations
 from .registry import ALL_CONES, NEWTON, register, solver_info
 from .result import CONVERGED, DIVERGED, FAILED, INACCURATE, MAX_ITER, MethodOutput
 
@@ -99,22 +101,6 @@ REGULARISATIONS = (0.0, 1e-10, 1e-8, 1e-6, 1e-4)
 """Diagonal shifts tried in turn when the factorised block of a Newton system is singular
 (:func:`_block_solve`)."""
 
-SPARSE_LU = dict(permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.1, panel_size=1,
-                 options=dict(SymmetricMode=True))
-"""SuperLU's settings for a factorised block ordered by SuperLU (3D problems; a 2D block is
-ordered by :mod:`.ordering`: :class:`_Factorisations`), whose pattern is ``W_AA``'s (symmetric
-but for the entries the product forming ``W`` left out as exact zeros):
-a minimum-degree ordering of ``A^T + A`` with pivots preferred on the diagonal. On developed
-2000-grain flows its factors hold 2.6 times the block's entries against 3.9 with COLAMD, and a
-Newton step costs 15 % less (same iterations). Panels of one column (SuperLU's default is 20):
-the same factors, 21-22 ms instead of 27-30 for the 22 000-27 000-row blocks of 12 000-grain
-flows, whose supernodes are too small for wider panels to pay (docs/records/benchmarks.md)."""
-
-ORDERED_LU = {**SPARSE_LU, "permc_spec": "NATURAL"}
-"""SuperLU's settings for an active block already permuted by an elimination order (carried over
-from an earlier block, or a 2D block's own: :class:`_Factorisations`) where the static LU's
-pivots were not good enough: no ordering of its own."""
-
 FACTOR_PRODUCT_SHARE = 0.5
 """On the sparse lane of a 2D problem whose ``W = L^T L`` comes with its factor, the products
 ``W x`` of the residual and the line search go through ``L`` (two compiled products) where ``L``
@@ -123,23 +109,6 @@ steps (0.41 of them) a mean of 0.315-0.316 s per step against 0.348-0.354 throug
 same Newton iterations; on 30 gluey ones (0.58) 0.281-0.291 against 0.275-0.287, no gain
 (docs/records/benchmarks.md, "fewer passes per Newton iteration")."""
 
-NEW_ROWS_LIMIT = 0.05
-"""An active block whose rows are all but this fraction rows of the block last ordered afresh
-is factorised in that block's elimination order (:class:`_Factorisations`), not ordered again.
-Against 0.01 (with :data:`FILL_GROWTH`): a quarter to a third fewer fresh orders on captured 2D
-flow steps from 4 000 to 10^5 grains, the factors 1-6 % larger (docs/records/benchmarks.md,
-"orders carried further")."""
-
-STATIC_LU_BACKWARD_ERROR = 1e-11
-"""A solve with :class:`_StaticLU`'s factors (no pivoting) whose normwise backward error is above
-this is done again by SuperLU with pivoting (a stable LU's is a few times the machine epsilon)."""
-
-FILL_GROWTH = 1.1
-"""A factorisation in a carried order whose factors hold more than this many times the ordered
-block's, per entry of its block, ends the carrying: the next block is ordered afresh. With
-:data:`NEW_ROWS_LIMIT` at 0.05, 1.25 let the factors of a gluey 10^5-grain flow's steps grow by
-8.6 % (1.2 % at 1.1) for a third fewer fresh orders (docs/records/benchmarks.md, "orders
-carried further")."""
 
 STALL_WINDOW = 60
 STALL_FACTOR = 0.5
@@ -279,9 +248,6 @@ the proximal loop's plain finish is exact once the active set has settled (a fri
 POLISH_ITERATIONS = 10
 """Proximal Newton iterations tried from the fallback's result (kept where they lower the error)."""
 
-KEPT_FACTORISATIONS = 2
-"""Factorisations of active blocks kept for reuse (:class:`_Factorisations`): two, for iterates
-that cycle between two pieces."""
 
 FINISH_ITERATIONS = 2
 """Plain Newton iterations, at most, after the proximal loop or the plain try converged on a
@@ -369,23 +335,6 @@ STALLED = "stalled"
 
 MAX_HALVINGS = 30
 """Step halvings before a direction is given up."""
-
-
-@cache
-def _ordering() -> ModuleType:
-    """:mod:`.ordering` (numba), imported on first use."""
-    from . import ordering
-
-    return ordering
-
-
-@cache
-def _kernels() -> ModuleType:
-    """:mod:`.kernels` (numba), imported on first use; an import statement in a function costs
-    0.8 us each time, which a small solve paid at each phase and each error."""
-    from . import kernels
-
-    return kernels
 
 
 class AlartCurnier:
@@ -478,7 +427,7 @@ class AlartCurnier:
             partner = np.full(self.n_rows, -1, dtype=np.int64)
             partner[self.cone_n], partner[projector.planar_tangent] = \
                 projector.planar_tangent, self.cone_n
-        self.factorisations = _Factorisations(carry=self.planar, partner=partner)
+        self.factorisations = Factorisations(carry=self.planar, partner=partner)
         self.convex = cones.is_convex
         self.compiled_rows = self.flow_lane
         self.factor_arrays = self.reduced_blocks = None
@@ -507,7 +456,7 @@ class AlartCurnier:
         if self.factor_arrays is None:
             return self.W @ vector
         out = np.empty(self.n_rows)
-        _kernels().apply_operator(*self.factor_arrays, vector, out)
+        kernels().apply_operator(*self.factor_arrays, vector, out)
         return out
 
     def set_proximal(self, sigma: float, center: np.ndarray) -> None:
@@ -523,7 +472,7 @@ class AlartCurnier:
             velocity = self.product(forces) + self.q
         if self.compiled_rows:                # one pass (kernels.alart_curnier_2d), the same values
             phi, y = np.empty(self.n_rows), np.empty(self.n_rows)
-            _kernels().alart_curnier_2d(self.rho, self.lower, self.upper, self.cone_n,
+            kernels().alart_curnier_2d(self.rho, self.lower, self.upper, self.cone_n,
                                         self.tangent_rows, self.cone_mu, self.unilateral,
                                         self.sigma, self.center, forces, velocity, phi, y)
             return phi, y, velocity
@@ -549,7 +498,7 @@ class AlartCurnier:
         if velocity is None:
             velocity = self.product(forces) + self.q
         if self.planar:
-            return float(_kernels().coulomb_error_2d(forces, velocity, self.lower, self.upper,
+            return float(kernels().coulomb_error_2d(forces, velocity, self.lower, self.upper,
                                                      self.cone_n, self.tangent_rows, self.cone_mu,
                                                      self.unilateral, self.q_scale))
         return coulomb_error(unshifted, forces, velocity)
@@ -570,7 +519,7 @@ class AlartCurnier:
             :func:`~lubcontact.solvers.kernels.sparse_jacobian_rows_2d` (``compiled_rows``).
         """
         if self.compiled_rows:
-            rows, indptr, indices, data, plain = _kernels().sparse_jacobian_rows_2d(
+            rows, indptr, indices, data, plain = kernels().sparse_jacobian_rows_2d(
                 *self.w_arrays, self.rho, self.lower, self.upper,
                 self.box, self.cone_n, self.tangent_rows, self.cone_mu, self.unilateral,
                 self.sigma, y)
@@ -683,10 +632,10 @@ class AlartCurnier:
             not be folded (in 2D every active row that is not plain is a sliding tangential row
             whose normal row is plain).
         """
-        kernels = _kernels()
-        kept, target, factor, outer, base, sliding, normal, slope = kernels.fold_sliding_rows_2d(
-            *kernels.generalised_jacobian_2d(self.lower, self.upper, self.box, self.cone_n,
-                                             self.tangent_rows, self.cone_mu, self.unilateral, y),
+        compiled = kernels()
+        kept, target, factor, outer, base, sliding, normal, slope = compiled.fold_sliding_rows_2d(
+            *compiled.generalised_jacobian_2d(self.lower, self.upper, self.box, self.cone_n,
+                                              self.tangent_rows, self.cone_mu, self.unilateral, y),
             phi)
         block, outside = self.reduced_blocks.block(kept, target, factor, self.sigma, outer)
         return kept, block, -phi[kept] - self.rho[kept] * outside, base, sliding, normal, slope
@@ -713,7 +662,7 @@ class AlartCurnier:
         self.set_proximal(0.0, forces)
         y = self.residual(forces)[1]
         if self.planar:
-            plain = _kernels().plain_rows_2d(self.lower, self.upper, self.box, self.cone_n,
+            plain = kernels().plain_rows_2d(self.lower, self.upper, self.box, self.cone_n,
                                              self.tangent_rows, self.cone_mu, self.unilateral, y)
         else:
             plain = self.jacobian(y)[2]
@@ -773,229 +722,29 @@ class _ReducedBlocks:
         ``outer`` (:func:`~lubcontact.solvers.kernels.fold_sliding_rows_2d`) and the proximal
         weight ``sigma``, and ``(W outer)[kept]`` (m,): read with the block's rows where they
         are read whole, else through the factor; the folded rows kept for the next call."""
-        kernels = _kernels()
-        row_ptr, columns, values, outside, into, slot, folded = kernels.reduced_block_2d(
+        compiled = kernels()
+        row_ptr, columns, values, outside, into, slot, folded = compiled.reduced_block_2d(
             *self.w_arrays, self.rho, sigma, kept, target, factor, outer, *self.hops, *self.last)
         if self.factor_arrays is not None:
             self.last = (into, factor, slot, kept, row_ptr, columns, folded)
-            outside = kernels.factor_rows_product(*self.factor_arrays, outer, kept)
+            outside = compiled.factor_rows_product(*self.factor_arrays, outer, kept)
         return sp.csr_matrix((values, columns, row_ptr), shape=(kept.size, kept.size)), outside
 
 
-class _Factorisations:
-    """The factorisations of the :data:`KEPT_FACTORISATIONS` active blocks used last, reused for
-    a block equal to one of them entry for entry (the same factors, so the same direction), and
-    the elimination order of the last block ordered afresh, carried over.
-
-    In 2D the generalised Jacobian is constant on each piece of the Alart-Curnier function: on
-    the hard steps of developed flows most Newton iterations after the first twenty keep the
-    active block of the one before, or of the one before that (the iterates cycling between
-    two pieces), and the factorisation was two thirds of their time.
-
-    The minimum-degree ordering is a third of a factorisation (8 of 22 ms on the 23 000-row blocks
-    of 12 000-grain gluey flows), and late Newton iterations change a few rows of the block. A
-    block whose rows are all but :data:`NEW_ROWS_LIMIT` of them rows of the last ordered block is
-    permuted by that block's order, each new row placed just after the other row of its contact
-    where that one is in it (``partner``: a tangential row that stopped sliding next to its normal
-    row, as a supervariable), else just after the last of its neighbours in it, and factorised
-    without ordering (:data:`ORDERED_LU`): 14-16 ms with 0-10 % more fill on those blocks
-    (docs/records/benchmarks.md; next to its contact's other row, 1.4-3.1 % fewer factor entries
-    and 0-7 % fewer fresh orders on captured 2D flow steps from 4 000 to 10^5 grains, "a new row of
-    a carried order next to its contact's other row"). Rows of the ordered block that the new one
-    lacks are left out of the order. Where the carried order's fill grows past :data:`FILL_GROWTH`
-    times the ordered block's (on a 1 600-row grid pattern with 1 % of its rows new, scattered: 2.0
-    times, 2.4 times a fresh ordering's), the next block is ordered afresh. Only where ``carry`` is
-    set (2D problems, whose blocks have ``W``'s pattern, nearly symmetric): on a 3D Siconos file
-    the carried orders' solves were ten times less accurate and Newton took 392 iterations instead
-    of 154.
-
-    Where ``carry`` is set a block is also ordered afresh by an approximate minimum degree
-    (:func:`~lubcontact.solvers.ordering.approximate_minimum_degree`) and factorised by
-    :class:`_StaticLU` in that order, as carried blocks are: SuperLU's own minimum degree was
-    7 of its 19 ms on the 20 000-row blocks of a 12 000-grain gluey step, and SuperLU gives no
-    order without factorising (12-15 ms instead, 5 % fewer factor entries:
-    docs/records/benchmarks.md, "a fresh order by approximate minimum degree"). Elsewhere
-    (3D) SuperLU orders and factorises with pivoting (:data:`SPARSE_LU`).
-
-    Parameters
-    ----------
-    carry : bool
-        Carry the elimination orders over (2D problems).
-    partner : ndarray of int, shape (n_rows,), optional
-        Per row of the system, the other row of its contact (-1 for none); none given: no row
-        has one.
-    """
-
-    def __init__(self, carry: bool = False, partner: np.ndarray | None = None):
-        self.kept: list[tuple[sp.spmatrix, spla.SuperLU | _StaticLU, np.ndarray | None]] = []
-        self.reused = 0
-        self.carry = carry
-        self.partner = np.empty(0, dtype=np.int64) if partner is None else partner
-        self.carried = 0
-        self.pivoted = 0            # blocks SuperLU took back from _StaticLU
-        self.ordered_rows: np.ndarray | None = None        # sorted
-        self.positions: np.ndarray | None = None           # their places in the order
-        self.fill = 0.0             # the ordered block's factor entries per block entry
-
-    def solve(self, matrix: sp.spmatrix, rhs: np.ndarray, rows: np.ndarray) -> np.ndarray:
-        """``matrix^-1 rhs``, factorising ``matrix`` unless it is kept; ``rows``: the rows of
-        the system the block's rows are, sorted. ``matrix``: CSC or CSR (a 2D block, by rows:
-        :meth:`AlartCurnier.newton_direction`; SuperLU's own order takes CSC)."""
-        for position, (kept, _, _) in enumerate(self.kept):
-            if _same_matrix(kept, matrix):
-                self.reused += 1
-                self.kept.insert(0, self.kept.pop(position))      # the most recently used first
-                return self._solved(rhs)
-        order = self._carried_order(matrix, rows)
-        carried = order is not None
-        if not carried and self.carry:
-            pattern = _kernels().symmetrised_pattern(*csr_arrays(matrix)[:2])
-            order = _ordering().approximate_minimum_degree(*pattern)
-        if order is None:                   # SuperLU's own order, pivoting
-            factors = spla.splu(matrix, **SPARSE_LU)
-            self.ordered_rows, self.positions = rows, factors.perm_c
-            self.fill = factors.nnz / matrix.nnz
-        else:
-            permuted, norm = _permuted(matrix, order)
-            factors = _StaticLU.factorise(permuted, norm)
-            if factors is None:
-                factors = spla.splu(permuted, **ORDERED_LU)
-                self.pivoted += 1
-            if carried:
-                self.carried += 1
-                if factors.nnz > FILL_GROWTH * self.fill * matrix.nnz:
-                    self.ordered_rows = None        # the order no longer fits: order afresh
-            else:
-                self.ordered_rows, self.positions = rows, _places(order)
-                self.fill = factors.nnz / matrix.nnz
-        self.kept = [(matrix, factors, order), *self.kept][:KEPT_FACTORISATIONS]
-        return self._solved(rhs)
-
-    def _solved(self, rhs: np.ndarray) -> np.ndarray:
-        """``rhs`` solved by the factors kept first; where they are :class:`_StaticLU`'s and the
-        solution is not accurate, by SuperLU's (pivoting) in their place."""
-        matrix, factors, order = self.kept[0]
-        solved = _ordered_solve(factors, order, rhs)
-        if isinstance(factors, _StaticLU) and not factors.accurate(solved[order], rhs[order]):
-            factors = spla.splu(factors.matrix, **ORDERED_LU)
-            self.pivoted += 1
-            self.kept[0] = (matrix, factors, order)
-            solved = _ordered_solve(factors, order, rhs)
-        return solved
-
-    def _carried_order(self, matrix: sp.spmatrix, rows: np.ndarray) -> np.ndarray | None:
-        """The last ordered block's elimination order for ``matrix`` (a permutation of its
-        rows: :func:`~lubcontact.solvers.kernels.carried_order`, each new row just after its
-        contact's other row where that one is old, else just after the last of its old
-        neighbours, its column's rows in ``W``'s symmetric pattern; placed before the first of
-        them instead, the carried 12 000-grain blocks took +0-13 % fill against +0-10 %), or
-        None when more than :data:`NEW_ROWS_LIMIT` of ``rows`` are new to it."""
-        if not self.carry or self.ordered_rows is None:
-            return None
-        order, carried = _kernels().carried_order(matrix.indptr, matrix.indices, rows,
-                                                  self.ordered_rows, self.positions,
-                                                  NEW_ROWS_LIMIT * rows.size, self.partner)
-        return order if carried else None
-
-
-class _StaticLU:
-    """``A = L U`` without pivoting on static patterns
-    (:func:`~lubcontact.solvers.kernels.static_pattern`: those of ``A + A^T``'s Cholesky factor;
-    :func:`~lubcontact.solvers.kernels.static_lu`), for the blocks :class:`_Factorisations`
-    factorises in an elimination order of its own (a 2D block ordered afresh) or carried over:
-    on a 12 000-grain gluey step's 19 000-row block,
-    5.1 ms (patterns 3.0, values 2.1 with unsigned indices; 8.3 ms in all on the blocks of six
-    such steps with signed ones; the patterns 2.0-2.3 ms since they are found in one pass)
-    against 10.4 ms for SuperLU in the same order, the same fill
-    (docs/records/benchmarks.md). ``nnz``
-    counts the entries of both factors, the diagonal twice (SuperLU's counts its supernodes'
-    storage: the same on these blocks, within 1 %)."""
-
-    def __init__(self, matrix: sp.csc_matrix, norm: float, pattern: tuple, lower: np.ndarray,
-                 upper: np.ndarray):
-        self.matrix, self.norm, self.pattern = matrix, norm, pattern
-        self.lower, self.upper = lower, upper
-        self.nnz = lower.size + upper.size
-
-    @classmethod
-    def factorise(cls, matrix: sp.csc_matrix, norm: float) -> _StaticLU | None:
-        """The factors of ``matrix`` (CSC, square; ``norm``: its ``|A|_inf``), or None where a
-        pivot is below ``1e-14`` times its largest entry (SuperLU then factorises it, pivoting)."""
-        indptr, indices, data = csr_arrays(matrix)      # unsigned: no wrap-around checks
-        compiled = _kernels()
-        pattern = tuple(positions(array) for array in compiled.static_pattern(indptr, indices))
-        lower, upper, failed = compiled.static_lu(indptr, indices, data, *pattern)
-        return None if failed >= 0 else cls(matrix, norm, pattern, lower, upper)
-
-    def solve(self, rhs: np.ndarray) -> np.ndarray:
-        """``matrix^-1 rhs``."""
-        lower_ptr, lower_idx, upper_ptr, upper_idx = self.pattern
-        return _kernels().static_lu_solve(lower_ptr, lower_idx, self.lower, upper_ptr, upper_idx,
-                                          self.upper, rhs)
-
-    def accurate(self, solved: np.ndarray, rhs: np.ndarray) -> bool:
-        """Whether ``solved`` solves ``matrix x = rhs`` with a normwise backward error
-        ``|r|_inf / (|A|_inf |x|_inf + |b|_inf)`` of at most :data:`STATIC_LU_BACKWARD_ERROR`
-        (no pivoting: small pivots can amplify rounding where SuperLU would pivot; an
-        ill-conditioned block's residual is large either way)."""
-        scale = self.norm * np.abs(solved).max(initial=0.0) + np.abs(rhs).max(initial=0.0)
-        residual = np.abs(self.matrix @ solved - rhs).max(initial=0.0)
-        return bool(residual <= STATIC_LU_BACKWARD_ERROR * scale)
-
-
-def _permuted(matrix: sp.spmatrix, order: np.ndarray) -> tuple[sp.csc_matrix, float]:
-    """``matrix[order][:, order]`` (``order``: a permutation of its rows) in CSC form with sorted
-    32-bit indices, as SuperLU takes it, and ``|matrix|_inf``, from its rows
-    (:func:`~lubcontact.solvers.kernels.permuted_columns`; a 2D block comes by rows, another
-    matrix is converted first)."""
-    indptr, indices, data, norm = _kernels().permuted_columns(*csr_arrays(sp.csr_matrix(matrix)),
-                                                              positions(order))
-    permuted = sp.csc_matrix((data, indices, indptr), shape=matrix.shape)
-    permuted.has_sorted_indices = True
-    return permuted, float(norm)
-
-
-def _places(order: np.ndarray) -> np.ndarray:
-    """Each row's place in an elimination ``order`` (its inverse permutation), 32-bit as
-    SuperLU's ``perm_c``, the form :class:`_Factorisations` carries."""
-    places = np.empty(order.size, dtype=np.int32)
-    places[order] = np.arange(order.size, dtype=np.int32)
-    return places
-
-
-def _ordered_solve(factors: spla.SuperLU, order: np.ndarray | None, rhs: np.ndarray) -> np.ndarray:
-    """The solution of ``A x = rhs`` from the factors of ``A`` (``order`` None) or of
-    ``A[order][:, order]``."""
-    if order is None:
-        return factors.solve(rhs)
-    solved = np.empty_like(rhs)
-    solved[order] = factors.solve(rhs[order])
-    return solved
-
-
-def _same_matrix(first: sp.spmatrix, second: sp.spmatrix) -> bool:
-    """Whether two compressed matrices (both CSC, or both CSR) store the same entries in the same
-    order."""
-    return (first.format == second.format and first.shape == second.shape
-            and first.nnz == second.nnz
-            and np.array_equal(first.data, second.data)
-            and np.array_equal(first.indices, second.indices)
-            and np.array_equal(first.indptr, second.indptr))
-
-
 def _newton_direction(J: sp.csr_matrix | np.ndarray, active: np.ndarray,
-                      phi: np.ndarray, factorisations: _Factorisations | None = None,
+                      phi: np.ndarray, factorisations: Factorisations | None = None,
                       singular: bool = False) -> np.ndarray | None:
     """Solve ``J d = -phi`` with the identity rows eliminated (``J``: the active rows, as
-    :meth:`AlartCurnier.jacobian` returns them), the active block by :func:`_block_solve`
-    (``factorisations``: a fresh one when not given); None where it fails."""
+    :meth:`AlartCurnier.jacobian` returns them), the active block by
+    :func:`_block_solve` (``factorisations``: a fresh one
+    when not given); None where it fails."""
     direction = -phi.copy()
     rows = np.flatnonzero(active)
     if rows.size == 0:
         return direction
     rhs = -phi[rows] - J @ np.where(active, 0.0, direction)
     block = J[:, rows] if isinstance(J, np.ndarray) else J[:, rows].tocsc()
-    solved = _block_solve(block, rhs, rows, _Factorisations() if factorisations is None
+    solved = _block_solve(block, rhs, rows, Factorisations() if factorisations is None
                           else factorisations, singular)
     if solved is None:
         return None
@@ -1003,21 +752,26 @@ def _newton_direction(J: sp.csr_matrix | np.ndarray, active: np.ndarray,
     return direction
 
 
+
+
+
 def _block_solve(block: sp.spmatrix | np.ndarray, rhs: np.ndarray, rows: np.ndarray,
-                 factorisations: _Factorisations, singular: bool = False) -> np.ndarray | None:
+                 factorisations: Factorisations, singular: bool = False) -> np.ndarray | None:
     """``block^-1 rhs`` for the active block of a Newton system (``rows``: the system's rows it
     holds, sorted), or None when every regularisation fails.
 
-    The block is factorised by a dense LU (LAPACK) up to :data:`DENSE_LIMIT` rows, sparse
-    above, through ``factorisations`` (:class:`_Factorisations`: in 2D an elimination order of
+    The block is factorised by a dense LU (LAPACK) up to
+    :data:`~lubcontact.solvers.dual_data.DENSE_LIMIT` rows, sparse
+    above, through ``factorisations`` (:class:`Factorisations`: in 2D an elimination order of
     its own or carried over and a static LU; in 3D SuperLU, :data:`SPARSE_LU`; the factors of a
     block met again reused).
 
     A singular active block (``W`` rank deficient: more sticking rows than
     degrees of freedom) is regularised, ``block + delta I`` with ``delta`` from
     :data:`REGULARISATIONS` in turn (a proximal step, as in Siconos' PROX), from the first
-    positive one where the block is ``singular`` by a count (:meth:`AlartCurnier.singular_by_count`).
-    On the 2D sparse lane the block is the reduced one (:meth:`AlartCurnier.newton_direction`;
+    positive one where the block is ``singular`` by a count
+    (:meth:`~lubcontact.solvers.newton.AlartCurnier.singular_by_count`). On the 2D sparse lane
+    the block is the reduced one (:meth:`~lubcontact.solvers.newton.AlartCurnier.newton_direction`;
     on the compiled dense lane too, :func:`~lubcontact.solvers.kernels.newton_direction_2d`),
     so only its rows are shifted, not the eliminated sliding rows: the regularised direction
     differs from that of the whole active block's by about ``delta`` (relative). Where the block
@@ -1046,7 +800,6 @@ def _block_solve(block: sp.spmatrix | np.ndarray, rhs: np.ndarray, rows: np.ndar
         if np.isfinite(solved).all():
             return solved
     return None
-
 
 @register("newton-ac", kind=NEWTON, cones=ALL_CONES, warm_start=True, native_coulomb=True)
 def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = 500,
@@ -1106,11 +859,13 @@ def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = 5
         ``info``: ``joint_iterations`` (the joint phase's, with ``joint``),
         ``newton_iterations`` (each one LU, more where a
         singular block is regularised), ``reused_factorisations`` (the sparse lane's LUs
-        saved by a block met again: :class:`_Factorisations`), ``carried_orderings`` (its LUs
-        in the elimination order of an earlier block, not ordered again),
+        saved by a block met again:
+        :class:`~lubcontact.solvers.factorisations.Factorisations`), ``carried_orderings``
+        (its LUs in the elimination order of an earlier block, not ordered again),
         ``pivoted_factorisations`` (the sparse lane's LUs in such an order or in a 2D block's
-        own that SuperLU factorised, pivoting, after :class:`_StaticLU`'s pivots or solve were
-        not good enough), ``gradient_steps``
+        own that SuperLU factorised, pivoting, after
+        :class:`~lubcontact.solvers.factorisations.StaticLU`'s pivots or solve were not good
+        enough), ``gradient_steps``
         (steepest-descent steps taken where the Newton direction failed),
         ``proximal_steps`` and ``strategies`` (the starting weights tried, each with
         its start, ``"warm"`` or ``"cold"``),
@@ -1483,7 +1238,7 @@ def _newton_phase(function: AlartCurnier, unshifted: ConicProblem, forces: np.nd
 def _compiled_phase(function: AlartCurnier, forces: np.ndarray, tol: float, max_iter: int,
                     inner_tol: float) -> _Phase:
     """:func:`_newton_phase` by :func:`~lubcontact.solvers.kernels.newton_phase_2d`."""
-    compiled = _kernels()
+    compiled = kernels()
     (best, best_error, last, last_error, iterations, gradient_steps, code, history,
      solved) = compiled.newton_phase_2d(
         function.W, function.q, function.rho, function.lower, function.upper, function.box,

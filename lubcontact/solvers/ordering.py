@@ -2,7 +2,7 @@
 (numba, imported on first use).
 
 newton-ac factorises an active block of its 2D Newton systems afresh where the rows changed too
-much for the last block's order to carry over (``newton._Factorisations``). SuperLU's
+much for the last block's order to carry over (``factorisations.Factorisations``). SuperLU's
 minimum-degree ordering was about 7 of its 19 ms on the 20 000-row blocks of a 12 000-grain gluey
 flow, and SuperLU gives no order without factorising; this order (5.5-7.3 ms), then the static
 LU of those blocks, took 12-15 ms against SuperLU's 17-20, with 5 % fewer factor entries

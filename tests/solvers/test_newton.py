@@ -29,6 +29,7 @@ from lubcontact.solvers import (
     INACCURATE,
     MAX_ITER,
     SolveSettings,
+    factorisations,
     newton,
     solve,
     solve_coulomb,
@@ -1138,7 +1139,7 @@ def test_an_active_block_met_again_is_solved_with_its_kept_factors():
         return (sp.identity(n, format="csr") * 4.0 + extra).tocsr()
     active, phi = np.ones(n, dtype=bool), rng.normal(size=n)
     first, second = rows_of_J(1), rows_of_J(2)
-    kept = newton._Factorisations()
+    kept = factorisations.Factorisations()
     fresh = newton._newton_direction(first, active, phi)
     assert np.array_equal(newton._newton_direction(first, active, phi, kept), fresh)
     newton._newton_direction(second, active, phi, kept)
@@ -1175,32 +1176,32 @@ def test_an_active_block_with_few_new_rows_is_factorised_in_the_carried_order():
         return kept.kept[0][1].nnz
 
     everything = np.ones(n, dtype=bool)
-    kept = newton._Factorisations(carry=True)
+    kept = factorisations.Factorisations(carry=True)
     direction(everything, kept)
     ordered = fill(kept)
     direction(everything, kept, system + 1e-3 * sp.identity(n, format="csr"))   # no new row
     assert kept.carried == 1 and fill(kept) == ordered
     edge = everything.copy()
     edge[:n // 200] = False                      # 8 new rows, at the grid's edge
-    kept = newton._Factorisations(carry=True)
+    kept = factorisations.Factorisations(carry=True)
     direction(edge, kept)
     carried = direction(everything, kept)
     assert kept.carried == 1 and kept.ordered_rows is not None
-    fresh = direction(everything, newton._Factorisations(carry=True))
+    fresh = direction(everything, factorisations.Factorisations(carry=True))
     assert np.allclose(carried, fresh, rtol=0, atol=1e-12 * np.abs(fresh).max())
     assert np.abs(system @ carried + phi).max() <= 1e-12 * np.abs(phi).max()
     assert np.array_equal(direction(everything, kept), carried) and kept.reused == 1
     scattered = everything.copy()                # as many new rows as the limit lets in, inside
-    scattered[rng.choice(n, size=int(newton.NEW_ROWS_LIMIT * n), replace=False)] = False
-    kept = newton._Factorisations(carry=True)
+    scattered[rng.choice(n, size=int(factorisations.NEW_ROWS_LIMIT * n), replace=False)] = False
+    kept = factorisations.Factorisations(carry=True)
     direction(scattered, kept)
     direction(everything, kept)
     assert kept.carried == 1 and kept.ordered_rows is None           # the next is ordered afresh
-    kept = newton._Factorisations(carry=True)
+    kept = factorisations.Factorisations(carry=True)
     direction(np.arange(n) >= n // 4, kept)
     direction(everything, kept)                                      # a quarter of the rows new
     assert kept.carried == 0 and kept.ordered_rows.size == n
-    assert newton._Factorisations().carry is False
+    assert factorisations.Factorisations().carry is False
 
 
 @pytest.mark.parametrize("pattern", ["symmetric", "asymmetric", "forest"])
@@ -1212,7 +1213,7 @@ def test_the_static_lu_has_the_fill_of_symbolic_elimination_and_solves(pattern):
     with a quarter of the entries above the diagonal dropped (a pattern not symmetric, as ``W``'s
     where a product came out exactly 0) they hold them (those of ``A + A^T``). Either way L U is
     the matrix to rounding and the solve's residual is at rounding; its norm (for the backward
-    error) is ``|A|_inf``, as newton._permuted gives it. Through newton._StaticLU, which hands
+    error) is ``|A|_inf``, as factorisations._permuted gives it. Through factorisations.StaticLU, which hands
     the kernels unsigned index arrays, as the Newton phases do."""
     def lattice(side):
         size = side * side
@@ -1229,7 +1230,8 @@ def test_the_static_lu_has_the_fill_of_symbolic_elimination_and_solves(pattern):
         dropped = upper[rng.choice(len(upper), size=len(upper) // 4, replace=False)]
         dense[dropped[:, 0], dropped[:, 1]] = 0.0
     matrix = sp.csc_matrix(dense)
-    factors = newton._StaticLU.factorise(*newton._permuted(matrix, np.arange(n)))   # the same order
+    factors = factorisations.StaticLU.factorise(                    # the same order
+        *factorisations._permuted(matrix, np.arange(n)))
     lower_ptr, lower_idx, upper_ptr, upper_idx = factors.pattern
     assert lower_idx.dtype == upper_idx.dtype == np.uint32
     filled = dense != 0
@@ -1258,28 +1260,28 @@ def test_the_static_lu_has_the_fill_of_symbolic_elimination_and_solves(pattern):
 
 
 def test_a_carried_block_without_a_stable_static_lu_is_factorised_by_superlu():
-    """A carried block is factorised without pivoting (newton._StaticLU) where that is stable,
+    """A carried block is factorised without pivoting (factorisations.StaticLU) where that is stable,
     also where its pattern is not symmetric; a zero pivot, or a tiny one whose solve misses
     STATIC_LU_BACKWARD_ERROR (1e-12 on a symmetric 2 x 2's diagonal: a backward error of 1e-5),
     hands it to SuperLU, which pivots: the direction is then at rounding."""
-    assert newton._StaticLU.factorise(sp.csc_matrix(np.array([[0.0, 1.0], [1.0, 0.0]])), 1.0) is None
+    assert factorisations.StaticLU.factorise(sp.csc_matrix(np.array([[0.0, 1.0], [1.0, 0.0]])), 1.0) is None
     rows, rhs = np.arange(2), np.array([1.0, 1.0])
-    kept = newton._Factorisations(carry=True)
+    kept = factorisations.Factorisations(carry=True)
     kept.solve(sp.csc_matrix(np.array([[2.0, 1.0], [1.0, 3.0]])), rhs, rows)      # ordered
     stable = sp.csc_matrix(np.array([[4.0, 1.0], [1.0, 5.0]]))
     kept.solve(stable, rhs, rows)
-    assert kept.carried == 1 and kept.pivoted == 0 and isinstance(kept.kept[0][1], newton._StaticLU)
+    assert kept.carried == 1 and kept.pivoted == 0 and isinstance(kept.kept[0][1], factorisations.StaticLU)
     tiny = sp.csc_matrix(np.array([[1e-12, 1.0], [1.0, 1e-12]]))
-    static = newton._StaticLU.factorise(*newton._permuted(tiny, rows))
+    static = factorisations.StaticLU.factorise(*factorisations._permuted(tiny, rows))
     assert static is not None and not static.accurate(static.solve(rhs), rhs)
     solved = kept.solve(tiny, rhs, rows)
     assert kept.carried == 2 and kept.pivoted == 1 and isinstance(kept.kept[0][1], spla.SuperLU)
     assert np.abs(tiny @ solved - rhs).max() <= 1e-15
-    kept = newton._Factorisations(carry=True)
+    kept = factorisations.Factorisations(carry=True)
     kept.solve(sp.csc_matrix(np.array([[2.0, 0.0], [1.0, 3.0]])), rhs, rows)      # ordered
     lopsided = sp.csc_matrix(np.array([[4.0, 0.0], [1.0, 5.0]]))        # no mirror entry
     solved = kept.solve(lopsided, rhs, rows)
-    assert kept.carried == 1 and isinstance(kept.kept[0][1], newton._StaticLU)
+    assert kept.carried == 1 and isinstance(kept.kept[0][1], factorisations.StaticLU)
     assert np.abs(lopsided @ solved - rhs).max() <= 1e-15
 
 
@@ -1287,12 +1289,12 @@ def test_a_new_row_of_a_carried_order_goes_just_after_its_last_old_neighbour(mon
     """On a path (each row coupled to the next) ordered backwards, a new row goes just after the
     last of its neighbours in the carried order, and a new row with no old neighbour at the end
     (the limit on new rows raised for this 13-row block)."""
-    monkeypatch.setattr(newton, "NEW_ROWS_LIMIT", 0.5)
+    monkeypatch.setattr(factorisations, "NEW_ROWS_LIMIT", 0.5)
     n = 12
     path = sp.diags([np.ones(n - 1), 4.0 * np.ones(n), np.ones(n - 1)], [-1, 0, 1],
                     shape=(n, n), format="csc")
     isolated = sp.block_diag([path, sp.identity(1)], format="csc")      # row 12: no neighbour
-    kept = newton._Factorisations(carry=True)
+    kept = factorisations.Factorisations(carry=True)
     kept.ordered_rows = np.array([0, 1, 2, 3, 5, 6, 7, 8, 9, 10, 11])   # rows 4 and 12 new
     kept.positions = np.array([10, 9, 8, 7, 6, 5, 4, 3, 2, 1, 0])      # eliminated backwards
     order = kept._carried_order(isolated, np.arange(n + 1))
@@ -1383,7 +1385,7 @@ def test_a_block_permuted_for_its_carried_order_is_scipys_permutation_with_sorte
         shuffle = start + rng.permutation(end - start)
         matrix.indices[start:end], matrix.data[start:end] = \
             matrix.indices[shuffle].copy(), matrix.data[shuffle].copy()
-    permuted, norm = newton._permuted(matrix, order)
+    permuted, norm = factorisations._permuted(matrix, order)
     assert sp.isspmatrix_csc(permuted)
     assert permuted.indices.dtype == permuted.indptr.dtype == np.int32
     for name in ("indptr", "indices", "data"):
@@ -1438,15 +1440,15 @@ def test_a_block_singular_by_its_count_of_sticking_rows_skips_the_failed_factori
         outcomes.append("factorised")
         return factors
 
-    monkeypatch.setattr(newton.spla, "splu", counted)
+    monkeypatch.setattr(factorisations.spla, "splu", counted)
     tried = newton._newton_direction(J, active, phi)
     assert outcomes == ["singular", "factorised"]
     outcomes.clear()
     assert np.array_equal(newton._newton_direction(J, active, phi, singular=True), tried)
     assert outcomes == ["factorised"]
     outcomes.clear()                    # the sparse lane's reduced system counts alike
-    static = newton._StaticLU.factorise             # (in 2D its fresh blocks: the static LU)
-    monkeypatch.setattr(newton._StaticLU, "factorise", classmethod(
+    static = factorisations.StaticLU.factorise             # (in 2D its fresh blocks: the static LU)
+    monkeypatch.setattr(factorisations.StaticLU, "factorise", classmethod(
         lambda cls, matrix, norm: outcomes.append("factorised") or static(matrix, norm)))
     function.set_proximal(0.0, answer.forces / scaled.scaling.force)
     direction = function.newton_direction(y, phi)
@@ -1528,8 +1530,8 @@ def test_the_reused_factorisations_count_the_polish_after_a_fallback(name, monke
     (``newton_iterations`` counts those iterations)."""
     use_the_sparse_lane(monkeypatch)                       # with its kept LUs
     made = []
-    init = newton._Factorisations.__init__
-    monkeypatch.setattr(newton._Factorisations, "__init__",
+    init = factorisations.Factorisations.__init__
+    monkeypatch.setattr(factorisations.Factorisations, "__init__",
                         lambda self, *args, **kwargs: (init(self, *args, **kwargs),
                                                        made.append(self))[0])
     problem = load_cases()[name].problem.normalized()

@@ -7,7 +7,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from lubcontact.problem import StepProblem
-from lubcontact.solvers import kernels, newton
+from lubcontact.solvers import factorisations, kernels
 from lubcontact.solvers.newton import AlartCurnier
 from lubcontact.solvers.ordering import _both_triangles, approximate_minimum_degree
 
@@ -116,14 +116,14 @@ def test_a_fresh_2d_block_is_factorised_in_this_order_by_the_static_lu(monkeypat
     phi, y, _ = function.residual(start)
     kept, block, rhs, *_ = function.reduced_system(y, phi)
     calls = []
-    monkeypatch.setattr(newton.spla, "splu", lambda *args, **kwargs: calls.append(1))
-    factorisations = newton._Factorisations(carry=True)
-    solved = factorisations.solve(block, rhs, kept)
-    assert calls == [] and factorisations.pivoted == 0
-    matrix, factors, order = factorisations.kept[0]
-    assert isinstance(factors, newton._StaticLU) and is_permutation(order, kept.size)
+    monkeypatch.setattr(factorisations.spla, "splu", lambda *args, **kwargs: calls.append(1))
+    kept_factors = factorisations.Factorisations(carry=True)
+    solved = kept_factors.solve(block, rhs, kept)
+    assert calls == [] and kept_factors.pivoted == 0
+    matrix, factors, order = kept_factors.kept[0]
+    assert isinstance(factors, factorisations.StaticLU) and is_permutation(order, kept.size)
     scale = abs(block).max() * np.abs(solved).max() + np.abs(rhs).max()
     assert np.abs(block @ solved - rhs).max() <= 1e-13 * scale
     monkeypatch.undo()
-    superlu = spla.splu(block.tocsc(), **newton.SPARSE_LU)
+    superlu = spla.splu(block.tocsc(), **factorisations.SPARSE_LU)
     assert factors.nnz <= 1.1 * superlu.nnz
