@@ -167,8 +167,8 @@ class Factorisations:
         if not self.carry or self.ordered_rows is None:
             return None
         order, carried = kernels().carried_order(matrix.indptr, matrix.indices, rows,
-                                                  self.ordered_rows, self.positions,
-                                                  NEW_ROWS_LIMIT * rows.size, self.partner)
+                                                 self.ordered_rows, self.positions,
+                                                 NEW_ROWS_LIMIT * rows.size, self.partner)
         return order if carried else None
 
 
@@ -205,7 +205,7 @@ class StaticLU:
         """``matrix^-1 rhs``."""
         lower_ptr, lower_idx, upper_ptr, upper_idx = self.pattern
         return kernels().static_lu_solve(lower_ptr, lower_idx, self.lower, upper_ptr, upper_idx,
-                                          self.upper, rhs)
+                                         self.upper, rhs)
 
     def accurate(self, solved: np.ndarray, rhs: np.ndarray) -> bool:
         """Whether ``solved`` solves ``matrix x = rhs`` with a normwise backward error
@@ -223,7 +223,7 @@ def _permuted(matrix: sp.spmatrix, order: np.ndarray) -> tuple[sp.csc_matrix, fl
     (:func:`~lubcontact.solvers.kernels.permuted_columns`; a 2D block comes by rows, another
     matrix is converted first)."""
     indptr, indices, data, norm = kernels().permuted_columns(*csr_arrays(sp.csr_matrix(matrix)),
-                                                              positions(order))
+                                                             positions(order))
     permuted = sp.csc_matrix((data, indices, indptr), shape=matrix.shape)
     permuted.has_sorted_indices = True
     return permuted, float(norm)

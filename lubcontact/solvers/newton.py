@@ -473,8 +473,8 @@ class AlartCurnier:
         if self.compiled_rows:                # one pass (kernels.alart_curnier_2d), the same values
             phi, y = np.empty(self.n_rows), np.empty(self.n_rows)
             kernels().alart_curnier_2d(self.rho, self.lower, self.upper, self.cone_n,
-                                        self.tangent_rows, self.cone_mu, self.unilateral,
-                                        self.sigma, self.center, forces, velocity, phi, y)
+                                       self.tangent_rows, self.cone_mu, self.unilateral,
+                                       self.sigma, self.center, forces, velocity, phi, y)
             return phi, y, velocity
         y = forces - self.rho * velocity
         if self.sigma:
@@ -499,8 +499,8 @@ class AlartCurnier:
             velocity = self.product(forces) + self.q
         if self.planar:
             return float(kernels().coulomb_error_2d(forces, velocity, self.lower, self.upper,
-                                                     self.cone_n, self.tangent_rows, self.cone_mu,
-                                                     self.unilateral, self.q_scale))
+                                                    self.cone_n, self.tangent_rows, self.cone_mu,
+                                                    self.unilateral, self.q_scale))
         return coulomb_error(unshifted, forces, velocity)
 
     def jacobian(self, y: np.ndarray) -> tuple[sp.csr_matrix | np.ndarray, np.ndarray, int]:
@@ -663,7 +663,7 @@ class AlartCurnier:
         y = self.residual(forces)[1]
         if self.planar:
             plain = kernels().plain_rows_2d(self.lower, self.upper, self.box, self.cone_n,
-                                             self.tangent_rows, self.cone_mu, self.unilateral, y)
+                                            self.tangent_rows, self.cone_mu, self.unilateral, y)
         else:
             plain = self.jacobian(y)[2]
         return self.singular_by_count(plain)

@@ -1213,8 +1213,9 @@ def test_the_static_lu_has_the_fill_of_symbolic_elimination_and_solves(pattern):
     with a quarter of the entries above the diagonal dropped (a pattern not symmetric, as ``W``'s
     where a product came out exactly 0) they hold them (those of ``A + A^T``). Either way L U is
     the matrix to rounding and the solve's residual is at rounding; its norm (for the backward
-    error) is ``|A|_inf``, as factorisations._permuted gives it. Through factorisations.StaticLU, which hands
-    the kernels unsigned index arrays, as the Newton phases do."""
+    error) is ``|A|_inf``, as factorisations._permuted gives it. Through
+    factorisations.StaticLU, which hands the kernels unsigned index arrays, as the Newton phases
+    do."""
     def lattice(side):
         size = side * side
         return sp.diags([np.ones(size - 1), np.ones(size - side)], [1, side], shape=(size, size))
@@ -1260,10 +1261,10 @@ def test_the_static_lu_has_the_fill_of_symbolic_elimination_and_solves(pattern):
 
 
 def test_a_carried_block_without_a_stable_static_lu_is_factorised_by_superlu():
-    """A carried block is factorised without pivoting (factorisations.StaticLU) where that is stable,
-    also where its pattern is not symmetric; a zero pivot, or a tiny one whose solve misses
-    STATIC_LU_BACKWARD_ERROR (1e-12 on a symmetric 2 x 2's diagonal: a backward error of 1e-5),
-    hands it to SuperLU, which pivots: the direction is then at rounding."""
+    """A carried block is factorised without pivoting (factorisations.StaticLU) where that is
+    stable, also where its pattern is not symmetric; a zero pivot, or a tiny one whose solve
+    misses STATIC_LU_BACKWARD_ERROR (1e-12 on a symmetric 2 x 2's diagonal: a backward error of
+    1e-5), hands it to SuperLU, which pivots: the direction is then at rounding."""
     assert factorisations.StaticLU.factorise(sp.csc_matrix(np.array([[0.0, 1.0], [1.0, 0.0]])), 1.0) is None
     rows, rhs = np.arange(2), np.array([1.0, 1.0])
     kept = factorisations.Factorisations(carry=True)
