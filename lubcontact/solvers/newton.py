@@ -760,18 +760,17 @@ def _block_solve(block: sp.spmatrix | np.ndarray, rhs: np.ndarray, rows: np.ndar
     """``block^-1 rhs`` for the active block of a Newton system (``rows``: the system's rows it
     holds, sorted), or None when every regularisation fails.
 
-    The block is factorised by a dense LU (LAPACK) up to
-    :data:`~lubcontact.solvers.dual_data.DENSE_LIMIT` rows, sparse
-    above, through ``factorisations`` (:class:`Factorisations`: in 2D an elimination order of
-    its own or carried over and a static LU; in 3D SuperLU, :data:`SPARSE_LU`; the factors of a
-    block met again reused).
+    The block is factorised by a dense LU (LAPACK) up to :data:`DENSE_LIMIT` rows, sparse
+    above, through ``factorisations`` (:class:`~lubcontact.solvers.factorisations.Factorisations`:
+    in 2D an elimination order of its own or carried over and a static LU; in 3D SuperLU,
+    :data:`~lubcontact.solvers.factorisations.SPARSE_LU`; the factors of a block met again
+    reused).
 
     A singular active block (``W`` rank deficient: more sticking rows than
     degrees of freedom) is regularised, ``block + delta I`` with ``delta`` from
     :data:`REGULARISATIONS` in turn (a proximal step, as in Siconos' PROX), from the first
-    positive one where the block is ``singular`` by a count
-    (:meth:`~lubcontact.solvers.newton.AlartCurnier.singular_by_count`). On the 2D sparse lane
-    the block is the reduced one (:meth:`~lubcontact.solvers.newton.AlartCurnier.newton_direction`;
+    positive one where the block is ``singular`` by a count (:meth:`AlartCurnier.singular_by_count`).
+    On the 2D sparse lane the block is the reduced one (:meth:`AlartCurnier.newton_direction`;
     on the compiled dense lane too, :func:`~lubcontact.solvers.kernels.newton_direction_2d`),
     so only its rows are shifted, not the eliminated sliding rows: the regularised direction
     differs from that of the whole active block's by about ``delta`` (relative). Where the block
