@@ -177,13 +177,12 @@ class StaticLU:
     (:func:`~lubcontact.solvers.kernels.static_pattern`: those of ``A + A^T``'s Cholesky factor;
     :func:`~lubcontact.solvers.kernels.static_lu`), for the blocks :class:`Factorisations`
     factorises in an elimination order of its own (a 2D block ordered afresh) or carried over:
-    on a 12 000-grain gluey step's 19 000-row block,
-    5.1 ms (patterns 3.0, values 2.1 with unsigned indices; 8.3 ms in all on the blocks of six
-    such steps with signed ones; the patterns 2.0-2.3 ms since they are found in one pass)
-    against 10.4 ms for SuperLU in the same order, the same fill
-    (docs/records/benchmarks.md). ``nnz``
-    counts the entries of both factors, the diagonal twice (SuperLU's counts its supernodes'
-    storage: the same on these blocks, within 1 %)."""
+    on a 12 000-grain gluey step's 19 000-row block, 5.1 ms (patterns 3.0, values 2.1 with
+    unsigned indices; 8.3 ms in all on the blocks of six such steps with signed ones; the
+    patterns 2.0-2.3 ms since they are found in one pass) against 10.4 ms for SuperLU in the
+    same order, the same fill (docs/records/benchmarks.md). ``nnz`` counts the entries of both
+    factors, the diagonal twice (SuperLU's counts its supernodes' storage: the same on these
+    blocks, within 1 %)."""
 
     def __init__(self, matrix: sp.csc_matrix, norm: float, pattern: tuple, lower: np.ndarray,
                  upper: np.ndarray):

@@ -40,8 +40,8 @@ where ``G`` vanishes (open contacts, zero-forced rows) are identity rows: their
 update is ``-phi`` and they are eliminated, so the LU factorisation (sparse above
 ``DENSE_LIMIT`` rows: :class:`~lubcontact.solvers.factorisations.Factorisations`) is of the
 active rows only. A 2D problem of up to ``DENSE_LIMIT`` rows runs each Newton phase in one
-compiled call on the dense ``W``
-(:func:`~lubcontact.solvers.kernels.newton_phase_2d`, with the numpy phase's rules); there and
+compiled call on the dense ``W`` (:func:`~lubcontact.solvers.kernels.newton_phase_2d`, with
+the numpy phase's rules); there and
 on a larger 2D problem the Newton system is solved without its sliding tangential rows: in 2D
 ``I - t t^T`` vanishes, so such a row says ``d_T = mu t d_n`` plus a constant, and its unknown
 folds into its normal row's (:meth:`AlartCurnier.newton_direction`,
@@ -735,9 +735,8 @@ def _newton_direction(J: sp.csr_matrix | np.ndarray, active: np.ndarray,
                       phi: np.ndarray, factorisations: Factorisations | None = None,
                       singular: bool = False) -> np.ndarray | None:
     """Solve ``J d = -phi`` with the identity rows eliminated (``J``: the active rows, as
-    :meth:`AlartCurnier.jacobian` returns them), the active block by
-    :func:`_block_solve` (``factorisations``: a fresh one
-    when not given); None where it fails."""
+    :meth:`AlartCurnier.jacobian` returns them), the active block by :func:`_block_solve`
+    (``factorisations``: a fresh one when not given); None where it fails."""
     direction = -phi.copy()
     rows = np.flatnonzero(active)
     if rows.size == 0:
@@ -750,9 +749,6 @@ def _newton_direction(J: sp.csr_matrix | np.ndarray, active: np.ndarray,
         return None
     direction[rows] = solved
     return direction
-
-
-
 
 
 def _block_solve(block: sp.spmatrix | np.ndarray, rhs: np.ndarray, rows: np.ndarray,
