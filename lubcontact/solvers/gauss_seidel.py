@@ -22,6 +22,7 @@ from __future__ import annotations
 import time
 
 import numpy as np
+import scipy.sparse as sp
 
 from ..problem.conic import ConicProblem
 from ..problem.metrics import coulomb_error
@@ -65,8 +66,6 @@ def nonsmooth_gauss_seidel(problem: ConicProblem, *, tol: float, max_iter: int =
         ``iterations``: sweeps; ``residual_history``: the FCLIB error at each
         check; ``info["error"]``: the last one.
     """
-    from .kernels import gauss_seidel_2d
-
     if replay is not None:
         return replay
     start = time.perf_counter()
@@ -78,38 +77,23 @@ def nonsmooth_gauss_seidel(problem: ConicProblem, *, tol: float, max_iter: int =
     q[:nc] -= problem.shift
     unshifted = problem.with_shift(np.zeros(nc))
     projector = cones.projector
-    cone_n = projector.friction_normal.astype(np.int64)
-    cone_t = projector.planar_tangent.astype(np.int64)
-    mu = projector.friction_mu.astype(float)
-    unilateral = ~projector.friction_union
-    box = np.ones(problem.n_rows, dtype=bool)
-    box[cone_n] = False
-    box[cone_t] = False
-    box_rows = np.flatnonzero(box & (projector.lower < projector.upper)).astype(np.int64)
-    diagonal = W.diagonal()
-    local = np.zeros((cone_n.size, 4))
-    if cone_n.size:
-        local = np.stack([diagonal[cone_n], np.asarray(W[cone_n, cone_t]).ravel(),
-                          np.asarray(W[cone_t, cone_n]).ravel(), diagonal[cone_t]], axis=1)
+    sweeps = Sweeps(W, q, projector.lower, projector.upper, projector.friction_normal,
+                    projector.planar_tangent, projector.friction_mu, ~projector.friction_union,
+                    factor=None if small else problem.delassus_factor,
+                    factor_transpose=None if small else problem.delassus_factor_transpose)
+    box = sweeps.contact < 0
     forces = np.zeros(problem.n_rows) if warm_start is None else \
         np.array(warm_start, dtype=float)
     forces[box] = np.clip(forces[box], projector.lower[box], projector.upper[box])
-    factor = None if small else problem.delassus_factor
-    # the rows the sweeps read: of W, or of F^T (W = F^T F) on a large step problem
-    rows = dense_csr_arrays(W) if small else W if factor is None else \
-        problem.delassus_factor_transpose
-    arrays = (*csr_arrays(rows), q, projector.lower, projector.upper, box_rows, diagonal[box_rows],
-              cone_n, cone_t, mu, unilateral, local)
+    every_row = np.arange(problem.n_rows)
     setup_time = time.perf_counter() - start
     history = [coulomb_error(unshifted, forces)]
     velocity = W @ forces + q
-    sweeps, status, changes = 0, MAX_ITER, [np.inf, np.inf]
-    while not _settled(history[-1], changes, velocity, tol) and sweeps < max_iter:
-        count = min(CHECK_EVERY, max_iter - sweeps)
-        # F r from the forces at each call: the updates inside carry no drift over the sweeps
-        state = forces if factor is None else factor @ forces
-        gauss_seidel_2d(*arrays, forces, state, factor is not None, count)
-        sweeps += count
+    count, status, changes = 0, MAX_ITER, [np.inf, np.inf]
+    while not _settled(history[-1], changes, velocity, tol) and count < max_iter:
+        batch = min(CHECK_EVERY, max_iter - count)
+        forces = sweeps(forces, every_row, batch)
+        count += batch
         previous, velocity = velocity, W @ forces + q
         changes = [changes[1], float(np.max(np.abs(velocity - previous), initial=0.0))]
         history.append(coulomb_error(unshifted, forces))
@@ -118,7 +102,7 @@ def nonsmooth_gauss_seidel(problem: ConicProblem, *, tol: float, max_iter: int =
             break
     if _settled(history[-1], changes, velocity, tol):
         status = CONVERGED
-    return MethodOutput(forces, status, sweeps, setup_time=setup_time,
+    return MethodOutput(forces, status, count, setup_time=setup_time,
                         solve_time=time.perf_counter() - start - setup_time,
                         residual_history=np.asarray(history), info={"error": history[-1]})
 
@@ -141,3 +125,72 @@ def _settled(error: float, changes: list[float], velocity: np.ndarray, tol: floa
     rate = min(change / previous, ahead / (1.0 + ahead)) if previous > 0 else ahead / (1.0 + ahead)
     scale = max(1.0, float(np.max(np.abs(velocity), initial=0.0)))
     return change * rate / (1.0 - rate) <= tol * scale
+
+
+def contact_blocks(W: np.ndarray | sp.csr_matrix, diagonal: np.ndarray, cone_n: np.ndarray,
+                   cone_t: np.ndarray) -> np.ndarray:
+    """Each 2D frictional contact's block of ``W``, ``[W_nn, W_nt, W_tn, W_tt]``, shape (nf, 4),
+    as :func:`~.kernels.gauss_seidel_2d` takes them (``W`` dense or sparse, ``diagonal`` its
+    diagonal; ``cone_n``, ``cone_t`` the contacts' normal and tangential rows, shape (nf,))."""
+    if cone_n.size == 0:
+        return np.zeros((0, 4))
+    return np.stack([diagonal[cone_n], np.asarray(W[cone_n, cone_t]).ravel(),
+                     np.asarray(W[cone_t, cone_n]).ravel(), diagonal[cone_t]], axis=1)
+
+
+class Sweeps:
+    """Gauss-Seidel sweeps (:func:`~.kernels.gauss_seidel_2d`) over all or some rows of a 2D
+    problem, the other rows' forces frozen: each box row among them (bounds ``lower < upper``)
+    and each frictional contact one of whose rows is among them, in row order. ``nsgs`` sweeps
+    every row; newton-ac's proximal loop sweeps the rows where the FCLIB error concentrates
+    (:meth:`~.newton.AlartCurnier.swept`).
+
+    Parameters
+    ----------
+    W : ndarray or scipy.sparse.csr_matrix, shape (n, n)
+    q, lower, upper : ndarray, shape (n,)
+        The offset without the shift, and the box bounds.
+    cone_n, cone_t : ndarray of int, shape (nf,)
+        Each frictional contact's normal and tangential row.
+    mu : ndarray, shape (nf,)
+    unilateral : ndarray of bool, shape (nf,)
+        COULOMB (True) or UNION (False) contacts.
+    factor, factor_transpose : scipy.sparse.csr_matrix, optional
+        ``F`` and ``F^T`` with ``W = F^T F`` (a step problem's ``L``): the sweeps then read a
+        row's velocity from the velocities ``F r`` (a row of ``F^T`` holds the degrees of
+        freedom of one contact's two bodies, where a row of ``W`` holds every contact sharing
+        a body with it: about 4x the entries on a developed flow), else from the rows of ``W``.
+    """
+
+    def __init__(self, W: np.ndarray | sp.csr_matrix, q: np.ndarray, lower: np.ndarray,
+                 upper: np.ndarray, cone_n: np.ndarray, cone_t: np.ndarray, mu: np.ndarray,
+                 unilateral: np.ndarray, factor: sp.csr_matrix | None = None,
+                 factor_transpose: sp.csr_matrix | None = None):
+        self.W, self.q, self.lower, self.upper = W, q, lower, upper
+        self.cone_n, self.cone_t = cone_n.astype(np.int64), cone_t.astype(np.int64)
+        self.mu, self.unilateral = mu.astype(float), unilateral
+        self.diagonal = W.diagonal()
+        self.contact = np.full(q.size, -1, dtype=np.int64)      # each row's contact, or -1
+        self.contact[self.cone_n] = self.contact[self.cone_t] = np.arange(cone_n.size)
+        self.blocks = contact_blocks(W, self.diagonal, self.cone_n, self.cone_t)
+        self.factor = factor
+        read = W if factor is None else factor_transpose
+        self.rows = dense_csr_arrays(read) if isinstance(read, np.ndarray) else csr_arrays(read)
+
+    def __call__(self, forces: np.ndarray, rows: np.ndarray, sweeps: int) -> np.ndarray:
+        """The forces (shape (n,)) after ``sweeps`` sweeps over ``rows`` (sorted) from
+        ``forces``."""
+        from .kernels import gauss_seidel_2d
+
+        contact = self.contact[rows]
+        cones = np.unique(contact[contact >= 0])
+        box_rows = rows[(contact < 0) & (self.lower[rows] < self.upper[rows])]
+        cone_n, cone_t = self.cone_n[cones], self.cone_t[cones]
+        swept = np.array(forces, dtype=float)
+        # F r from the forces at each call: the updates inside carry no drift over the sweeps
+        state = swept if self.factor is None else self.factor @ swept
+        gauss_seidel_2d(*self.rows, self.q, self.lower, self.upper, box_rows,
+                        self.diagonal[box_rows], cone_n, cone_t, self.mu[cones],
+                        self.unilateral[cones], self.blocks[cones], swept, state,
+                        self.factor is not None, sweeps)
+        return swept

@@ -579,12 +579,12 @@ def alart_curnier_2d(rho, lower, upper, cone_n, cone_t, cone_mu, unilateral, sig
 
 
 @numba.njit(cache=True)
-def coulomb_error_2d(forces, velocity, lower, upper, cone_n, cone_t, cone_mu, unilateral,
-                     q_scale):
-    """:func:`~lubcontact.problem.metrics.coulomb_error` of an unshifted problem from its
-    velocity ``W r + q``; ``q_scale`` is ``1 + |q|``. A UNION contact (not ``unilateral``) is
-    measured on its pushed piece where ``r_n >= 0``, on the pulled one (``n <= 0``, ``t = 0``)
-    elsewhere."""
+def coulomb_residual_2d(forces, velocity, lower, upper, cone_n, cone_t, cone_mu, unilateral):
+    """The vector whose norm is :func:`~lubcontact.problem.metrics.coulomb_error` of an unshifted
+    problem (divided by ``1 + |q|``), from its velocity ``W r + q``, shape (n,): per row ``r``
+    less its projection after the step by the velocity (de Saxce's for a frictional contact).
+    A UNION contact (not ``unilateral``) is measured on its pushed piece where ``r_n >= 0``, on
+    the pulled one (``n <= 0``, ``t = 0``) elsewhere."""
     n = forces.size
     difference = np.empty(n)
     for i in range(n):
@@ -600,10 +600,47 @@ def coulomb_error_2d(forces, velocity, lower, upper, cone_n, cone_t, cone_mu, un
             new_n, new_t = min(r_n - u_n, 0.0), 0.0
         difference[normal] = r_n - new_n
         difference[tangent] = r_t - new_t
+    return difference
+
+
+@numba.njit(cache=True)
+def coulomb_error_2d(forces, velocity, lower, upper, cone_n, cone_t, cone_mu, unilateral,
+                     q_scale):
+    """:func:`~lubcontact.problem.metrics.coulomb_error` of an unshifted problem from its
+    velocity ``W r + q`` (:func:`coulomb_residual_2d`'s norm); ``q_scale`` is ``1 + |q|``."""
+    difference = coulomb_residual_2d(forces, velocity, lower, upper, cone_n, cone_t, cone_mu,
+                                     unilateral)
     total = 0.0
-    for i in range(n):
+    for i in range(difference.size):
         total += difference[i] * difference[i]
     return np.sqrt(total) / q_scale
+
+
+@numba.njit(cache=True)
+def neighbourhood(indptr, indices, seeds, hops):
+    """The rows within ``hops`` steps of the rows ``seeds`` in the pattern of a square matrix
+    (CSR arrays ``indptr``, ``indices``; a step from row ``i`` reaches the columns of its
+    entries), the seeds included, sorted."""
+    n = indptr.size - 1
+    inside = np.zeros(n, dtype=np.bool_)
+    reached = np.empty(n, dtype=np.int64)
+    count = 0
+    for s in seeds:
+        if not inside[s]:
+            inside[s], reached[count] = True, s
+            count += 1
+    start = 0
+    for _ in range(hops):
+        end = count
+        for k in range(start, end):
+            i = reached[k]
+            for e in range(indptr[i], indptr[i + 1]):
+                j = indices[e]
+                if not inside[j]:
+                    inside[j], reached[count] = True, j
+                    count += 1
+        start = end
+    return np.sort(reached[:count])
 
 
 @numba.njit(cache=True)

@@ -1,5 +1,7 @@
 """nsgs, non-smooth Gauss-Seidel with exact local 2D Coulomb solves, against the stored references,
 Clarabel's fixed point on s and its own domain; and as newton-ac's first 2D fallback."""
+from pathlib import Path
+
 import numpy as np
 import pytest
 import scipy.sparse as sp
@@ -10,8 +12,10 @@ from lubcontact.bench.hard import expected_for, load_cases
 from lubcontact.problem.cones import ConeKind, Cones
 from lubcontact.problem.local import LocalProblem
 from lubcontact.problem.metrics import scaled_coulomb_error, scaled_velocity_error, velocity_error
+from lubcontact.problem.step import StepProblem
 from lubcontact.solvers import CONVERGED, MAX_ITER, solve, solve_coulomb, solver_info
-from lubcontact.solvers.kernels import local_coulomb_2d
+from lubcontact.solvers.gauss_seidel import Sweeps
+from lubcontact.solvers.kernels import coulomb_residual_2d, local_coulomb_2d
 
 #: the reference cases a Gauss-Seidel method reaches to 1e-8 within its default 20 000 sweeps
 #: (the jammed 200-grain piles need more: pgd needs 1.2 million iterations on one)
@@ -88,3 +92,56 @@ def test_newton_ac_falls_back_on_gauss_seidel_first_in_2d():
     assert result.info["newton_status"] == MAX_ITER and result.info["fallbacks"] == ["nsgs"]
     assert result.status == CONVERGED
     assert scaled_coulomb_error(case.problem, result.forces) <= 1e-9
+
+
+@pytest.fixture(scope="module")
+def gluey_step():
+    """A 2D gluey + friction flow step (1 635 rows: NONNEG and UNION contacts), normalised, with
+    its sweeps read through ``W``'s factor and through ``W``'s rows, and its warm start."""
+    path = Path(__file__).parents[1] / "flow" / "data" / "gluey-flow-step.npz"
+    with np.load(path) as data:
+        problem = StepProblem.from_arrays(data)
+        warm_start = data["warm_start"]
+    scaled = problem.normalized()
+    W = scaled.delassus.tocsr()
+    q = scaled.offset.copy()
+    q[: scaled.n_contacts] -= scaled.shift
+    projector = scaled.cones.projector
+    arguments = (W, q, projector.lower, projector.upper, projector.friction_normal,
+                 projector.planar_tangent, projector.friction_mu, ~projector.friction_union)
+    through_factor = Sweeps(*arguments, factor=scaled.delassus_factor,
+                            factor_transpose=scaled.delassus_factor_transpose)
+    return through_factor, Sweeps(*arguments), warm_start / scaled.scaling.force
+
+
+def test_sweeps_through_the_factor_are_the_sweeps_through_w(gluey_step):
+    """The same forces to rounding, whether a row's velocity is read from ``F r`` (updated after
+    each change) or from its row of ``W``: over every row (nsgs's) and over some."""
+    through_factor, through_w, start = gluey_step
+    n = start.size
+    for rows in (np.arange(n), np.arange(0, n, 3)):
+        first, second = through_factor(start, rows, 10), through_w(start, rows, 10)
+        assert np.abs(first - start).max() > 1e-3 * np.abs(start).max()     # they moved
+        assert np.abs(first - second).max() <= 1e-11 * np.abs(first).max()
+
+
+def test_sweeps_over_some_rows_solve_their_contacts_laws_and_leave_the_others(gluey_step):
+    """Sweeps over a few rows, the seeds and their neighbours in ``W``'s pattern: the forces of
+    every other contact stay as they were, and the swept contacts' laws hold to rounding (the
+    FCLIB residual of their rows, with the others' forces frozen) once the sweeps converge."""
+    sweeps, _, start = gluey_step
+    W, q = sweeps.W, sweeps.q
+    n = start.size
+    seeds = np.argsort(np.abs(W @ start + q))[-5:]
+    rows = np.unique(W[seeds].indices)
+    swept = sweeps(start, rows, 500)
+    contact = sweeps.contact
+    touched = np.isin(np.arange(n), rows) | np.isin(contact, contact[rows][contact[rows] >= 0])
+    assert np.array_equal(swept[~touched], start[~touched])
+    assert np.abs(swept[touched] - start[touched]).max() > 0
+    def residual(forces):
+        return coulomb_residual_2d(forces, W @ forces + q, sweeps.lower, sweeps.upper,
+                                   sweeps.cone_n, sweeps.cone_t, sweeps.mu, sweeps.unilateral)
+    scale = np.abs(start).max()
+    assert np.abs(residual(start)[touched]).max() > 1e-3 * scale
+    assert np.abs(residual(swept)[touched]).max() <= 1e-10 * scale
