@@ -85,14 +85,13 @@ def nonsmooth_gauss_seidel(problem: ConicProblem, *, tol: float, max_iter: int =
     forces = np.zeros(problem.n_rows) if warm_start is None else \
         np.array(warm_start, dtype=float)
     forces[box] = np.clip(forces[box], projector.lower[box], projector.upper[box])
-    every_row = np.arange(problem.n_rows)
     setup_time = time.perf_counter() - start
     history = [coulomb_error(unshifted, forces)]
     velocity = W @ forces + q
     count, status, changes = 0, MAX_ITER, [np.inf, np.inf]
     while not _settled(history[-1], changes, velocity, tol) and count < max_iter:
         batch = min(CHECK_EVERY, max_iter - count)
-        forces = sweeps(forces, every_row, batch)
+        forces = sweeps(forces, batch)
         count += batch
         previous, velocity = velocity, W @ forces + q
         changes = [changes[1], float(np.max(np.abs(velocity - previous), initial=0.0))]
@@ -173,18 +172,23 @@ class Sweeps:
         self.contact = np.full(q.size, -1, dtype=np.int64)      # each row's contact, or -1
         self.contact[self.cone_n] = self.contact[self.cone_t] = np.arange(cone_n.size)
         self.blocks = contact_blocks(W, self.diagonal, self.cone_n, self.cone_t)
+        self.box_rows = np.flatnonzero((self.contact < 0) & (lower < upper))
         self.factor = factor
         read = W if factor is None else factor_transpose
         self.rows = dense_csr_arrays(read) if isinstance(read, np.ndarray) else csr_arrays(read)
 
-    def __call__(self, forces: np.ndarray, rows: np.ndarray, sweeps: int) -> np.ndarray:
-        """The forces (shape (n,)) after ``sweeps`` sweeps over ``rows`` (sorted) from
-        ``forces``."""
+    def __call__(self, forces: np.ndarray, sweeps: int, rows: np.ndarray | None = None
+                 ) -> np.ndarray:
+        """The forces (shape (n,)) after ``sweeps`` sweeps from ``forces`` over ``rows`` (sorted;
+        None: every row)."""
         from .kernels import gauss_seidel_2d
 
-        contact = self.contact[rows]
-        cones = np.unique(contact[contact >= 0])
-        box_rows = rows[(contact < 0) & (self.lower[rows] < self.upper[rows])]
+        if rows is None:
+            cones, box_rows = slice(None), self.box_rows
+        else:
+            contact = self.contact[rows]
+            cones = np.unique(contact[contact >= 0])
+            box_rows = rows[(contact < 0) & (self.lower[rows] < self.upper[rows])]
         cone_n, cone_t = self.cone_n[cones], self.cone_t[cones]
         swept = np.array(forces, dtype=float)
         # F r from the forces at each call: the updates inside carry no drift over the sweeps

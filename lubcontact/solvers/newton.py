@@ -546,12 +546,14 @@ class AlartCurnier:
                       self.cone_mu, self.unilateral, factor=factor, factor_transpose=transpose)
 
     def swept(self, forces: np.ndarray, velocity: np.ndarray | None = None
-              ) -> tuple[np.ndarray, np.ndarray, float]:
+              ) -> tuple[np.ndarray, np.ndarray, float] | None:
         """``forces`` after :data:`LOCAL_SWEEPS` Gauss-Seidel sweeps over the rows within
         :data:`LOCAL_HOPS` of the :data:`LOCAL_ROWS` rows where the FCLIB error's residual
         (:func:`~lubcontact.solvers.kernels.coulomb_residual_2d`) is largest, with their
-        velocity ``W r + q`` and FCLIB error; ``velocity``: that of ``forces`` where known. On
-        the sparse lane of a 2D problem with friction cones (``flow_lane``)."""
+        velocity ``W r + q`` and FCLIB error; None, without sweeping, where those rows hold less
+        than :data:`LOCAL_SHARE` of the residual's square (an error spread over the problem).
+        ``velocity``: that of ``forces`` where known. On the sparse lane of a 2D problem with
+        friction cones (``flow_lane``)."""
         compiled = kernels()
         if velocity is None:
             velocity = self.product(forces) + self.q
@@ -564,7 +566,7 @@ class AlartCurnier:
         if squares[worst].sum() < LOCAL_SHARE * squares.sum():
             return None
         rows = compiled.neighbourhood(*self.w_arrays[:2], worst, LOCAL_HOPS)
-        swept = self.local_sweeps(forces, rows, LOCAL_SWEEPS)
+        swept = self.local_sweeps(forces, LOCAL_SWEEPS, rows)
         velocity = self.product(swept) + self.q
         return swept, velocity, self.coulomb_error(None, swept, velocity)
 
@@ -1109,8 +1111,9 @@ def _proximal_newton(function: AlartCurnier, unshifted: ConicProblem, forces: np
     the phase returns. The phase stalls by :class:`_StallRule`.
     On a flow's step (:data:`RECENTRE_WINDOW`) each subproblem first gets one Newton iteration,
     re-centred at its result at the same weight, until the error stops halving or nears ``tol``;
-    after that, each subproblem starts from local Gauss-Seidel sweeps where they lower the error
-    (:data:`LOCAL_ROWS`), the next centre.
+    there, before each subproblem (re-centred ones too) where the error sits on a few rows, local
+    Gauss-Seidel sweeps over them give the next centre if they lower the error (:data:`LOCAL_ROWS`;
+    their error joins the record, the Newton iterations' errors, as an iteration's would).
     With ``finish``, a phase that converged on a problem without friction cones ends with at most
     :data:`FINISH_ITERATIONS` plain Newton iterations, exact there once the active set has
     settled (unless the block is singular by its count, :meth:`AlartCurnier.hyperstatic`): from

@@ -116,11 +116,12 @@ def gluey_step():
 
 def test_sweeps_through_the_factor_are_the_sweeps_through_w(gluey_step):
     """The same forces to rounding, whether a row's velocity is read from ``F r`` (updated after
-    each change) or from its row of ``W``: over every row (nsgs's) and over some."""
+    each change) or from its row of ``W``: over every row (nsgs's: None, or all of them given)
+    and over some."""
     through_factor, through_w, start = gluey_step
     n = start.size
-    for rows in (np.arange(n), np.arange(0, n, 3)):
-        first, second = through_factor(start, rows, 10), through_w(start, rows, 10)
+    for rows in (None, np.arange(n), np.arange(0, n, 3)):
+        first, second = through_factor(start, 10, rows), through_w(start, 10, rows)
         assert np.abs(first - start).max() > 1e-3 * np.abs(start).max()     # they moved
         assert np.abs(first - second).max() <= 1e-11 * np.abs(first).max()
 
@@ -134,7 +135,7 @@ def test_sweeps_over_some_rows_solve_their_contacts_laws_and_leave_the_others(gl
     n = start.size
     seeds = np.argsort(np.abs(W @ start + q))[-5:]
     rows = np.unique(W[seeds].indices)
-    swept = sweeps(start, rows, 500)
+    swept = sweeps(start, 500, rows)
     contact = sweeps.contact
     touched = np.isin(np.arange(n), rows) | np.isin(contact, contact[rows][contact[rows] >= 0])
     assert np.array_equal(swept[~touched], start[~touched])
