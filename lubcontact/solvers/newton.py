@@ -561,8 +561,8 @@ class AlartCurnier:
                                                 self.cone_n, self.tangent_rows, self.cone_mu,
                                                 self.unilateral)
         squares = residual * residual
-        worst = np.argpartition(squares, -LOCAL_ROWS)[-LOCAL_ROWS:] if squares.size > LOCAL_ROWS \
-            else np.arange(squares.size)
+        count = min(LOCAL_ROWS, squares.size)
+        worst = np.argpartition(squares, -count)[-count:]
         if squares[worst].sum() < LOCAL_SHARE * squares.sum():
             return None
         rows = compiled.neighbourhood(*self.w_arrays[:2], worst, LOCAL_HOPS)
