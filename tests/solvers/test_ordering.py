@@ -9,7 +9,12 @@ import scipy.sparse.linalg as spla
 from lubcontact.problem import StepProblem
 from lubcontact.solvers import factorisations, kernels
 from lubcontact.solvers.newton import AlartCurnier
-from lubcontact.solvers.ordering import _both_triangles, approximate_minimum_degree
+from lubcontact.solvers.ordering import (
+    _both_triangles,
+    _postorder,
+    approximate_minimum_degree,
+    elimination_tree,
+)
 
 
 def grid(m: int) -> sp.csr_matrix:
@@ -85,6 +90,59 @@ def test_the_adjacency_has_both_triangles_of_the_symmetrised_pattern_without_its
     for row in range(30):
         assert np.array_equal(np.sort(neighbours[pointers[row]:pointers[row + 1]]),
                               expected.indices[expected.indptr[row]:expected.indptr[row + 1]])
+
+
+def adjacency(matrix: sp.spmatrix) -> tuple[np.ndarray, np.ndarray]:
+    """Both triangles of ``matrix``'s symmetrised pattern, as the order reads it."""
+    matrix = sp.csr_matrix(matrix)
+    return _both_triangles(*kernels.symmetrised_pattern(matrix.indptr, matrix.indices))
+
+
+@pytest.mark.parametrize("pattern", ["grid", "random", "two_components"])
+def test_the_elimination_tree_is_the_factor_s_and_its_postorder_keeps_the_fill(pattern):
+    """In a random order of a 12 x 12 grid, of a random pattern and of two components, the
+    elimination tree is the one the static pattern of the factor holds (each column's least row
+    below the diagonal), and the order rearranged by its postorder factorises with exactly as
+    many entries; postordering that order again leaves it as it is."""
+    matrix = {"grid": lambda: grid(12),
+              "random": lambda: sp.random(150, 150, 0.02, random_state=4) + sp.identity(150),
+              "two_components": lambda: sp.block_diag([grid(5), np.ones((9, 9))])}[pattern]()
+    order = np.random.default_rng(5).permutation(matrix.shape[0])
+    pointers, neighbours = adjacency(matrix)
+    parent = elimination_tree(pointers, neighbours, order)
+    permuted = sp.csc_matrix(matrix)[order][:, order].tocsc()
+    permuted.sort_indices()
+    lower_ptr, lower_idx, *_ = kernels.static_pattern(permuted.indptr.astype(np.int64),
+                                                      permuted.indices.astype(np.uint32))
+    expected = np.array([lower_idx[lower_ptr[k] + 1:lower_ptr[k + 1]].min()
+                         if lower_ptr[k + 1] - lower_ptr[k] > 1 else -1
+                         for k in range(order.size)])
+    assert np.array_equal(parent, expected)
+    postordered = order[_postorder(parent)]
+    assert is_permutation(postordered, order.size)
+    assert factor_entries(matrix, postordered) == factor_entries(matrix, order)
+    again = _postorder(elimination_tree(pointers, neighbours, postordered))
+    assert np.array_equal(again, np.arange(order.size))
+
+
+def test_the_order_is_postordered():
+    """The minimum-degree order of a 30 x 30 grid comes postordered: each subtree of its
+    elimination tree a contiguous run of places ending at its root (the same fill; a column's
+    descendants next to it in memory)."""
+    matrix = grid(30)
+    order = order_of(matrix)
+    parent = elimination_tree(*adjacency(matrix), order)
+    assert np.all((parent == -1) | (parent > np.arange(900)))
+    assert np.array_equal(_postorder(parent), np.arange(900))
+    size = np.ones(900, dtype=int)                  # each subtree's rows (children come first)
+    for k in range(900):
+        if parent[k] >= 0:
+            size[parent[k]] += size[k]
+    for k in range(900):                            # the subtree of k: the places k - size + 1 .. k
+        for j in range(k - size[k] + 1, k):
+            while j < k:
+                j = parent[j]
+            assert j == k
 
 
 def test_the_order_keeps_the_fill_of_a_grid_near_superlu_s_minimum_degree():
