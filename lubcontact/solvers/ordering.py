@@ -31,7 +31,7 @@ that each subtree is a contiguous run of places ending at its root. Any order th
 parents after their children has the same factor pattern up to relabelling, so the fill is
 unchanged; but the columns that update a column now lie next to it in memory, where the minimum
 degree picks its pivots all over the graph. On the blocks of 10^5-grain gluey flows (150 000
-rows) the permutation, the static patterns and the static LU together took 2.3 times less time
+rows) the permutation, the static patterns and the static LU together took 2.6 times less time
 (docs/records/benchmarks.md, "the minimum-degree order postordered").
 """
 from __future__ import annotations
