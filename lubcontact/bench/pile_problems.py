@@ -9,7 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..model.assemble import assemble
-from ..model.contacts import Contacts, find_contacts
+from ..model.contacts import Contacts, find_contacts, lookup_by_key
 from ..model.scene import Scene
 from ..problem.cones import ConeKind, Cones
 from ..problem.step import StepProblem
@@ -126,7 +126,5 @@ def matched_forces(previous_keys: np.ndarray, previous_forces: np.ndarray,
     ndarray, shape (problem.n_rows,)
     """
     guess = np.zeros(problem.n_rows)
-    pos = np.clip(np.searchsorted(previous_keys, problem.keys), 0, previous_keys.size - 1)
-    guess[: problem.n_contacts] = np.where(previous_keys[pos] == problem.keys,
-                                           previous_forces[pos], 0.0)
+    guess[: problem.n_contacts] = lookup_by_key(previous_keys, previous_forces, problem.keys)
     return guess
