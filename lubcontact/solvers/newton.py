@@ -538,6 +538,13 @@ class AlartCurnier:
         return coulomb_error(unshifted, forces, velocity)
 
     @cached_property
+    def sweeps_apply(self) -> bool:
+        """Whether the proximal loop tries :meth:`swept` on this problem: one of the sparse lane
+        of a 2D problem (``flow_lane``) with friction cones and more than :data:`LOCAL_MIN_ROWS`
+        rows (a flow's step)."""
+        return bool(self.flow_lane and self.cone_n.size and self.n_rows > LOCAL_MIN_ROWS)
+
+    @cached_property
     def local_sweeps(self) -> Sweeps:
         """The Gauss-Seidel sweeps over some rows of :meth:`swept`, prepared on first use (they
         read the velocities through ``W``'s factor where the problem gives it)."""
@@ -552,8 +559,7 @@ class AlartCurnier:
         (:func:`~lubcontact.solvers.kernels.coulomb_residual_2d`) is largest, with their
         velocity ``W r + q`` and FCLIB error; None, without sweeping, where those rows hold less
         than :data:`LOCAL_SHARE` of the residual's square (an error spread over the problem).
-        ``velocity``: that of ``forces`` where known. On the sparse lane of a 2D problem with
-        friction cones (``flow_lane``)."""
+        ``velocity``: that of ``forces`` where known. Where :attr:`sweeps_apply`."""
         compiled = kernels()
         if velocity is None:
             velocity = self.product(forces) + self.q
@@ -1143,8 +1149,7 @@ def _proximal_newton(function: AlartCurnier, unshifted: ConicProblem, forces: np
                            or not _halved_over(history, best[0], RECENTRE_WINDOW)):
             recentring = False              # near tol, or no longer halving: solve subproblems
             scale = max(min(scale, error * function.typical), SIGMA_MIN * function.typical)
-        if LOCAL_SWEEPS and scale > 0 and function.flow_lane and function.cone_n.size \
-                and function.n_rows > LOCAL_MIN_ROWS:
+        if LOCAL_SWEEPS and scale > 0 and function.sweeps_apply:
             swept = function.swept(forces, velocity)
             if swept is not None and swept[2] < error:  # the few contacts Newton cycles on
                 function.sweeps_kept += 1
