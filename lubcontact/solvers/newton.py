@@ -41,7 +41,9 @@ update is ``-phi`` and they are eliminated, so the LU factorisation (sparse abov
 ``DENSE_LIMIT`` rows: :class:`~lubcontact.solvers.factorisations.Factorisations`) is of the
 active rows only. A 2D problem of up to ``DENSE_LIMIT`` rows runs each Newton phase in one
 compiled call on the dense ``W`` (:func:`~lubcontact.solvers.kernels.newton_phase_2d`, with
-the numpy phase's rules); there and
+the numpy phase's rules; from :data:`STATIC_DENSE_ROWS` rows with ``W`` also by its rows and
+each block factorised sparse, in a minimum-degree order of ``W``, LAPACK's LU the fallback);
+there and
 on a larger 2D problem the Newton system is solved without its sliding tangential rows: in 2D
 ``I - t t^T`` vanishes, so such a row says ``d_T = mu t d_n`` plus a constant, and its unknown
 folds into its normal row's (:meth:`AlartCurnier.newton_direction`,
@@ -84,10 +86,10 @@ from ..problem.conic import ConicProblem
 from ..problem.metrics import coulomb_error
 from ..problem.step import diagonal_scaled
 from .compiled_apgd import csr_arrays, joint_applies, joint_coulomb_apgd, operator_arrays
-from .compiled_modules import kernels
+from .compiled_modules import kernels, ordering
 from .coulomb import solve_coulomb
 from .dual_data import DENSE_LIMIT, dense_lu, dense_lu_solve, is_small
-from .factorisations import Factorisations
+from .factorisations import STATIC_LU_BACKWARD_ERROR, Factorisations
 from .gauss_seidel import Sweeps
 from .registry import ALL_CONES, NEWTON, register, solver_info
 from .result import CONVERGED, DIVERGED, FAILED, INACCURATE, MAX_ITER, MethodOutput
@@ -101,6 +103,15 @@ ARMIJO = 1e-4
 REGULARISATIONS = (0.0, 1e-10, 1e-8, 1e-6, 1e-4)
 """Diagonal shifts tried in turn when the factorised block of a Newton system is singular
 (:func:`_block_solve`)."""
+
+STATIC_DENSE_ROWS = 96
+"""On the compiled lane (a 2D problem of at most ``DENSE_LIMIT`` rows), the rows from which the
+products ``W x`` read ``W`` by its rows and the Newton blocks are factorised sparse, without
+pivoting, in a minimum-degree order of ``W`` (:attr:`AlartCurnier.elimination_places`), rather
+than by LAPACK's dense LU: a 40-grain pile's blocks (about 80 of its 130 rows, 6 % of ``W``'s
+entries not zero) in 19 us against 33, the order 13 us once per solve; below about 96 rows the
+order and the sparse bookkeeping cost what they save (docs/records/benchmarks.md, "small
+problems' blocks factorised sparse")."""
 
 FACTOR_PRODUCT_SHARE = 0.5
 """On the sparse lane of a 2D problem whose ``W = L^T L`` comes with its factor, the products
@@ -396,7 +407,10 @@ class AlartCurnier:
         ``W``'s CSR arrays with unsigned indices (:func:`~.compiled_apgd.csr_arrays`), for the
         kernels of the sparse lane (``compiled_rows``): numba checks every signed index for
         wrap-around, and the reduced Newton system took 4.4 ms instead of 5.2 on a 12 000-grain
-        gluey step (51 879 rows) with them.
+        gluey step (51 879 rows) with them; on the compiled lane, the dense ``W``'s entries
+        that are not zero (:func:`~lubcontact.solvers.kernels.compressed_rows`) from
+        :data:`STATIC_DENSE_ROWS` rows, for its products and blocks (a 40-grain pile's ``W`` is
+        6 % full), else empty.
     factor_arrays : tuple of ndarray or None
         On the sparse lane, the CSR arrays of ``W``'s factor ``L`` and of ``L^T`` and a work
         vector, where the products ``W x`` go through them (:meth:`product`); None otherwise.
@@ -476,6 +490,8 @@ class AlartCurnier:
             self.tangent_rows = projector.planar_tangent
         if self.compiled:
             self.W = np.ascontiguousarray(self.W)
+            self.w_arrays = kernels().compressed_rows(self.W) if self.n_rows >= STATIC_DENSE_ROWS \
+                else (np.empty(0, dtype=np.uint32), np.empty(0, dtype=np.uint32), np.empty(0))
 
     @cached_property
     def scaled_W(self) -> sp.csr_matrix | np.ndarray:
@@ -536,6 +552,20 @@ class AlartCurnier:
                                                     self.cone_n, self.tangent_rows, self.cone_mu,
                                                     self.unilateral, self.q_scale))
         return coulomb_error(unshifted, forces, velocity)
+
+    @cached_property
+    def elimination_places(self) -> np.ndarray:
+        """On the compiled lane, each row's place in a minimum-degree elimination order of
+        ``W``'s pattern, in which the Newton phases factorise their blocks without pivoting
+        (:func:`~lubcontact.solvers.kernels.newton_direction_2d`), where the problem has at
+        least :data:`STATIC_DENSE_ROWS` rows; empty (LAPACK's LU) otherwise."""
+        if not (self.compiled and self.w_arrays[0].size):
+            return np.empty(0, dtype=np.int64)
+        order = ordering().approximate_minimum_degree(
+            *kernels().symmetrised_pattern(*self.w_arrays[:2]))
+        places = np.empty(self.n_rows, dtype=np.int64)
+        places[order] = np.arange(self.n_rows)
+        return places
 
     @cached_property
     def sweeps_apply(self) -> bool:
@@ -1323,11 +1353,12 @@ def _compiled_phase(function: AlartCurnier, forces: np.ndarray, tol: float, max_
     compiled = kernels()
     (best, best_error, last, last_error, iterations, gradient_steps, code, history,
      solved) = compiled.newton_phase_2d(
-        function.W, function.q, function.rho, function.lower, function.upper, function.box,
-        function.cone_n, function.tangent_rows, function.cone_mu, function.unilateral,
+        function.W, function.w_arrays, function.q, function.rho, function.lower, function.upper,
+        function.box, function.cone_n, function.tangent_rows, function.cone_mu, function.unilateral,
         function.sigma, function.center, function.q_scale, np.asarray(forces, dtype=float),
         float(tol), int(max_iter), float(inner_tol), np.array(REGULARISATIONS, dtype=float),
-        LINE_SEARCH_MEMORY, ARMIJO, MAX_HALVINGS)
+        function.elimination_places, STATIC_LU_BACKWARD_ERROR, LINE_SEARCH_MEMORY, ARMIJO,
+        MAX_HALVINGS)
     status = FAILED if code == compiled.FAILED_CODE else \
         CONVERGED if code == compiled.CONVERGED_CODE else MAX_ITER
     return _Phase(forces=best, status=status, iterations=int(iterations),

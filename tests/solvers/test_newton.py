@@ -794,7 +794,11 @@ def test_the_compiled_residual_jacobian_and_error_are_their_numpy_twins(name, si
         forces = rng.normal(size=n) * rng.choice([1e-3, 1.0, 1e3], size=n)
         phi, y, velocity = function.residual(forces)
         compiled = np.empty(n), np.empty(n), np.empty(n)
-        kernel.product_2d(function.W, forces, function.q, compiled[2])
+        kernel.product_2d(function.W, *function.w_arrays, forces, function.q, compiled[2])
+        by_rows = np.empty(n)                   # W by its rows: the same sums, zeros left out
+        kernel.product_2d(function.W, *kernel.compressed_rows(function.W), forces, function.q,
+                          by_rows)
+        assert np.array_equal(by_rows, compiled[2])
         merit = kernel.alart_curnier_2d(
             function.rho, function.lower, function.upper, function.cone_n, function.tangent_rows,
             function.cone_mu, function.unilateral, function.sigma, function.center, forces,
@@ -893,16 +897,21 @@ def eliminated_sliding_rows(function, points):
 
 @pytest.mark.parametrize("name", [name for name in COMPILED_CASES if name != "mu_zero_friction"])
 @pytest.mark.parametrize("sigma", [1e-4, 1e-2])
-def test_the_compiled_dense_lane_solves_the_newton_system_without_its_sliding_rows(name, sigma):
+@pytest.mark.parametrize("static_rows", [0, 10**6])
+def test_the_compiled_dense_lane_solves_the_newton_system_without_its_sliding_rows(
+        name, sigma, static_rows, monkeypatch):
     """The compiled dense lane's Newton direction (kernels.newton_direction_2d) comes from the
     system reduced to its rows of diag(rho) (W + sigma I), as on the sparse lane: checked at
     points with every contact state, on the hard cases with friction, where contacts slide
-    (before, it factorised the whole active block)."""
+    (before, it factorised the whole active block); with the block factorised sparse in a
+    minimum-degree order (STATIC_DENSE_ROWS 0) and by LAPACK's dense LU."""
     from lubcontact.solvers.kernels import fold_sliding_rows_2d, generalised_jacobian_2d, newton_direction_2d
 
+    monkeypatch.setattr(newton, "STATIC_DENSE_ROWS", static_rows)
     problem = load_cases()[name].problem.normalized()
     function = AlartCurnier(problem)
     assert function.compiled and function.dense
+    assert (function.elimination_places.size > 0) == (static_rows == 0)
     rng = np.random.default_rng(5)
     function.set_proximal(sigma, rng.normal(size=problem.n_rows))
     n = problem.n_rows
@@ -917,8 +926,11 @@ def test_the_compiled_dense_lane_solves_the_newton_system_without_its_sliding_ro
             *generalised_jacobian_2d(*states, y), phi)
         assert kept.size == plain and sliding.size == np.count_nonzero(active) - plain
         sliding_rows += sliding.size
-        direction, ok = newton_direction_2d(function.W, function.rho, *states, function.sigma,
-                                            y, phi, np.array(newton.REGULARISATIONS))
+        direction, ok = newton_direction_2d(function.W, function.w_arrays, function.rho, *states,
+                                            function.sigma, y, phi,
+                                            np.array(newton.REGULARISATIONS),
+                                            function.elimination_places,
+                                            newton.STATIC_LU_BACKWARD_ERROR)
         assert ok
         solves_the_whole_newton_system(J, active, phi, direction)
         # the sliding rows' unknowns follow their normal rows' exactly: they were eliminated
@@ -1321,6 +1333,37 @@ def test_the_static_lu_has_the_fill_of_symbolic_elimination_and_solves(pattern):
     assert factors.norm == pytest.approx(np.abs(dense).sum(axis=1).max(), rel=1e-14)
 
 
+def test_a_small_block_is_solved_sparse_in_its_order_where_that_is_stable():
+    """kernels.static_block_solve: a block given by its rows (CSR, kernels.compressed_rows of a
+    dense one, as on the compiled lane) in a random order is solved to rounding, and the block
+    as LAPACK's LU takes it is left as it was; a zero pivot, or a tiny one whose solve misses
+    the backward error bound (1e-12 in the corner: a backward error of about 1e-4), is no
+    answer (ok False: LAPACK's LU then solves it); the tiny pivot's block in the other order
+    is (rows and columns are permuted alike: a zero diagonal stays)."""
+    from lubcontact.solvers.kernels import compressed_rows, static_block_solve
+
+    rng = np.random.default_rng(12)
+    n = 60
+    dense = sp.random(n, n, density=0.08, random_state=3).toarray() + 4.0 * np.eye(n)
+    indptr, indices, values = compressed_rows(dense)
+    assert indptr.dtype == indices.dtype == np.uint32
+    assert np.array_equal(sp.csr_matrix((values, indices, indptr), shape=(n, n)).toarray(), dense)
+    rhs = rng.normal(size=n)
+    bound = newton.STATIC_LU_BACKWARD_ERROR
+    solved, ok = static_block_solve(indptr, indices, values, rhs, rng.permutation(n), bound)
+    assert ok and np.abs(dense @ solved - rhs).max() <= 1e-14 * np.abs(dense).max() * np.abs(solved).max()
+    swap = np.array([1, 0])
+    for block, natural, swapped in (([[0.0, 1.0], [1.0, 0.0]], False, False),
+                                    ([[1e-12, 1.0], [1.0, 1.0]], False, True),
+                                    ([[4.0, 1.0], [1.0, 5.0]], True, True)):
+        arrays = compressed_rows(np.array(block))
+        for order, expected in ((np.arange(2), natural), (swap, swapped)):
+            solved, ok = static_block_solve(*arrays, np.array([1.0, 2.0]), order, bound)
+            assert ok == expected
+            if ok:
+                assert np.abs(np.array(block) @ solved - [1.0, 2.0]).max() <= 1e-15
+
+
 def test_a_carried_block_without_a_stable_static_lu_is_factorised_by_superlu():
     """A carried block is factorised without pivoting (factorisations.StaticLU) where that is
     stable, also where its pattern is not symmetric; a zero pivot, or a tiny one whose solve
@@ -1457,7 +1500,7 @@ def test_a_block_permuted_for_its_carried_order_is_scipys_permutation_with_sorte
 
 @pytest.fixture(scope="module")
 def pile_at_rest():
-    """The step after 160 steps of a 30-grain frictional settling pile (mu = 0.3), at rest:
+    """The step after 180 steps of a 30-grain frictional settling pile (mu = 0.3), at rest:
     more sticking rows than degrees of freedom (hyperstatic), and the previous step's forces."""
     from lubcontact import scenes
     from lubcontact.model.laws import Coulomb
@@ -1465,7 +1508,7 @@ def pile_at_rest():
 
     sim = Simulation(scenes.settling_pile(30, seed=3), Coulomb(0.3), 0.05, solver="newton-ac",
                      tol=1e-8, fixed_point=True, tol_fp=1e-6, on_failure="ignore")
-    sim.run(160)
+    sim.run(180)
     _, _, problem, guess, _ = sim.next_problem()
     return problem, guess
 
@@ -1562,11 +1605,16 @@ def test_the_compiled_lu_solves_like_numpy_and_reports_an_exactly_singular_block
     assert ok and solved.shape == (0,)
 
 
-def test_a_singular_active_block_is_regularised_alike_when_compiled():
+@pytest.mark.parametrize("sparse", [False, True])
+def test_a_singular_active_block_is_regularised_alike_when_compiled(sparse):
     """Two equal rows and columns of ``W`` (box rows inside their bounds, no proximal weight)
     make the active block singular: the compiled direction takes the first regularisation that
-    factorises, as _newton_direction does, and finds the same direction."""
-    from lubcontact.solvers.kernels import lu_solve, newton_direction_2d
+    factorises, as _newton_direction does, and finds the same direction; with the block
+    factorised by LAPACK's LU, and sparse without pivoting (``sparse``: W by rows, in its own
+    order), whose solve of this ill-conditioned block (``W + 1e-10 I``) is held to the static
+    LU's backward error instead (``STATIC_LU_BACKWARD_ERROR``: its direction is 4e-6 from
+    LAPACK's, relative)."""
+    from lubcontact.solvers.kernels import compressed_rows, lu_solve, newton_direction_2d
 
     rng = np.random.default_rng(2)
     root = rng.normal(size=(4, 4))
@@ -1576,13 +1624,19 @@ def test_a_singular_active_block_is_regularised_alike_when_compiled():
     phi, y = rng.normal(size=n), rng.normal(size=n)
     assert not lu_solve(np.ascontiguousarray(W.T), phi)[1]        # a zero pivot: singular
     no_cones = np.zeros(0, dtype=np.int64)
+    w_arrays, places = (compressed_rows(W), np.arange(n)) if sparse else \
+        ((np.zeros(0, dtype=np.uint32), np.zeros(0, dtype=np.uint32), np.zeros(0)), no_cones)
     direction, ok = newton_direction_2d(
-        W, np.ones(n), np.full(n, -np.inf), np.full(n, np.inf), np.ones(n, dtype=bool),
+        W, w_arrays, np.ones(n), np.full(n, -np.inf), np.full(n, np.inf), np.ones(n, dtype=bool),
         no_cones, no_cones, np.zeros(0), np.zeros(0, dtype=bool), 0.0, y, phi,
-        np.array(newton.REGULARISATIONS))
+        np.array(newton.REGULARISATIONS), places, newton.STATIC_LU_BACKWARD_ERROR)
     expected = newton._newton_direction(W, np.ones(n, dtype=bool), phi)   # J = W here
     assert ok and expected is not None
-    assert np.allclose(direction, expected, rtol=1e-6, atol=1e-9)
+    regularised = W + newton.REGULARISATIONS[1] * np.eye(n)
+    scale = np.abs(regularised).sum(axis=1).max() * np.abs(direction).max() + np.abs(phi).max()
+    assert np.abs(regularised @ direction + phi).max() <= newton.STATIC_LU_BACKWARD_ERROR * scale
+    if not sparse:
+        assert np.allclose(direction, expected, rtol=1e-6, atol=1e-9)
 
 
 @pytest.mark.parametrize("name", COMPILED_CASES)
