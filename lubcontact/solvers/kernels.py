@@ -1393,18 +1393,17 @@ def newton_direction_2d(W, w_arrays, rho, lower, upper, box, cone_n, cone_t, con
             if position[p] >= 0:
                 order[count] = position[p]
                 count += 1
-    hops, kept_int, kept_real = np.empty(0, dtype=np.uint32), np.empty(0, dtype=np.int32), \
-        np.empty(0)                             # reduced_block_2d reads every row, keeps none
     solved_any = m == 0
     for delta in regularisations:
         if solved_any:
             break
         ok = False
         if order.size:
+            hops, last, last_values = np.empty(0, dtype=np.uint32), \
+                np.empty(0, dtype=np.int32), np.empty(0)   # every row read, none kept
             row_ptr, columns, values, outside, _, _, _ = reduced_block_2d(
                 *w_arrays, rho, sigma, kept, target, factor, outer, hops, hops, hops, hops,
-                kept_int, kept_real, kept_int, np.empty(0, dtype=np.int64), kept_int, kept_int,
-                kept_real)
+                last, last_values, last, np.empty(0, dtype=np.int64), last, last, last_values)
             rhs = np.empty(m)
             for a in range(m):
                 values[row_ptr[a]] += delta      # the diagonal, first in each row

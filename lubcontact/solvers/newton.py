@@ -100,18 +100,23 @@ LINE_SEARCH_MEMORY = 5
 ARMIJO = 1e-4
 """Sufficient decrease factor of the line search."""
 
-REGULARISATIONS = (0.0, 1e-10, 1e-8, 1e-6, 1e-4)
+REGULARISATIONS = np.array([0.0, 1e-10, 1e-8, 1e-6, 1e-4])
 """Diagonal shifts tried in turn when the factorised block of a Newton system is singular
-(:func:`_block_solve`)."""
+(:func:`_block_solve`; an array, as the compiled phases take it)."""
 
 STATIC_DENSE_ROWS = 96
 """On the compiled lane (a 2D problem of at most ``DENSE_LIMIT`` rows), the rows from which the
 products ``W x`` read ``W`` by its rows and the Newton blocks are factorised sparse, without
-pivoting, in a minimum-degree order of ``W`` (:attr:`AlartCurnier.elimination_places`), rather
+pivoting, in a minimum-degree order of ``W`` (``AlartCurnier.elimination_places``), rather
 than by LAPACK's dense LU: a 40-grain pile's blocks (about 80 of its 130 rows, 6 % of ``W``'s
 entries not zero) in 19 us against 33, the order 13 us once per solve; below about 96 rows the
 order and the sparse bookkeeping cost what they save (docs/records/benchmarks.md, "small
 problems' blocks factorised sparse")."""
+
+_NOT_BY_ROWS = (np.empty(0, dtype=np.uint32), np.empty(0, dtype=np.uint32), np.empty(0))
+_NO_PLACES = np.empty(0, dtype=np.int64)
+"""``W`` not by its rows, no elimination order: the compiled lane below :data:`STATIC_DENSE_ROWS`
+rows (shared, never written)."""
 
 FACTOR_PRODUCT_SHARE = 0.5
 """On the sparse lane of a 2D problem whose ``W = L^T L`` comes with its factor, the products
@@ -411,6 +416,11 @@ class AlartCurnier:
         that are not zero (:func:`~lubcontact.solvers.kernels.compressed_rows`) from
         :data:`STATIC_DENSE_ROWS` rows, for its products and blocks (a 40-grain pile's ``W`` is
         6 % full), else empty.
+    elimination_places : ndarray of int, shape (n_rows,) or (0,)
+        On the compiled lane from :data:`STATIC_DENSE_ROWS` rows, each row's place in a
+        minimum-degree elimination order of ``W``'s pattern, in which the Newton phases
+        factorise their blocks without pivoting
+        (:func:`~lubcontact.solvers.kernels.newton_direction_2d`); empty (LAPACK's LU) below.
     factor_arrays : tuple of ndarray or None
         On the sparse lane, the CSR arrays of ``W``'s factor ``L`` and of ``L^T`` and a work
         vector, where the products ``W x`` go through them (:meth:`product`); None otherwise.
@@ -490,8 +500,14 @@ class AlartCurnier:
             self.tangent_rows = projector.planar_tangent
         if self.compiled:
             self.W = np.ascontiguousarray(self.W)
-            self.w_arrays = kernels().compressed_rows(self.W) if self.n_rows >= STATIC_DENSE_ROWS \
-                else (np.empty(0, dtype=np.uint32), np.empty(0, dtype=np.uint32), np.empty(0))
+            self.w_arrays, self.elimination_places = _NOT_BY_ROWS, _NO_PLACES
+            if self.n_rows >= STATIC_DENSE_ROWS:
+                compiled = kernels()
+                self.w_arrays = compiled.compressed_rows(self.W)
+                order = ordering().approximate_minimum_degree(
+                    *compiled.symmetrised_pattern(*self.w_arrays[:2]))
+                self.elimination_places = np.empty(self.n_rows, dtype=np.int64)
+                self.elimination_places[order] = np.arange(self.n_rows)
 
     @cached_property
     def scaled_W(self) -> sp.csr_matrix | np.ndarray:
@@ -552,20 +568,6 @@ class AlartCurnier:
                                                     self.cone_n, self.tangent_rows, self.cone_mu,
                                                     self.unilateral, self.q_scale))
         return coulomb_error(unshifted, forces, velocity)
-
-    @cached_property
-    def elimination_places(self) -> np.ndarray:
-        """On the compiled lane, each row's place in a minimum-degree elimination order of
-        ``W``'s pattern, in which the Newton phases factorise their blocks without pivoting
-        (:func:`~lubcontact.solvers.kernels.newton_direction_2d`), where the problem has at
-        least :data:`STATIC_DENSE_ROWS` rows; empty (LAPACK's LU) otherwise."""
-        if not (self.compiled and self.w_arrays[0].size):
-            return np.empty(0, dtype=np.int64)
-        order = ordering().approximate_minimum_degree(
-            *kernels().symmetrised_pattern(*self.w_arrays[:2]))
-        places = np.empty(self.n_rows, dtype=np.int64)
-        places[order] = np.arange(self.n_rows)
-        return places
 
     @cached_property
     def sweeps_apply(self) -> bool:
@@ -1356,7 +1358,7 @@ def _compiled_phase(function: AlartCurnier, forces: np.ndarray, tol: float, max_
         function.W, function.w_arrays, function.q, function.rho, function.lower, function.upper,
         function.box, function.cone_n, function.tangent_rows, function.cone_mu, function.unilateral,
         function.sigma, function.center, function.q_scale, np.asarray(forces, dtype=float),
-        float(tol), int(max_iter), float(inner_tol), np.array(REGULARISATIONS, dtype=float),
+        float(tol), int(max_iter), float(inner_tol), REGULARISATIONS,
         function.elimination_places, STATIC_LU_BACKWARD_ERROR, LINE_SEARCH_MEMORY, ARMIJO,
         MAX_HALVINGS)
     status = FAILED if code == compiled.FAILED_CODE else \

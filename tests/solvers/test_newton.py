@@ -1138,7 +1138,7 @@ def test_the_compiled_phase_takes_the_same_steepest_descent_steps(name, monkeypa
     """Without regularisations to try, a singular or failed Newton system leaves the steepest
     descent direction ``-J^T phi``: with none at all, every step of both phases is one, the same."""
     problem = load_cases()[name].problem.normalized()
-    monkeypatch.setattr(newton, "REGULARISATIONS", ())
+    monkeypatch.setattr(newton, "REGULARISATIONS", np.zeros(0))
     cold = np.zeros(problem.n_rows)
     mine, theirs = compiled_and_numpy(
         problem, lambda function, unshifted: newton._newton_phase(function, unshifted, cold, 1e-10, 30))
