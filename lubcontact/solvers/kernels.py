@@ -1426,9 +1426,9 @@ def newton_direction_2d(W, w_arrays, rho, lower, upper, box, cone_n, cone_t, con
 
 
 @numba.njit(cache=True)
-def newton_phase_2d(W, w_arrays, q, rho, lower, upper, box, cone_n, cone_t, cone_mu, unilateral, sigma,
-                    center, q_scale, forces, tol, max_iter, inner_tol, regularisations, places,
-                    backward_error, memory, armijo, max_halvings):
+def newton_phase_2d(W, w_arrays, q, rho, lower, upper, box, cone_n, cone_t, cone_mu, unilateral,
+                    sigma, center, q_scale, forces, tol, max_iter, inner_tol, regularisations,
+                    places, backward_error, memory, armijo, max_halvings):
     """Newton iterations from ``forces`` until the FCLIB error is below ``tol``, ``|phi| <=
     inner_tol``, a failed line search or ``max_iter`` (:func:`newton._newton_phase`).
 
