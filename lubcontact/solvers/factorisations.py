@@ -143,7 +143,7 @@ class Factorisations:
                 if factors.nnz > FILL_GROWTH * self.fill * matrix.nnz:
                     self.ordered_rows = None        # the order no longer fits: order afresh
             else:
-                self.ordered_rows, self.positions = rows, _places(order)
+                self.ordered_rows, self.positions = rows, places_of(order)
                 self.fill = factors.nnz / matrix.nnz
         self.kept = [(matrix, factors, order), *self.kept][:KEPT_FACTORISATIONS]
         return self._solved(rhs)
@@ -230,9 +230,10 @@ def _permuted(matrix: sp.spmatrix, order: np.ndarray) -> tuple[sp.csc_matrix, fl
     return permuted, float(norm)
 
 
-def _places(order: np.ndarray) -> np.ndarray:
+def places_of(order: np.ndarray) -> np.ndarray:
     """Each row's place in an elimination ``order`` (its inverse permutation), 32-bit as
-    SuperLU's ``perm_c``, the form :class:`Factorisations` carries."""
+    SuperLU's ``perm_c``, the form :class:`Factorisations` carries (and the compiled lane's
+    ``AlartCurnier.elimination_places``)."""
     places = np.empty(order.size, dtype=np.int32)
     places[order] = np.arange(order.size, dtype=np.int32)
     return places

@@ -89,7 +89,7 @@ from .compiled_apgd import csr_arrays, joint_applies, joint_coulomb_apgd, operat
 from .compiled_modules import kernels, ordering
 from .coulomb import solve_coulomb
 from .dual_data import DENSE_LIMIT, dense_lu, dense_lu_solve, is_small
-from .factorisations import STATIC_LU_BACKWARD_ERROR, Factorisations
+from .factorisations import STATIC_LU_BACKWARD_ERROR, Factorisations, places_of
 from .gauss_seidel import Sweeps
 from .registry import ALL_CONES, NEWTON, register, solver_info
 from .result import CONVERGED, DIVERGED, FAILED, INACCURATE, MAX_ITER, MethodOutput
@@ -114,7 +114,7 @@ order and the sparse bookkeeping cost what they save (docs/records/benchmarks.md
 problems' blocks factorised sparse")."""
 
 _NOT_BY_ROWS = (np.empty(0, dtype=np.uint32), np.empty(0, dtype=np.uint32), np.empty(0))
-_NO_PLACES = np.empty(0, dtype=np.int64)
+_NO_PLACES = np.empty(0, dtype=np.int32)
 """``W`` not by its rows, no elimination order: the compiled lane below :data:`STATIC_DENSE_ROWS`
 rows (shared, never written)."""
 
@@ -416,7 +416,7 @@ class AlartCurnier:
         that are not zero (:func:`~lubcontact.solvers.kernels.compressed_rows`) from
         :data:`STATIC_DENSE_ROWS` rows, for its products and blocks (a 40-grain pile's ``W`` is
         6 % full), else empty.
-    elimination_places : ndarray of int, shape (n_rows,) or (0,)
+    elimination_places : ndarray of int32, shape (n_rows,) or (0,)
         On the compiled lane from :data:`STATIC_DENSE_ROWS` rows, each row's place in a
         minimum-degree elimination order of ``W``'s pattern, in which the Newton phases
         factorise their blocks without pivoting
@@ -506,8 +506,7 @@ class AlartCurnier:
                 self.w_arrays = compiled.compressed_rows(self.W)
                 order = ordering().approximate_minimum_degree(
                     *compiled.symmetrised_pattern(*self.w_arrays[:2]))
-                self.elimination_places = np.empty(self.n_rows, dtype=np.int64)
-                self.elimination_places[order] = np.arange(self.n_rows)
+                self.elimination_places = places_of(order)
 
     @cached_property
     def scaled_W(self) -> sp.csr_matrix | np.ndarray:
