@@ -249,21 +249,21 @@ def _corrected(problem: ConicProblem, layout: _Layout, candidate: np.ndarray, st
     g_n, g_t = _components(problem, layout, problem.gradient(candidate))
     b_n, b_t = _components(problem, layout, problem.offset)
     allowance = ROUNDING * (1 + np.abs(b_n) + np.linalg.norm(b_t, axis=1))
-    strength = ROUNDING * max(float(np.abs(candidate).max(initial=0.0)), 1.0)
+    force_allowance = ROUNDING * max(float(np.abs(candidate).max(initial=0.0)), 1.0)
     new_state, new_direction = state.copy(), direction.copy()
     friction, one_sided = layout.friction, ~layout.friction & (layout.sign != 0)
     # frictionless and mu = 0 contacts
-    new_state[one_sided & (state == HELD) & (layout.sign * normal < -strength)] = OPEN
+    new_state[one_sided & (state == HELD) & (layout.sign * normal < -force_allowance)] = OPEN
     new_state[one_sided & (state == OPEN) & (layout.sign * g_n < -allowance)] = HELD
     # friction contacts
     norm_t, norm_slip = np.linalg.norm(tangential, axis=1), np.linalg.norm(g_t, axis=1)
-    leaves = friction & (state == STICK) & (norm_t > layout.mu * normal + strength)
+    leaves = friction & (state == STICK) & (norm_t > layout.mu * normal + force_allowance)
     new_state[leaves] = SLIDE
     new_direction[leaves] = _unit(tangential[leaves], fallback=np.zeros_like(tangential[leaves]))
     sliding = friction & (state == SLIDE)
     along = np.sum(direction * g_t, axis=1)
     new_state[sliding & (along > allowance)] = STICK
-    new_state[friction & (state != OPEN) & (normal < -strength)] = OPEN
+    new_state[friction & (state != OPEN) & (normal < -force_allowance)] = OPEN
     new_state[friction & (state == OPEN) & (g_n - layout.mu * norm_slip < -allowance)] = STICK
     changed = bool(np.any(new_state != state))
     across = np.linalg.norm(g_t - along[:, None] * direction, axis=1) > allowance

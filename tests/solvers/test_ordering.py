@@ -140,7 +140,7 @@ def test_the_order_is_postordered():
             size[parent[k]] += size[k]
     for k in range(900):                            # the subtree of k: the places k - size + 1 .. k
         for j in range(k - size[k] + 1, k):
-            while j < k:
+            while 0 <= j < k:                       # up the tree: a root (-1) ends it too
                 j = parent[j]
             assert j == k
 
