@@ -39,7 +39,7 @@ y_T/|y_T|``), the Jacobian of ``phi`` is ``J = I - G + G diag(rho) W``. Rows
 where ``G`` vanishes (open contacts, zero-forced rows) are identity rows: their
 update is ``-phi`` and they are eliminated, so the LU factorisation (sparse above
 ``DENSE_LIMIT`` rows: :class:`~lubcontact.solvers.factorisations.Factorisations`) is of the
-active rows only. A 2D problem of up to ``DENSE_LIMIT`` rows runs each Newton phase in one
+active rows only. A 2D problem of up to :data:`COMPILED_LIMIT` rows runs each Newton phase in one
 compiled call on the dense ``W`` (:func:`~lubcontact.solvers.kernels.newton_phase_2d`, with
 the numpy phase's rules; from :data:`STATIC_DENSE_ROWS` rows with ``W`` also by its rows and
 each block factorised sparse, in a minimum-degree order of ``W``, LAPACK's LU the fallback);
@@ -104,8 +104,19 @@ REGULARISATIONS = np.array([0.0, 1e-10, 1e-8, 1e-6, 1e-4])
 """Diagonal shifts tried in turn when the factorised block of a Newton system is singular
 (:func:`_block_solve`; an array, as the compiled phases take it)."""
 
+COMPILED_LIMIT = 700
+"""The rows up to which a 2D problem takes the compiled lane (each Newton phase in one compiled
+call, :func:`~lubcontact.solvers.kernels.newton_phase_2d`) rather than the sparse lane; its
+proximal loop follows the same rules either way (:attr:`AlartCurnier.flow_step`), and both took
+the same Newton iterations on every step measured. Over 100 captured steps of developed flows
+(exact Coulomb, tol 1e-6), against ``DENSE_LIMIT`` (300): gluey 90 grains (298-344 rows) 0.50 of
+the time, gluey 150 grains (518-558 rows) 0.72, dry 150 grains (650-660 rows, without the joint
+phase, which costs more than it saves there: 42.5 ms per step against 51.5 with it) 0.78;
+settling piles of 200 and 230 grains (600-680 rows) 0.96-1.0, a gluey 250-grain flow (866-937
+rows) 1.0 (docs/records/benchmarks.md, "the compiled lane to 700 rows")."""
+
 STATIC_DENSE_ROWS = 96
-"""On the compiled lane (a 2D problem of at most ``DENSE_LIMIT`` rows), the rows from which the
+"""On the compiled lane (a 2D problem of at most :data:`COMPILED_LIMIT` rows), the rows from which the
 products ``W x`` read ``W`` by its rows and the Newton blocks are factorised sparse, without
 pivoting, in a minimum-degree order of ``W`` (``AlartCurnier.elimination_places``), rather
 than by LAPACK's dense LU: a 40-grain pile's blocks (about 80 of its 130 rows, 6 % of ``W``'s
@@ -150,18 +161,18 @@ granular file (measured on Siconos' and FCLIB's test problems). With a warm star
 weight is also tried from zero forces, second: in the first steps of a flow the previous step's
 forces can be a start from which every weight stalls where a cold start converges (two of three
 such gluey steps of the demo's flow)."""
-WARM_SPARSE_WEIGHT = 3e-3
+WARM_FLOW_WEIGHT = 3e-3
 """The first starting weight, in place of ``STRATEGIES[0]``, from a warm start on a 2D problem of
-the sparse lane (a flow's step, whose force network renews from step to step: the warm start's
+more than ``DENSE_LIMIT`` rows (a flow's step, whose force network renews from step to step: the warm start's
 FCLIB error about 2e-2 on developed gluey flows). Newton iterations summed over captured steps of
 developed flows (exact Coulomb, tol 1e-6), 1e-3 against 3e-3 against 1e-2: gluey 2 000 to
 12 000 grains (209 steps) 6 578, 5 767, 5 749; dry (113 steps) 2 646, 2 646, 2 511; the tests'
-creeping 300-grain bed 234, 222, and with 1e-2 a stall. Not on the dense lane, where the warm
+creeping 300-grain bed 234, 222, and with 1e-2 a stall. Not on smaller problems, where the warm
 starts of small piles near rest took 3-14 % more iterations with either
 (docs/records/benchmarks.md, "a firmer first weight on flows")."""
 WARM_DENSE_WEIGHT = 1e-4
 """The first starting weight, in place of ``STRATEGIES[0]``, from a warm start on a 2D problem of
-the dense lane (at most ``DENSE_LIMIT`` rows, a small system's step, near the previous one's
+at most ``DENSE_LIMIT`` rows (a small system's step, near the previous one's
 forces). Newton iterations summed over 150 captured steps of settling frictional piles of 10,
 20 and 40 grains (exact Coulomb, tol 1e-8), 1e-3 against 3e-4, 1e-4, 3e-5, 1e-5: 275, 273, 269,
 283, 339; 628, 583, 566, 509, 588; 1 005, 883, 918, 872, 899 (docs/records/benchmarks.md,
@@ -170,20 +181,20 @@ SIGMA_DECREASE = 10.0
 """The factor dividing the proximal weight after an outer iteration whose subproblem was solved
 (:func:`_proximal_newton`), but on gluey flows' steps (:data:`UNION_SIGMA_DECREASE`)."""
 UNION_SIGMA_DECREASE = 3.0
-"""The factor dividing the proximal weight after a solved subproblem on a 2D problem of the sparse
-lane with UNION contacts (a gluey flow's step, whose contacts change piece): more outer
-iterations, each in Newton's fast local phase. Newton iterations summed over captured steps of
-developed gluey flows (exact Coulomb, tol 1e-6), factor 10 against 3: 12 000 grains (70
+"""The factor dividing the proximal weight after a solved subproblem on a flow's step
+(``AlartCurnier.flow_step``) with UNION contacts (a gluey flow's step, whose contacts change
+piece): more outer iterations, each in Newton's fast local phase. Newton iterations summed over
+captured steps of developed gluey flows (exact Coulomb, tol 1e-6), factor 10 against 3: 12 000 grains (70
 consecutive steps) 2 712 against 2 027 (one of the two steps that stalled into the Gauss-Seidel
 fallback converges, the other needs one round of it instead of two), 8 000 (90 steps) 2 599
 against 2 489, 4 000 (80) 1 929 against 1 844, 2 000 (8) 179 against 172. Not on dry problems: the
 tests' creeping 300-grain bed stalls with 3 or 4 (converges with 5 and 10), and on dry flows the
 steps cost more time with 3 (docs/records/benchmarks.md, "a slower decrease of the proximal
-weight on gluey flows"); nor on the dense lane, where small piles near rest took 2-6 % more
+weight on gluey flows"); nor on small problems, where small piles near rest took 2-6 % more
 iterations with 5 or 3."""
 PLAIN_TRY = 5
 """Plain Newton iterations (no proximal weight), at most, tried first from a warm start on a
-small 2D problem (the dense lane) without friction cones, unless plain Newton's block is
+small 2D problem (``AlartCurnier.small``) without friction cones, unless plain Newton's block is
 singular by its count there (the plain try, :func:`_strategies`; then at most
 :data:`FINISH_ITERATIONS` more to round-off); :data:`STRATEGIES` follow from the warm start
 where they did not reach ``tol``. From the previous step's forces of a small frictionless pile
@@ -230,7 +241,7 @@ step than solving each subproblem to 1e-3 did, and no more on any of Siconos' an
 problems (docs/records/benchmarks.md, "newton-ac on developed flows"); 0.1 gained less, 0.5
 took up to 5 times more Newton iterations on some flow steps."""
 UNION_INNER_CAP = 5
-"""``INNER_CAP`` on a 2D problem of the sparse lane with UNION contacts (a gluey flow's step).
+"""``INNER_CAP`` on a flow's step (``AlartCurnier.flow_step``) with UNION contacts (a gluey flow's step).
 There the hard steps' subproblems at small weights end unsolved after all ten iterations, the
 iterates cycling on a kink, before the weight rises. Newton iterations summed over captured steps
 of developed gluey flows (exact Coulomb, tol 1e-6), caps 10, 6, 5, 4, 3: 4 000 grains (30
@@ -242,7 +253,7 @@ tests' creeping 300-grain bed ends ``inaccurate`` with a cap of 6 (docs/records/
 
 RECENTRE_WINDOW = 6
 RECENTRE_UNTIL = 100.0
-"""On a 2D problem of the sparse lane with friction cones (a flow's step) the proximal loop first
+"""On a flow's step (``AlartCurnier.flow_step``) with friction cones the proximal loop first
 takes one Newton iteration per subproblem, re-centred at its result at the same weight (a
 regularised Newton method), while its best FCLIB error halves (by :data:`STALL_FACTOR`) within
 ``RECENTRE_WINDOW`` iterations and is above ``RECENTRE_UNTIL`` ``tol`` (not at all from a start
@@ -398,16 +409,19 @@ class AlartCurnier:
     unilateral : ndarray of bool, shape (nf,)
         True where the normal row is ``max(y_n, 0)`` (COULOMB), False where it
         is bilateral (UNION: a box row with no bounds).
-    planar, compiled, compiled_rows : bool
+    planar, compiled, compiled_rows, dense : bool
         A 2D problem (its FCLIB error compiled); one whose Newton phases run compiled on the
-        dense ``W`` (at most ``DENSE_LIMIT`` rows); one on the sparse lane whose Newton systems,
-        Jacobian rows and residuals are assembled compiled (:mod:`~lubcontact.solvers.kernels`;
-        the residual in one pass, 6 % of a 12 000-grain gluey step).
-    flow_lane, convex : bool
-        A 2D problem of the sparse lane (a flow's step: :data:`WARM_SPARSE_WEIGHT`, and with
-        UNION contacts :data:`UNION_SIGMA_DECREASE` and :data:`UNION_INNER_CAP`; fixed here,
-        where ``compiled_rows`` is an implementation switch); one without UNION contacts
-        (``Cones.is_convex``).
+        dense ``W`` (at most :data:`COMPILED_LIMIT` rows); one on the sparse lane whose Newton
+        systems, Jacobian rows and residuals are assembled compiled
+        (:mod:`~lubcontact.solvers.kernels`; the residual in one pass, 6 % of a 12 000-grain gluey
+        step); one whose ``W`` is dense (compiled, or :attr:`small`). These choose how a rule is
+        carried out, never which rule.
+    small, flow_step, convex : bool
+        A small system's problem (at most ``DENSE_OPERATOR_LIMIT`` rows, in 2D ``DENSE_LIMIT``:
+        :data:`PLAIN_TRY`, :data:`WARM_DENSE_WEIGHT`, no :meth:`hyperstatic` test); a 2D one that
+        is not small (a flow's step: :data:`WARM_FLOW_WEIGHT`, :data:`RECENTRE_WINDOW`, and with
+        UNION contacts :data:`UNION_SIGMA_DECREASE` and :data:`UNION_INNER_CAP`); one without
+        UNION contacts (``Cones.is_convex``).
     w_arrays : tuple of ndarray
         ``W``'s CSR arrays with unsigned indices (:func:`~.compiled_apgd.csr_arrays`), for the
         kernels of the sparse lane (``compiled_rows``): numba checks every signed index for
@@ -444,11 +458,14 @@ class AlartCurnier:
         nc, dim_t = cones.count, cones.tangent_dim
         # a small problem is dense throughout (W, the Jacobian's rows, the LU): at <= 128 rows
         # the sparse products' fixed cost was most of a Newton iteration (dual_data); a 2D one
-        # of up to DENSE_LIMIT rows runs each Newton phase in one compiled call (kernels),
-        # 2-3x faster than the sparse lane at 190-300 rows (docs/records/benchmarks.md)
+        # of up to COMPILED_LIMIT rows runs each Newton phase in one compiled call (kernels),
+        # 2-3x faster than the sparse lane at 190-300 rows, 1.3-2x at 300-660 on flows
+        # (docs/records/benchmarks.md)
         self.planar = dim_t == 1
-        self.compiled = self.planar and problem.n_rows <= DENSE_LIMIT
-        self.dense = self.compiled or is_small(problem)
+        self.compiled = self.planar and problem.n_rows <= COMPILED_LIMIT
+        self.small = is_small(problem) or self.planar and problem.n_rows <= DENSE_LIMIT
+        self.flow_step = self.planar and not self.small
+        self.dense = self.compiled or self.small
         self.W = problem.dense_delassus if self.dense else problem.delassus.tocsr()
         self.q = problem.offset.copy()
         self.q[:nc] -= problem.shift
@@ -475,16 +492,15 @@ class AlartCurnier:
         # on the sparse lane, a 2D problem's Newton systems, Jacobian rows and residuals are
         # assembled compiled (a numpy sparse product G W and sum cost as much as the LU on
         # developed 2000-grain flows)
-        self.flow_lane = self.planar and not self.dense
+        self.compiled_rows = self.planar and not self.dense
         partner = None
-        if self.flow_lane:              # each friction contact's two rows, for carried orders
+        if self.compiled_rows:          # each friction contact's two rows, for carried orders
             partner = np.full(self.n_rows, -1, dtype=np.int64)
             partner[self.cone_n], partner[projector.planar_tangent] = \
                 projector.planar_tangent, self.cone_n
         self.factorisations = Factorisations(carry=self.planar, partner=partner)
         self.sweeps_kept = 0            # local sweeps whose forces were taken (swept)
         self.convex = cones.is_convex
-        self.compiled_rows = self.flow_lane
         self.factor_arrays = self.reduced_blocks = None
         self.delassus_factors = None, None
         if self.compiled_rows:
@@ -571,9 +587,9 @@ class AlartCurnier:
     @cached_property
     def sweeps_apply(self) -> bool:
         """Whether the proximal loop tries :meth:`swept` on this problem: one of the sparse lane
-        of a 2D problem (``flow_lane``) with friction cones and more than :data:`LOCAL_MIN_ROWS`
+        of a 2D problem (``compiled_rows``) with friction cones and more than :data:`LOCAL_MIN_ROWS`
         rows (a flow's step)."""
-        return bool(self.flow_lane and self.cone_n.size and self.n_rows > LOCAL_MIN_ROWS)
+        return bool(self.compiled_rows and self.cone_n.size and self.n_rows > LOCAL_MIN_ROWS)
 
     @cached_property
     def local_sweeps(self) -> Sweeps:
@@ -746,13 +762,13 @@ class AlartCurnier:
 
     def hyperstatic(self, forces: np.ndarray) -> bool:
         """Whether plain Newton's active block at ``forces`` is singular by its count of sticking
-        rows (:meth:`singular_by_count`), as on a pile at rest, on the sparse lane (False on the
-        dense lanes of small problems, where an iteration costs little). There the Newton
+        rows (:meth:`singular_by_count`), as on a pile at rest, on a problem that is not
+        :attr:`small` (False on small ones, where an iteration costs little). There the Newton
         iterations past ``tol`` do not converge quadratically:
         on a deposited 400-grain layer ten of them took the FCLIB error from 1.3e-7 to 1.0e-7,
         and at 12 800 grains each cost three times the whole joint phase
         (docs/records/benchmarks.md, "newton-ac on piles at rest")."""
-        return not self.dense and self.singular_at(forces)
+        return not self.small and self.singular_at(forces)
 
     def singular_at(self, forces: np.ndarray) -> bool:
         """Whether plain Newton's active block at ``forces`` is singular by its count of sticking
@@ -932,8 +948,8 @@ def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = 5
         weight tried (degenerate contacts, e.g. the 7002-contact Siconos
         granular file with its indefinite ``W``).
     joint : int
-        If > 0, on 2D convex cones (no UNION contact) of more than
-        :data:`~lubcontact.solvers.dual_data.DENSE_LIMIT` rows (the sparse lane): first the
+        If > 0, on 2D convex cones (no UNION contact) of more than :data:`COMPILED_LIMIT` rows
+        (the sparse lane): first the
         joint phase of the fixed point
         (:func:`~lubcontact.solvers.compiled_apgd.joint_coulomb_apgd`: APGD that updates the
         shift every ``joint`` iterations, to ``tol``, at most :data:`JOINT_START_ITERATIONS`
@@ -944,7 +960,8 @@ def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = 5
         and go on to :data:`JOINT_FINISH` ``tol``.
         0: none. On developed dry flows its forces (FCLIB error near ``tol``) leave Newton 2 to
         13 iterations instead of 15-28; on the compiled lane the APGD run costs more than the
-        Newton iterations it saves, and with UNION contacts it ends on the wrong piece of the
+        Newton iterations it saves (dry 150-grain flows, 650-660 rows: 51.5 ms per step with it
+        against 42.5 without), and with UNION contacts it ends on the wrong piece of the
         contacts that change piece, from where Newton took more iterations on 12 000-grain
         gluey steps (docs/records/benchmarks.md, "newton-ac from the joint phase").
     replay : MethodOutput, optional
@@ -1076,10 +1093,10 @@ def _strategies(function: AlartCurnier, unshifted: ConicProblem, forces: np.ndar
                 tol: float, max_iter: int) -> _Phase:
     """:func:`_proximal_newton` with each ``sigma`` of :data:`STRATEGIES` in turn, each from
     ``forces`` (a strategy's stalled iterate is a worse start than the warm start, measured),
-    the first also from zero forces when ``forces`` is not zero (from a warm start on the 2D
-    sparse lane the first from ``forces`` is :data:`WARM_SPARSE_WEIGHT` instead, on the 2D dense
-    lane :data:`WARM_DENSE_WEIGHT`, which ``STRATEGIES[0]`` then replaces among the later ones;
-    from zero it stays ``STRATEGIES[0]``), until one converges, the best
+    the first also from zero forces when ``forces`` is not zero (from a warm start on a flow's
+    step, ``AlartCurnier.flow_step``, the first from ``forces`` is :data:`WARM_FLOW_WEIGHT`
+    instead, on a small 2D problem :data:`WARM_DENSE_WEIGHT`, which ``STRATEGIES[0]`` then
+    replaces among the later ones; from zero it stays ``STRATEGIES[0]``), until one converges, the best
     error is within :data:`STRATEGY_GAP` of ``tol`` or ``max_iter`` Newton iterations are
     spent; the best phase is returned (the plain try's, if best, as stalled where it stopped
     short of ``tol``; its error counts in the test against :data:`STRATEGY_GAP`).
@@ -1092,13 +1109,13 @@ def _strategies(function: AlartCurnier, unshifted: ConicProblem, forces: np.ndar
     best, history, tried = None, [], []
     iterations = gradient_steps = proximal_steps = 0
     warm = bool(forces.any())
-    plain_try = PLAIN_TRY > 0 and max_iter > 2 * PLAIN_TRY and warm and function.dense \
+    plain_try = PLAIN_TRY > 0 and max_iter > 2 * PLAIN_TRY and warm and function.small \
         and function.planar and not function.cone_n.size and not function.singular_at(forces)
     starts = [(0.0, forces, True)] if plain_try else []
     first = STRATEGIES[0]
-    if warm and function.flow_lane:
-        first = WARM_SPARSE_WEIGHT
-    elif warm and function.planar and function.dense:
+    if warm and function.flow_step:
+        first = WARM_FLOW_WEIGHT
+    elif warm and function.planar and function.small:
         first = WARM_DENSE_WEIGHT
     starts += [(first, forces, False)] \
         + ([(STRATEGIES[0], np.zeros_like(forces), False)] if warm else []) \
@@ -1161,7 +1178,7 @@ def _proximal_newton(function: AlartCurnier, unshifted: ConicProblem, forces: np
     round-off); the polish to :data:`JOINT_FINISH` ``tol`` does not (that is its target).
     """
     scale = sigma * function.typical
-    gluey = function.flow_lane and not function.convex      # a gluey flow's step
+    gluey = function.flow_step and not function.convex      # a gluey flow's step
     decrease = UNION_SIGMA_DECREASE if gluey else SIGMA_DECREASE
     cap = UNION_INNER_CAP if gluey else INNER_CAP
     error, velocity = function.coulomb_error(unshifted, forces), None
@@ -1170,7 +1187,7 @@ def _proximal_newton(function: AlartCurnier, unshifted: ConicProblem, forces: np
     status = MAX_ITER
     floor, floor_error = 0.0, np.inf                # the largest weight that failed lately
     rule = _StallRule(tol)
-    recentring = RECENTRE_WINDOW > 0 and function.flow_lane and function.cone_n.size > 0 and scale > 0 \
+    recentring = RECENTRE_WINDOW > 0 and function.flow_step and function.cone_n.size > 0 and scale > 0 \
         and error > RECENTRE_UNTIL * tol
     while best[0] > tol and iterations < max_iter:
         if rule.stalled(history, best[0]):

@@ -90,6 +90,7 @@ def test_exact_rows_with_the_joint_phase_are_labelled_and_converge(tmp_path, mon
 
     monkeypatch.setattr(dual_data, "DENSE_OPERATOR_LIMIT", 0)
     monkeypatch.setattr(newton, "DENSE_LIMIT", 0)
+    monkeypatch.setattr(newton, "COMPILED_LIMIT", 0)
     layer = dry_layer(tmp_path)
     argv = ["--sizes", "24", "--layer", str(layer / "checkpoint.npz"), "--methods",
             "apgd-jacobi,newton-ac", "--joint", "5", "--steps", "2", "--cache", str(tmp_path),

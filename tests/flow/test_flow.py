@@ -254,6 +254,7 @@ def test_exact_runs_start_each_step_with_the_joint_phase_by_default(monkeypatch)
 
     monkeypatch.setattr(dual_data, "DENSE_OPERATOR_LIMIT", 0)
     monkeypatch.setattr(newton, "DENSE_LIMIT", 0)
+    monkeypatch.setattr(newton, "COMPILED_LIMIT", 0)
     scene = initial_scene(small_config())
     joint_iterations = {}
     for joint in (DEFAULT_JOINT, 0):

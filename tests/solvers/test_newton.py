@@ -164,7 +164,7 @@ def test_a_creeping_bed_converges_by_the_proximal_loop_without_fallback():
     settings = SolveSettings(method="newton-ac", tol=1e-6, exact_coulomb=True,
                              options={"fallback": None})
     result = settings.solve(problem, warm_start, warm_shift)
-    assert result.status == CONVERGED and result.info["strategies"] == [(newton.WARM_SPARSE_WEIGHT, "warm")]
+    assert result.status == CONVERGED and result.info["strategies"] == [(newton.WARM_FLOW_WEIGHT, "warm")]
     assert scaled_coulomb_error(problem, result.forces) <= 1e-6
 
 
@@ -255,7 +255,7 @@ def test_the_products_go_through_the_factor_where_it_has_under_half_the_entries_
     assert calls == []
     monkeypatch.setattr(newton, "FACTOR_PRODUCT_SHARE", 1.0)
     function = AlartCurnier(scaled)
-    assert function.flow_lane and function.factor_arrays is not None
+    assert function.compiled_rows and function.factor_arrays is not None
     vector = np.random.default_rng(3).normal(size=scaled.n_rows)
     expected = function.W @ vector
     assert np.abs(function.product(vector) - expected).max() <= 1e-13 * np.abs(expected).max()
@@ -303,7 +303,7 @@ def scripted_recentring(monkeypatch, errors):
     the centre's entries), and the result."""
     problem = siconos_test_problem("FrictionContactProblem00237.dat").normalized()
     function = AlartCurnier(problem)
-    assert function.flow_lane and function.cone_n.size
+    assert function.flow_step and function.cone_n.size
     start = np.zeros(problem.n_rows)
     centre = function.coulomb_error(problem, start)
     errors = iter(errors(centre))
@@ -719,6 +719,7 @@ def use_the_sparse_lane(monkeypatch):
 
     monkeypatch.setattr(dual_data, "DENSE_OPERATOR_LIMIT", 0)
     monkeypatch.setattr(newton, "DENSE_LIMIT", 0)
+    monkeypatch.setattr(newton, "COMPILED_LIMIT", 0)
 
 
 @pytest.mark.parametrize("name", ["gamma_states_gluey_coulomb", "mu_ten", "dt_large_friction",
@@ -1004,6 +1005,29 @@ def gluey_flow_function():
         problem = StepProblem.from_arrays(data).normalized()
         start = data["warm_start"] / problem.scaling.force
     return AlartCurnier(problem), start
+
+
+def test_the_lane_carries_out_a_flow_steps_rules_without_choosing_them(monkeypatch):
+    """The gluey + friction flow step (1 635 rows) solved on the sparse lane and, its limit raised,
+    on the compiled lane: the rules are a flow step's on both (its first weight, its re-centring,
+    its inner cap), so both take the same Newton iterations and strategies and reach tol. When
+    the compiled lane ended at DENSE_LIMIT rows, a rule of a flow's step was a rule of the sparse
+    lane, and the compiled lane above 300 rows ended a flow step at max_iter (one in 180)."""
+    with np.load(Path(__file__).parents[1] / "flow" / "data" / "gluey-flow-step.npz") as data:
+        problem = StepProblem.from_arrays(data)
+        guess = data["warm_start"]
+    lanes = {}
+    for limit in (newton.COMPILED_LIMIT, problem.n_rows):
+        monkeypatch.setattr(newton, "COMPILED_LIMIT", limit)
+        function = AlartCurnier(problem.normalized())
+        assert function.flow_step and function.compiled == (limit == problem.n_rows)
+        lanes[function.compiled] = solve_coulomb(problem, "newton-ac", tol=1e-6, warm_start=guess,
+                                                 fallback=None)
+    for result in lanes.values():
+        assert result.status == CONVERGED and scaled_coulomb_error(problem, result.forces) <= 1e-6
+    assert lanes[True].info["strategies"] == lanes[False].info["strategies"] \
+        == [(newton.WARM_FLOW_WEIGHT, "warm")]
+    assert lanes[True].info["newton_iterations"] == lanes[False].info["newton_iterations"]
 
 
 def test_a_reduced_block_rereads_from_w_only_the_rows_whose_columns_changed_their_fold(
@@ -1462,7 +1486,7 @@ def test_on_the_sparse_lane_the_carried_orders_pair_each_friction_contacts_two_r
     row goes after its contact's other row in a carried order); a dense problem's carry has no
     pairs."""
     function, _ = gluey_flow_function()
-    assert function.flow_lane and function.cone_n.size > 0
+    assert function.compiled_rows and function.cone_n.size > 0
     partner = function.factorisations.partner
     assert np.array_equal(partner[function.cone_n], function.tangent_rows)
     assert np.array_equal(partner[function.tangent_rows], function.cone_n)
@@ -1832,7 +1856,7 @@ def test_a_small_frictionless_problem_near_its_warm_start_is_solved_by_the_plain
     assert tight.status == CONVERGED and tight.strategies[0] == (newton.WARM_DENSE_WEIGHT, "warm")
     use_the_sparse_lane(monkeypatch)
     sparse = solve(original, "newton-ac", tol=1e-8, warm_start=near * chain.scaling.force)
-    assert sparse.success and sparse.info["strategies"] == [(newton.WARM_SPARSE_WEIGHT, "warm")]
+    assert sparse.success and sparse.info["strategies"] == [(newton.WARM_FLOW_WEIGHT, "warm")]
 
 
 def test_plain_newton_as_a_strategy_has_no_finish():
@@ -1844,9 +1868,9 @@ def test_plain_newton_as_a_strategy_has_no_finish():
     assert result.iterations == 2 and result.info["error"] > newton.ROUND_OFF
 
 
-def test_the_first_weight_from_a_warm_start_depends_on_the_lane(settling_step, monkeypatch):
-    """From a warm start the strategies begin at WARM_DENSE_WEIGHT on the 2D dense lane (a small
-    system's step) and at WARM_SPARSE_WEIGHT on the sparse lane (a flow's step), then try
+def test_the_first_weight_from_a_warm_start_depends_on_the_size(settling_step, monkeypatch):
+    """From a warm start the strategies begin at WARM_DENSE_WEIGHT on a small 2D problem (a small
+    system's step) and at WARM_FLOW_WEIGHT on a larger one (a flow's step), then try
     STRATEGIES[0] from zero forces and the rest of STRATEGIES from the warm start, the first
     weight's place among them taken by STRATEGIES[0]: each start once. From zero forces they
     begin at STRATEGIES[0]."""
@@ -1863,7 +1887,7 @@ def test_the_first_weight_from_a_warm_start_depends_on_the_lane(settling_step, m
 
     monkeypatch.setattr(newton, "_proximal_newton", stalled)
     dense = AlartCurnier(scaled)
-    assert dense.planar and dense.dense and not dense.flow_lane
+    assert dense.planar and dense.small and not dense.flow_step
     newton._strategies(dense, unshifted, warm, 1e-8, 200)
     assert tried == [(newton.WARM_DENSE_WEIGHT, "warm"), (1e-3, "cold"), (0.0, "warm"), (1e-3, "warm")]
     tried.clear()
@@ -1872,9 +1896,9 @@ def test_the_first_weight_from_a_warm_start_depends_on_the_lane(settling_step, m
     tried.clear()
     use_the_sparse_lane(monkeypatch)
     sparse = AlartCurnier(scaled)
-    assert sparse.flow_lane
+    assert sparse.flow_step
     newton._strategies(sparse, unshifted, warm, 1e-8, 200)
-    assert tried == [(newton.WARM_SPARSE_WEIGHT, "warm"), (1e-3, "cold"), (0.0, "warm"), (1e-4, "warm")]
+    assert tried == [(newton.WARM_FLOW_WEIGHT, "warm"), (1e-3, "cold"), (0.0, "warm"), (1e-4, "warm")]
 
 
 def test_a_best_plain_try_short_of_tol_is_reported_stalled():
