@@ -209,7 +209,15 @@ STRATEGY_GAP = 100.0
 phase that stalled within two decades of ``tol`` goes to the fallbacks, whose Gauss-Seidel
 sweeps and Newton polish finish it. On the costliest steps of a creeping 2000-grain bed the
 first strategy stalled at 3-9 ``tol`` and the three others at 4 to 4000 ``tol``, spending
-two thirds of the step (docs/records/benchmarks.md, "newton-ac on creeping beds")."""
+two thirds of the step (docs/records/benchmarks.md, "newton-ac on creeping beds"). Not on the
+compiled lane (2D, at most :data:`COMPILED_LIMIT` rows), whose Newton iterations cost about ten
+Gauss-Seidel sweeps: there every strategy is tried before the fallbacks. On 100 captured steps
+each of developed flows of 90 to 150 grains (exact Coulomb, tol 1e-6) the steps that went to
+Gauss-Seidel after the first strategy (1 to 5 per flow; its rounds wandered, up to 20 000 sweeps
+and 1.1 s) took 80-1 100 ms, the second strategy converging on most of them in 25-135 ms: the
+flows' 100 steps took 0.57 (gluey, 90 grains), 0.71 (dry, 90), 0.76 (gluey, 120), 0.94 and 1.0
+(gluey and dry, 150) of the time; on one step every strategy stalled before Gauss-Seidel
+(2.2 times the time) (docs/records/benchmarks.md, "every strategy on the compiled lane")."""
 SIGMA_MIN = 1e-10
 """Floor of the proximal weight, in units of the median diagonal of ``W``."""
 SIGMA_MAX = 1e10
@@ -415,7 +423,8 @@ class AlartCurnier:
         systems, Jacobian rows and residuals are assembled compiled
         (:mod:`~lubcontact.solvers.kernels`; the residual in one pass, 6 % of a 12 000-grain gluey
         step); one whose ``W`` is dense (compiled, or :attr:`small`). These choose how a rule is
-        carried out, never which rule.
+        carried out, not which rule, but for :data:`STRATEGY_GAP`, which weighs a Newton
+        iteration's cost.
     small, flow_step, convex : bool
         A small system's problem (at most ``DENSE_OPERATOR_LIMIT`` rows, in 2D ``DENSE_LIMIT``:
         :data:`PLAIN_TRY`, :data:`WARM_DENSE_WEIGHT`, no :meth:`hyperstatic` test); a 2D one that
@@ -1096,10 +1105,11 @@ def _strategies(function: AlartCurnier, unshifted: ConicProblem, forces: np.ndar
     the first also from zero forces when ``forces`` is not zero (from a warm start on a flow's
     step, ``AlartCurnier.flow_step``, the first from ``forces`` is :data:`WARM_FLOW_WEIGHT`
     instead, on a small 2D problem :data:`WARM_DENSE_WEIGHT`, which ``STRATEGIES[0]`` then
-    replaces among the later ones; from zero it stays ``STRATEGIES[0]``), until one converges, the best
-    error is within :data:`STRATEGY_GAP` of ``tol`` or ``max_iter`` Newton iterations are
-    spent; the best phase is returned (the plain try's, if best, as stalled where it stopped
-    short of ``tol``; its error counts in the test against :data:`STRATEGY_GAP`).
+    replaces among the later ones; from zero it stays ``STRATEGIES[0]``), until one converges,
+    ``max_iter`` Newton iterations are spent or (off the compiled lane) the best error is within
+    :data:`STRATEGY_GAP` of ``tol``; the best phase is returned (the plain try's, if best, as
+    stalled where it stopped short of ``tol``; its error counts in the test against
+    :data:`STRATEGY_GAP`).
 
     First, on a small 2D problem without friction cones, from a warm start at which plain
     Newton's block is not singular by its count (:meth:`AlartCurnier.singular_at`), and where
@@ -1133,8 +1143,8 @@ def _strategies(function: AlartCurnier, unshifted: ConicProblem, forces: np.ndar
         history.extend(phase.history if not history else phase.history[1:])
         if best is None or phase.error < best.error:
             best = phase
-        if phase.status == CONVERGED or iterations >= max_iter \
-                or (not is_plain_try and best.error <= STRATEGY_GAP * tol):
+        if phase.status == CONVERGED or iterations >= max_iter or not function.compiled \
+                and not is_plain_try and best.error <= STRATEGY_GAP * tol:
             break
     return _Phase(forces=best.forces, status=best.status, iterations=iterations, error=best.error,
                   history=np.asarray(history), gradient_steps=gradient_steps,
