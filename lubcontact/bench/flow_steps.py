@@ -361,7 +361,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--joint", type=int, default=0,
                         help="exact friction starting with the fixed point's joint phase (the "
                              "first-order methods and newton-ac, which runs it on steps of more "
-                             "than 300 rows without UNION contacts), shift updated every JOINT "
+                             "than 700 rows without UNION contacts), shift updated every JOINT "
                              "iterations inside one APGD run (0: none; default 0)")
     parser.add_argument("--no-cold", dest="cold", action="store_false",
                         help="do not solve a step from zero forces (no warm_cold column): "

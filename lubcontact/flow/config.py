@@ -31,7 +31,7 @@ with its fixed point, every step at FCLIB error <= 1e-6 where apgd's end at ``ma
 DEFAULT_JOINT = 5
 """``joint`` of runs with exact Coulomb friction: each step starts with the fixed point's joint
 phase (APGD updating the shift every 5 iterations) where it applies: before ``newton-ac``'s
-Newton phases on steps of more than ``DENSE_LIMIT`` rows without UNION contacts, on developed
+Newton phases on steps of more than ``COMPILED_LIMIT`` (700) rows without UNION contacts, on developed
 dry flows of 400 to 12 800 grains 1.7-3.1x faster per step (FCLIB errors at most 1.5e-10),
 on the first steps of a tilted bed as fast; before the outer loop of any other solver's fixed
 point on 2D steps, as its starting forces and shift (a gluey 2 000-grain flow, ``apgd-jacobi``:

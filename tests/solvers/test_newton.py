@@ -725,7 +725,7 @@ def use_the_sparse_lane(monkeypatch):
 @pytest.mark.parametrize("name", ["gamma_states_gluey_coulomb", "mu_ten", "dt_large_friction",
                                   "tetrahedron_3d_friction"])
 def test_small_problems_take_the_dense_lane_with_the_same_newton_steps(name, monkeypatch):
-    """At most DENSE_OPERATOR_LIMIT rows (2D: DENSE_LIMIT, compiled) the Jacobian's rows are
+    """At most DENSE_OPERATOR_LIMIT rows (2D: COMPILED_LIMIT, compiled) the Jacobian's rows are
     dense: the same values as the sparse rows, and the same Newton iterations to the same forces
     (zero limits force the sparse lane)."""
     from lubcontact.solvers import dual_data
@@ -1970,12 +1970,27 @@ def test_a_joint_phase_worse_than_the_warm_start_does_not_start_newton(settling_
 
 
 def test_the_compiled_lane_skips_the_joint_start(settling_step):
-    """At most DENSE_LIMIT rows the compiled Newton phases cost less than the APGD run."""
+    """On the compiled lane (at most COMPILED_LIMIT rows) the Newton phases cost less than the
+    APGD run."""
     problem, _ = settling_step
     plain = solve_coulomb(problem, "newton-ac", tol=1e-9)
     joint = solve_coulomb(problem, "newton-ac", tol=1e-9, joint=5)
-    assert problem.n_rows <= newton.DENSE_LIMIT and joint.joint_iterations == 0
+    assert problem.n_rows <= newton.COMPILED_LIMIT and joint.joint_iterations == 0
     np.testing.assert_array_equal(joint.forces, plain.forces)
+
+
+def test_the_joint_start_runs_only_above_the_compiled_lane(monkeypatch):
+    """Siconos' 460-row granular step (2D, no UNION contact) is on the compiled lane, where the
+    joint phase cost more than it saved on dry flows of 650-660 rows: none runs; on the sparse
+    lane (its limit lowered) it runs, as it did at this size before the compiled lane reached
+    700 rows. Both converge."""
+    problem = siconos_test_problem("gfc2d_granularflowonwall_00230_00206.dat")
+    assert newton.DENSE_LIMIT < problem.n_rows <= newton.COMPILED_LIMIT and problem.cones.is_convex
+    compiled = solve_coulomb(problem, "newton-ac", tol=1e-8, joint=5)
+    assert compiled.status == CONVERGED and compiled.joint_iterations == 0
+    monkeypatch.setattr(newton, "COMPILED_LIMIT", 0)
+    sparse = solve_coulomb(problem, "newton-ac", tol=1e-8, joint=5)
+    assert sparse.status == CONVERGED and sparse.joint_iterations > 0
 
 
 def test_a_native_coulomb_method_without_a_joint_option_is_not_given_one():
