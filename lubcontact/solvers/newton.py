@@ -116,8 +116,8 @@ settling piles of 200 and 230 grains (600-680 rows) 0.96-1.0, a gluey 250-grain 
 rows) 1.0 (docs/records/benchmarks.md, "the compiled lane to 700 rows")."""
 
 STATIC_DENSE_ROWS = 96
-"""On the compiled lane (a 2D problem of at most :data:`COMPILED_LIMIT` rows), the rows from which the
-products ``W x`` read ``W`` by its rows and the Newton blocks are factorised sparse, without
+"""On the compiled lane (a 2D problem of at most :data:`COMPILED_LIMIT` rows), the rows from which
+the products ``W x`` read ``W`` by its rows and the Newton blocks are factorised sparse, without
 pivoting, in a minimum-degree order of ``W`` (``AlartCurnier.elimination_places``), rather
 than by LAPACK's dense LU: a 40-grain pile's blocks (about 80 of its 130 rows, 6 % of ``W``'s
 entries not zero) in 19 us against 33, the order 13 us once per solve; below about 96 rows the
@@ -217,7 +217,8 @@ Gauss-Seidel after the first strategy (1 to 5 per flow; its rounds wandered, up 
 and 1.1 s) took 80-1 100 ms, the second strategy converging on most of them in 25-135 ms: the
 flows' 100 steps took 0.57 (gluey, 90 grains), 0.71 (dry, 90), 0.76 (gluey, 120), 0.94 and 1.0
 (gluey and dry, 150) of the time; on one step every strategy stalled before Gauss-Seidel
-(2.2 times the time) (docs/records/benchmarks.md, "every strategy on the compiled lane")."""
+(2.2 times the time) (docs/records/benchmarks.md, "the compiled lane to 700 rows, and every
+strategy before the fallbacks there")."""
 SIGMA_MIN = 1e-10
 """Floor of the proximal weight, in units of the median diagonal of ``W``."""
 SIGMA_MAX = 1e10
