@@ -62,13 +62,13 @@ DENSE_LIMIT = 300
 block of a Newton system (its active rows), and the exact finish's ``W`` (all its rows, kept
 dense for the solve's attempts). A dense LU of 100-250 rows costs a fraction of a sparse
 factorisation's set-up (measured: 0.6 ms per SuperLU factorisation of 122 rows). It is also
-the size up to which ``newton-ac`` solves a 2D problem on the dense ``W``, each Newton phase in
-one compiled call (:func:`.kernels.newton_phase_2d`): on settling piles 2-3x faster than the sparse lane
-at 190-300 rows, even at about 400, slower from about 490."""
+the size up to which ``newton-ac`` treats a 2D problem as a small system's (its rules:
+``AlartCurnier.small`` in :mod:`.newton`); its compiled lane goes on to ``COMPILED_LIMIT``
+rows there."""
 DENSE_OPERATOR_LIMIT = 128
 """Rows up to which :func:`prepare` builds ``W_it`` from the problem's dense ``W``
 (``dense_delassus``, one BLAS product) and applies it as a dense product, and ``nsgs`` and
-``newton-ac`` (in 2D up to :data:`DENSE_LIMIT`) work on the dense ``W``: on such sizes the
+``newton-ac`` (in 2D up to its ``COMPILED_LIMIT``) work on the dense ``W``: on such sizes the
 sparse set-up (transposes, products, scaled copies; about 10 us of fixed cost each) was most
 of a warm-started solve (a 59-row step: 230 of 675 us). The dense product costs ``n_rows^2
 n_dof``: on settling piles (tol 1e-8, same problem, same process) ``apgd-jacobi`` gained 5-20 %
@@ -167,7 +167,7 @@ class DualData:
 def is_small(problem: ConicProblem) -> bool:
     """Whether ``problem`` takes the dense lane (at most :data:`DENSE_OPERATOR_LIMIT` rows): the
     rule :func:`prepare`, ``nsgs`` and ``newton-ac`` follow (``newton-ac`` takes 2D problems
-    of up to :data:`DENSE_LIMIT` rows to its compiled lane)."""
+    of up to its ``COMPILED_LIMIT`` rows to its compiled lane)."""
     return problem.n_rows <= DENSE_OPERATOR_LIMIT
 
 
