@@ -360,9 +360,10 @@ def main(argv: list[str] | None = None) -> int:
                              "themselves) (default: exact)")
     parser.add_argument("--joint", type=int, default=0,
                         help="exact friction starting with the fixed point's joint phase (the "
-                             "first-order methods and newton-ac, which runs it on steps of more "
-                             "than 700 rows without UNION contacts), shift updated every JOINT "
-                             "iterations inside one APGD run (0: none; default 0)")
+                             "first-order methods and newton-ac, which runs it on steps without "
+                             "UNION contacts: first above 700 rows, after stalled "
+                             "strategies up to 700), shift updated every JOINT iterations inside "
+                             "one APGD run (0: none; default 0)")
     parser.add_argument("--no-cold", dest="cold", action="store_false",
                         help="do not solve a step from zero forces (no warm_cold column): "
                              "newton-ac's solve from zero on a 10^5-grain pile at rest "

@@ -973,7 +973,15 @@ def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = 5
         Newton iterations it saves (dry 150-grain flows, 650-660 rows: 51.5 ms per step with it
         against 42.5 without), and with UNION contacts it ends on the wrong piece of the
         contacts that change piece, from where Newton took more iterations on 12 000-grain
-        gluey steps (docs/records/benchmarks.md, "newton-ac from the joint phase").
+        gluey steps (docs/records/benchmarks.md, "newton-ac from the joint phase"). On the
+        compiled lane it runs only where the first weight has stalled from the warm start and
+        from zero forces, from the warm start, and the strategies go on from its forces where
+        they are better (:func:`_strategies`, ``strategies`` labelled ``"joint"``): on
+        developed dry 140- and 150-grain flows the steps on which every strategy stalled went
+        to Gauss-Seidel, 10-30 times a usual step (docs/records/benchmarks.md, "the joint
+        phase after stalled strategies"). Not with UNION contacts there either: after the
+        first strategy, with the contacts on the pieces of the warm start, it cost gluey
+        90-grain flows more time.
     replay : MethodOutput, optional
         Returned as is (see ``native_coulomb`` in :class:`~lubcontact.solvers.SolverInfo`).
 
@@ -1008,14 +1016,15 @@ def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = 5
     unshifted = problem.with_shift(np.zeros(problem.cones.count)) if problem.shift.any() else problem
     forces = np.zeros(problem.n_rows) if warm_start is None else np.array(warm_start, dtype=float)
     setup_time = time.perf_counter() - start
-    joint_iterations, joined_start = 0, False
-    if joint > 0 and not function.dense and problem.cones.is_convex and joint_applies(problem.cones):
-        joined, joint_iterations = joint_coulomb_apgd(problem, forces, tol, JOINT_START_ITERATIONS,
-                                                      joint)
-        joined_start = function.coulomb_error(unshifted, joined) < function.coulomb_error(unshifted, forces)
-        if joined_start:
-            forces = joined
-    phase = _strategies(function, unshifted, forces, tol, max_iter)
+    joint_start = _JointStart(problem, function, unshifted, tol, joint) \
+        if joint > 0 and problem.cones.is_convex and joint_applies(problem.cones) else None
+    if joint_start is not None and not function.dense:
+        joined = joint_start(forces)
+        forces = forces if joined is None else joined
+    phase = _strategies(function, unshifted, forces, tol, max_iter,
+                        rescue=joint_start if function.dense else None)
+    joint_iterations, joined_start = (0, False) if joint_start is None else \
+        (joint_start.iterations, joint_start.taken)
     forces, iterations, history = phase.forces, phase.iterations + joint_iterations, phase.history
     status = INACCURATE if phase.status == STALLED else phase.status
     info = {"newton_iterations": phase.iterations, "gradient_steps": phase.gradient_steps,
@@ -1100,7 +1109,7 @@ def fallback_chain(cones: Cones, fallback: str | None) -> tuple[str, ...]:
 
 
 def _strategies(function: AlartCurnier, unshifted: ConicProblem, forces: np.ndarray,
-                tol: float, max_iter: int) -> _Phase:
+                tol: float, max_iter: int, rescue: _JointStart | None = None) -> _Phase:
     """:func:`_proximal_newton` with each ``sigma`` of :data:`STRATEGIES` in turn, each from
     ``forces`` (a strategy's stalled iterate is a worse start than the warm start, measured),
     the first also from zero forces when ``forces`` is not zero (from a warm start on a flow's
@@ -1116,28 +1125,30 @@ def _strategies(function: AlartCurnier, unshifted: ConicProblem, forces: np.ndar
     Newton's block is not singular by its count (:meth:`AlartCurnier.singular_at`), and where
     ``max_iter`` leaves the strategies room (more than twice :data:`PLAIN_TRY`), the plain try:
     at most :data:`PLAIN_TRY` plain Newton iterations from ``forces``, finished to round-off as a
-    proximal loop is (:data:`FINISH_ITERATIONS`); plain Newton as a strategy has no finish."""
+    proximal loop is (:data:`FINISH_ITERATIONS`); plain Newton as a strategy has no finish.
+
+    ``rescue`` (the joint phase, on the dense lanes: :class:`_JointStart`) is called once, with
+    the warm start, where the first weight has stalled from it and from zero forces; where it
+    returns forces, the first weight and the others start from them instead (labelled
+    ``"joint"`` in ``strategies``), as on the sparse lane from the joint phase's forces."""
     best, history, tried = None, [], []
     iterations = gradient_steps = proximal_steps = 0
     warm = bool(forces.any())
     plain_try = PLAIN_TRY > 0 and max_iter > 2 * PLAIN_TRY and warm and function.small \
         and function.planar and not function.cone_n.size and not function.singular_at(forces)
-    starts = [(0.0, forces, True)] if plain_try else []
-    first = STRATEGIES[0]
-    if warm and function.flow_step:
-        first = WARM_FLOW_WEIGHT
-    elif warm and function.planar and function.small:
-        first = WARM_DENSE_WEIGHT
-    starts += [(first, forces, False)] \
-        + ([(STRATEGIES[0], np.zeros_like(forces), False)] if warm else []) \
-        + [(STRATEGIES[0] if sigma == first else sigma, forces, False) for sigma in STRATEGIES[1:]]
-    for sigma, start, is_plain_try in starts:
+    starts = ([(0.0, forces, True)] if plain_try else []) + _starts(function, forces)
+    rescue_at = len(starts) - len(STRATEGIES) + 1       # before the other weights
+    label = "warm" if warm else "cold"
+    index = 0
+    while index < len(starts):
+        sigma, start, is_plain_try = starts[index]
+        index += 1
         budget = PLAIN_TRY if is_plain_try else max_iter - iterations
         phase = _proximal_newton(function, unshifted, start, tol, budget, sigma,
                                  finish=sigma > 0 or is_plain_try)
         if is_plain_try and phase.status != CONVERGED:
             phase.status = STALLED                  # its cap, not the solve's max_iter
-        tried.append((sigma, "warm" if start is forces and warm else "cold"))
+        tried.append((sigma, label if start is forces else "cold"))
         iterations += phase.iterations
         gradient_steps += phase.gradient_steps
         proximal_steps += phase.proximal_steps
@@ -1147,9 +1158,52 @@ def _strategies(function: AlartCurnier, unshifted: ConicProblem, forces: np.ndar
         if phase.status == CONVERGED or iterations >= max_iter or not function.compiled \
                 and not is_plain_try and best.error <= STRATEGY_GAP * tol:
             break
+        if rescue is not None and index == rescue_at:
+            joined = rescue(forces)
+            if joined is not None:
+                forces, label = joined, "joint"
+                starts[index:] = _starts(function, joined, cold=False)
     return _Phase(forces=best.forces, status=best.status, iterations=iterations, error=best.error,
                   history=np.asarray(history), gradient_steps=gradient_steps,
                   proximal_steps=proximal_steps, strategies=tried)
+
+
+def _starts(function: AlartCurnier, forces: np.ndarray, cold: bool = True
+            ) -> list[tuple[float, np.ndarray, bool]]:
+    """The strategies of :func:`_strategies` from ``forces``, in turn: ``(sigma, start, False)``
+    (the plain try aside); without the first weight from zero forces unless ``cold``."""
+    warm = bool(forces.any())
+    first = STRATEGIES[0]
+    if warm and function.flow_step:
+        first = WARM_FLOW_WEIGHT
+    elif warm and function.planar and function.small:
+        first = WARM_DENSE_WEIGHT
+    return [(first, forces, False)] \
+        + ([(STRATEGIES[0], np.zeros_like(forces), False)] if warm and cold else []) \
+        + [(STRATEGIES[0] if sigma == first else sigma, forces, False) for sigma in STRATEGIES[1:]]
+
+
+@dataclass
+class _JointStart:
+    """The joint phase of ``newton_alart_curnier`` (``joint``) as a start: called with forces,
+    :func:`~lubcontact.solvers.compiled_apgd.joint_coulomb_apgd` from them (at most
+    :data:`JOINT_START_ITERATIONS` iterations, the shift updated every ``every``), its forces
+    where their FCLIB error is below that of the forces given (``taken``), else None."""
+
+    problem: ConicProblem
+    function: AlartCurnier
+    unshifted: ConicProblem
+    tol: float
+    every: int
+    iterations: int = 0
+    taken: bool = False
+
+    def __call__(self, forces: np.ndarray) -> np.ndarray | None:
+        joined, self.iterations = joint_coulomb_apgd(self.problem, forces, self.tol,
+                                                     JOINT_START_ITERATIONS, self.every)
+        self.taken = self.function.coulomb_error(self.unshifted, joined) \
+            < self.function.coulomb_error(self.unshifted, forces)
+        return joined if self.taken else None
 
 
 def _proximal_newton(function: AlartCurnier, unshifted: ConicProblem, forces: np.ndarray,

@@ -1050,6 +1050,24 @@ def test_on_the_compiled_lane_every_strategy_comes_before_the_fallbacks(monkeypa
     assert 1e-6 < alone.info["error"] <= STRATEGY_GAP * 1e-6 and alone.status == INACCURATE
 
 
+def test_on_the_compiled_lane_the_joint_phase_rescues_stalled_strategies():
+    """A dry flow's step (654 rows, tests/solvers/data/README.md) on which every Newton strategy
+    stalled and Gauss-Seidel's rounds took 8 000 sweeps (1.5 s, 30 times a usual step): with
+    ``joint`` (a flow run's) the joint phase runs once the first weight has stalled from the
+    warm start and from zero forces, and the first weight from its forces converges, without
+    fallback."""
+    with np.load(Path(__file__).parent / "data" / "dry-150-step.npz") as data:
+        problem = StepProblem.from_arrays(data)
+        guess, shift = data["warm_start"], data["warm_shift"]
+    assert AlartCurnier(problem.normalized()).compiled and problem.cones.is_convex
+    result = solve_coulomb(problem, "newton-ac", tol=1e-6, warm_start=guess, shift=shift, joint=5)
+    assert result.status == CONVERGED and "fallbacks" not in result.info
+    assert result.info["strategies"] == [(newton.WARM_FLOW_WEIGHT, "warm"), (1e-3, "cold"),
+                                         (newton.WARM_FLOW_WEIGHT, "joint")]
+    assert 0 < result.info["joint_iterations"] <= newton.JOINT_START_ITERATIONS
+    assert scaled_coulomb_error(problem, result.forces) <= 1e-6
+
+
 def test_a_reduced_block_rereads_from_w_only_the_rows_whose_columns_changed_their_fold(
         monkeypatch):
     """The sparse lane's reduced Newton blocks built from the last block's rows (_ReducedBlocks
