@@ -33,11 +33,12 @@ DEFAULT_JOINT = 5
 phase (APGD updating the shift every 5 iterations) where it applies: before ``newton-ac``'s
 Newton phases on steps of more than ``COMPILED_LIMIT`` (700) rows without UNION contacts, on developed
 dry flows of 400 to 12 800 grains 1.7-3.1x faster per step (FCLIB errors at most 1.5e-10),
-on the first steps of a tilted bed as fast; on smaller steps without UNION contacts where
-``newton-ac``'s first Newton strategies have stalled (the steps that went to Gauss-Seidel's
-fallback: ``newton_alart_curnier``'s ``joint``); before the outer loop of any other solver's fixed
-point on 2D steps, as its starting forces and shift (a gluey 2 000-grain flow, ``apgd-jacobi``:
-0.33 against 0.48 s per step) (docs/records/benchmarks.md, "newton-ac from the joint phase")."""
+on the first steps of a tilted bed as fast (on smaller steps without UNION contacts it runs
+only where ``newton-ac``'s first Newton strategies have stalled, on the steps that went to
+Gauss-Seidel's fallback: ``newton_alart_curnier``'s ``joint``); before the outer loop of any
+other solver's fixed point on 2D steps, as its starting forces and shift (a gluey 2 000-grain
+flow, ``apgd-jacobi``: 0.33 against 0.48 s per step) (docs/records/benchmarks.md, "newton-ac
+from the joint phase")."""
 REFERENCE_SOLVER = "clarabel"
 """The default otherwise (always registered)."""
 
