@@ -1003,7 +1003,7 @@ def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = 5
         loop lowered the error and were taken: :data:`LOCAL_ROWS`), ``gradient_steps``
         (steepest-descent steps taken where the Newton direction failed),
         ``proximal_steps`` and ``strategies`` (the starting weights tried, each with
-        its start, ``"warm"`` or ``"cold"``),
+        its start, ``"warm"``, ``"cold"`` or ``"joint"``: the joint phase's forces),
         ``newton_status`` and ``error`` (the Newton phase's FCLIB error), and
         ``fallbacks`` (the methods run), ``fallback_iterations`` (summed) and
         ``fallback_status`` (the last call's: for a fallback run in rounds,
