@@ -309,7 +309,13 @@ way, 3.0e-7 at most against 1.9e-7, in 15 % fewer Newton iterations (dry: 2.3e-7
 38 % fewer) (docs/records/benchmarks.md, "local Gauss-Seidel sweeps")."""
 
 POLISH_ITERATIONS = 10
-"""Proximal Newton iterations tried from the fallback's result (kept where they lower the error)."""
+"""Proximal Newton iterations of the finish from the joint phase's forces (:data:`JOINT_FINISH`)."""
+FALLBACK_POLISH_ITERATIONS = 30
+"""Proximal Newton iterations tried from each fallback call's forces (each round of a fallback run
+in rounds, :func:`fallback_rounds`), kept where they lower the error: a round whose forces Newton
+finishes ends the chain. On captured steps of developed flows on which every strategy stalled
+(docs/records/benchmarks.md, "a longer polish after each fallback round"), 30 against 10 took
+about half the Gauss-Seidel sweeps on gluey flows of 140 and 250 grains."""
 
 
 FINISH_ITERATIONS = 2
@@ -365,7 +371,7 @@ than Gauss-Seidel's (docs/records/benchmarks.md, "The gluey bed coming to rest")
 FALLBACK_ROUND = 1000
 """Iterations of the first round of a fallback that solves exact Coulomb itself (``nsgs``): its
 iteration cap is spent in rounds (:func:`fallback_rounds`: 1 000, 1 000, 2 000, 4 000, then the
-rest), each continued from the last one's forces and polished (:data:`POLISH_ITERATIONS`), until
+rest), each continued from the last one's forces and polished (:data:`FALLBACK_POLISH_ITERATIONS`), until
 a polished answer reaches ``tol``. On a developed 12 000-grain gluey step whose Newton phases
 stalled at 2.9e-6 (tol 1e-6), Gauss-Seidel reached its own tol in about 4 500 sweeps (12.4 s),
 while Newton from its forces after 1 000 sweeps converged in 16 iterations and after 2 000 in
@@ -1050,7 +1056,8 @@ def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = 5
             iterations += rescue.iterations
             info["fallback_iterations"] = info.get("fallback_iterations", 0) + rescue.iterations
             info["fallback_status"] = rescue.status
-            finish = _proximal_newton(function, unshifted, rescue.forces, tol, POLISH_ITERATIONS,
+            finish = _proximal_newton(function, unshifted, rescue.forces, tol,
+                                      FALLBACK_POLISH_ITERATIONS,
                                       STRATEGIES[0])
             iterations += finish.iterations
             info["newton_iterations"] += finish.iterations
