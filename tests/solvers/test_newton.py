@@ -1070,6 +1070,21 @@ def test_on_the_compiled_lane_the_joint_phase_rescues_stalled_strategies():
     assert scaled_coulomb_error(problem, result.forces) <= 1e-6
 
 
+def test_newton_finishes_an_early_gauss_seidel_round_on_a_gluey_step():
+    """A gluey flow's step (931 rows, tests/solvers/data/README.md) whose first strategy stalls
+    within STRATEGY_GAP of tol (the sparse lane: on to the fallbacks): FALLBACK_POLISH_ITERATIONS
+    Newton iterations finish Gauss-Seidel's fourth round (8 000 sweeps in all), where ten
+    finished none and the rounds spent the whole cap (20 000 sweeps)."""
+    with np.load(Path(__file__).parent / "data" / "gluey-250-step.npz") as data:
+        problem = StepProblem.from_arrays(data)
+        guess, shift = data["warm_start"], data["warm_shift"]
+    assert not AlartCurnier(problem.normalized()).compiled
+    result = solve_coulomb(problem, "newton-ac", tol=1e-6, warm_start=guess, shift=shift)
+    assert result.status == CONVERGED and result.info["fallbacks"] == ["nsgs"]
+    assert result.info["fallback_iterations"] == sum(newton.fallback_rounds("nsgs")[:4]) == 8000
+    assert scaled_coulomb_error(problem, result.forces) <= 1e-6
+
+
 def test_a_reduced_block_rereads_from_w_only_the_rows_whose_columns_changed_their_fold(
         monkeypatch):
     """The sparse lane's reduced Newton blocks built from the last block's rows (_ReducedBlocks
