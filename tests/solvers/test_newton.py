@@ -2016,9 +2016,10 @@ def test_the_compiled_lane_skips_the_joint_start(settling_step):
 
 def test_the_joint_start_runs_only_above_the_compiled_lane(monkeypatch):
     """Siconos' 460-row granular step (2D, no UNION contact) is on the compiled lane, where the
-    joint phase cost more than it saved on dry flows of 650-660 rows: none runs; on the sparse
-    lane (its limit lowered) it runs, as it did at this size before the compiled lane reached
-    700 rows. Both converge."""
+    joint phase cost more than it saved on dry flows of 650-660 rows: it does not run first, and
+    here the first strategy converges, so it does not run after stalled strategies either; on the
+    sparse lane (its limit lowered) it runs first, as it did at this size before the compiled lane
+    reached 700 rows. Both converge."""
     problem = siconos_test_problem("gfc2d_granularflowonwall_00230_00206.dat")
     assert newton.DENSE_LIMIT < problem.n_rows <= newton.COMPILED_LIMIT and problem.cones.is_convex
     compiled = solve_coulomb(problem, "newton-ac", tol=1e-8, joint=5)
