@@ -207,6 +207,41 @@ def test_a_flow_step_takes_fewer_newton_iterations_re_centred_after_each(path, m
     assert re_centred < 0.9 * solved
 
 
+def test_on_a_gluey_flow_step_the_re_centred_weight_follows_the_error(monkeypatch):
+    """A 2 000-grain gluey flow's step (8 279 rows): each re-centred Newton iteration's weight is
+    at most its centre's FCLIB error (in units of the median diagonal of ``W``), so it falls with
+    the error from the first weight on, and the step reaches tol in 10 Newton iterations against
+    14 at the first weight throughout (``UNION_RECENTRE_FOLLOWS`` off), to the same tol."""
+    with np.load(Path(__file__).parent / "data" / "gluey-2000-recentred-step.npz") as data:
+        problem = StepProblem.from_arrays(data)
+        warm_start, warm_shift = data["warm_start"], data["warm_shift"]
+    assert not problem.cones.is_convex
+    settings = SolveSettings(method="newton-ac", tol=1e-6, exact_coulomb=True,
+                             options={"fallback": None})
+    phase, re_centred = newton._newton_phase, []
+
+    def spied(function, unshifted, forces, tol, max_iter, inner_tol=0.0, **known):
+        if max_iter == 1 and known.get("error") is not None:        # a re-centred iteration
+            re_centred.append((function.sigma / function.typical, known["error"]))
+        return phase(function, unshifted, forces, tol, max_iter, inner_tol, **known)
+
+    monkeypatch.setattr(newton, "_newton_phase", spied)
+    outcomes = {}
+    for follows in (True, False):
+        monkeypatch.setattr(newton, "UNION_RECENTRE_FOLLOWS", follows)
+        result = settings.solve(problem, warm_start, warm_shift)
+        assert result.status == CONVERGED and scaled_coulomb_error(problem, result.forces) <= 1e-6
+        outcomes[follows] = result.info["newton_iterations"], list(re_centred)
+        re_centred.clear()
+    (following, weights), (fixed, fixed_weights) = outcomes[True], outcomes[False]
+    assert len(weights) >= 3 and len(fixed_weights) >= 3
+    assert all(weight == pytest.approx(newton.WARM_FLOW_WEIGHT, rel=1e-12) for weight, _ in fixed_weights)
+    assert all(weight == pytest.approx(min(newton.WARM_FLOW_WEIGHT, error), rel=1e-12)
+               for weight, error in weights)
+    assert weights[-1][0] < newton.WARM_FLOW_WEIGHT / 3          # it fell with the error
+    assert following == 10 and fixed == 14
+
+
 def test_local_sweeps_take_a_flow_step_to_tol_in_fewer_newton_iterations(monkeypatch):
     """A 2 000-grain gluey flow's step (8 337 rows): where the FCLIB error's residual concentrates
     on a few rows, Gauss-Seidel sweeps over them start the next proximal subproblem, and the step
@@ -1070,11 +1105,15 @@ def test_on_the_compiled_lane_the_joint_phase_rescues_stalled_strategies():
     assert scaled_coulomb_error(problem, result.forces) <= 1e-6
 
 
-def test_newton_finishes_an_early_gauss_seidel_round_on_a_gluey_step():
+def test_newton_finishes_an_early_gauss_seidel_round_on_a_gluey_step(monkeypatch):
     """A gluey flow's step (931 rows, tests/solvers/data/README.md) whose first strategy stalls
     within STRATEGY_GAP of tol (the sparse lane: on to the fallbacks): FALLBACK_POLISH_ITERATIONS
     Newton iterations finish Gauss-Seidel's fourth round (8 000 sweeps in all), where ten
-    finished none and the rounds spent the whole cap (20 000 sweeps)."""
+    finished none and the rounds spent the whole cap (20 000 sweeps). The re-centred weight
+    kept at the first weight (``UNION_RECENTRE_FOLLOWS`` off), as when the step was stored: with
+    it following the error the strategies stall at another iterate, from which the rounds run to
+    the cap (the step converges either way)."""
+    monkeypatch.setattr(newton, "UNION_RECENTRE_FOLLOWS", False)
     with np.load(Path(__file__).parent / "data" / "gluey-250-step.npz") as data:
         problem = StepProblem.from_arrays(data)
         guess, shift = data["warm_start"], data["warm_shift"]
