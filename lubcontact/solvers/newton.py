@@ -287,11 +287,12 @@ UNION_RECENTRE_FOLLOWS = True
 is at most the centre's FCLIB error (in units of the median diagonal of ``W``), as the weight
 after re-centring is: it falls with the error from the first weight on (a regularised Newton
 method whose regularisation follows the residual) instead of staying at the first weight until
-the re-centring ends, where each iteration cut the error only by about 0.6. Newton iterations
+the re-centring ends, where each iteration cut the error only by 0.6-0.9. Newton iterations
 summed over captured consecutive steps of developed gluey flows (exact Coulomb, tol 1e-6),
 before against after: 10 000 grains (10 and 30 steps) 148 and 402 against 132 and 351; 4 000
 (30) 411 against 402; 2 000 (30) 355 against 367 (63 of the 100 steps take fewer iterations, 14
-more; the sums move with the few hard steps, whose counts change either way). Not on dry
+more; the sums move with the few hard steps, whose counts change either way); 0.76 and 0.88 of
+the time on 200 steps of 150- and 250-grain gluey flows (the demo's recipe). Not on dry
 problems: the tests' creeping 300-grain bed ends ``inaccurate`` with it (docs/records/
 benchmarks.md, "newton-ac: the re-centred weight follows the error on gluey flows")."""
 
@@ -449,7 +450,8 @@ class AlartCurnier:
         A small system's problem (at most ``DENSE_OPERATOR_LIMIT`` rows, in 2D ``DENSE_LIMIT``:
         :data:`PLAIN_TRY`, :data:`WARM_DENSE_WEIGHT`, no :meth:`hyperstatic` test); a 2D one that
         is not small (a flow's step: :data:`WARM_FLOW_WEIGHT`, :data:`RECENTRE_WINDOW`, and with
-        UNION contacts :data:`UNION_SIGMA_DECREASE` and :data:`UNION_INNER_CAP`); one without
+        UNION contacts :data:`UNION_SIGMA_DECREASE`, :data:`UNION_INNER_CAP` and
+        :data:`UNION_RECENTRE_FOLLOWS`); one without
         UNION contacts (``Cones.is_convex``).
     w_arrays : tuple of ndarray
         ``W``'s CSR arrays with unsigned indices (:func:`~.compiled_apgd.csr_arrays`), for the
