@@ -1230,9 +1230,15 @@ def test_the_compiled_newton_phase_takes_the_numpy_phase_steps(name, start):
     """The compiled phase and the numpy one (``compiled`` off) from the same start: the same
     iterations, steepest-descent steps, status and errors, and the same velocities to round-off
     (the compiled phase factorises the Newton system without its sliding rows, the numpy one the
-    whole active block: on the hyperstatic hexagonal packing, whose regularised Newton systems
-    are ill-conditioned, the two solves' rounding moves the smallest errors by up to 1 % and the
-    velocities by 5e-11; the forces, which are not unique there, by 1e-8 of their size)."""
+    whole active block with LAPACK).
+
+    On the hyperstatic hexagonal packing, whose regularised Newton systems are ill-conditioned,
+    the two solves' rounding decides the last steps: the iterates agree while the error is above
+    1e-6, then the numpy phase's path depends on the BLAS kernels. From zero forces it took 17
+    iterations in 5 proximal steps like the compiled phase with OpenBLAS's AVX2 kernels
+    (velocities 8e-12 apart) and 18 in 6 with its AVX-512 ones (1.1e-9 apart: two answers below
+    ``tol``, whose forces are not unique there). There the counts may differ by one, and the
+    velocities by 1e-8."""
     problem = load_cases()[name].problem.normalized()
     unshifted = problem.with_shift(np.zeros(problem.cones.count))
     forces = np.zeros(problem.n_rows)
@@ -1243,10 +1249,17 @@ def test_the_compiled_newton_phase_takes_the_numpy_phase_steps(name, start):
         problem, lambda function, unshifted: _proximal_newton(function, unshifted, forces, 1e-10,
                                                               200, 1e-3))
     assert mine.status == theirs.status == CONVERGED
-    assert (mine.iterations, mine.gradient_steps, mine.proximal_steps) == \
-        (theirs.iterations, theirs.gradient_steps, theirs.proximal_steps)
-    rounding = 1e-9 if name == "hex_box_lid_friction" else 1e-12      # measured: 5e-11, 1e-14
-    assert np.allclose(mine.history, theirs.history, rtol=1e-6, atol=rounding * theirs.history[0])
+    steps, expected_steps = ((phase.iterations, phase.gradient_steps, phase.proximal_steps)
+                             for phase in (mine, theirs))
+    if name == "hex_box_lid_friction":
+        assert max(abs(a - b) for a, b in zip(steps, expected_steps)) <= 1
+        above = np.flatnonzero(theirs.history < 1e-6)[0]
+        assert above >= 10 and np.allclose(mine.history[:above], theirs.history[:above], rtol=1e-6)
+        rounding = 1e-8                                 # measured: 8e-12 and 1.1e-9 (docstring)
+    else:
+        assert steps == expected_steps
+        rounding = 1e-12                                # measured: 1e-14
+        assert np.allclose(mine.history, theirs.history, rtol=1e-6, atol=rounding * theirs.history[0])
     velocity, expected = unshifted.gradient(mine.forces), unshifted.gradient(theirs.forces)
     assert np.abs(velocity - expected).max() <= rounding * max(np.abs(expected).max(), 1.0)
 
