@@ -644,6 +644,47 @@ def coulomb_error_2d(forces, velocity, lower, upper, cone_n, cone_t, cone_mu, un
 
 
 @numba.njit(cache=True)
+def largest_squares(values, count):
+    """The ``count`` rows of ``values`` (n,) with the largest squares and the share of the sum
+    of squares they hold: ``(rows, share)``, the rows unsorted (``count`` <= n; among equal
+    squares at the edge, those the pass meets first, but for the evictions of a heap). A
+    min-heap of the rows kept, in one pass: ``np.argpartition`` on the squares took 0.9 ms on the
+    60 000 rows of a 10 000-grain gluey step."""
+    rows = np.empty(count, dtype=np.int64)
+    heap = np.empty(count)
+    total = 0.0
+    for i in range(values.size):
+        square = values[i] * values[i]
+        total += square
+        if i < count:                        # sift up
+            k = i
+            while k > 0:
+                parent = (k - 1) // 2
+                if heap[parent] <= square:
+                    break
+                heap[k], rows[k] = heap[parent], rows[parent]
+                k = parent
+            heap[k], rows[k] = square, i
+        elif square > heap[0]:               # replaces the least kept; sift down
+            k = 0
+            while True:
+                child = 2 * k + 1
+                if child >= count:
+                    break
+                if child + 1 < count and heap[child + 1] < heap[child]:
+                    child += 1
+                if heap[child] >= square:
+                    break
+                heap[k], rows[k] = heap[child], rows[child]
+                k = child
+            heap[k], rows[k] = square, i
+    kept = 0.0
+    for k in range(count):
+        kept += heap[k]
+    return rows, kept / total if total > 0.0 else 1.0
+
+
+@numba.njit(cache=True)
 def neighbourhood(indptr, indices, seeds, hops):
     """The rows within ``hops`` steps of the rows ``seeds`` in the pattern of a square matrix
     (CSR arrays ``indptr``, ``indices``; a step from row ``i`` reaches the columns of its

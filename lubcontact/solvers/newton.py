@@ -644,10 +644,8 @@ class AlartCurnier:
         residual = compiled.coulomb_residual_2d(forces, velocity, self.lower, self.upper,
                                                 self.cone_n, self.tangent_rows, self.cone_mu,
                                                 self.unilateral)
-        squares = residual * residual
-        count = min(LOCAL_ROWS, squares.size)
-        worst = np.argpartition(squares, -count)[-count:]
-        if squares[worst].sum() < LOCAL_SHARE * squares.sum():
+        worst, share = compiled.largest_squares(residual, min(LOCAL_ROWS, residual.size))
+        if share < LOCAL_SHARE:
             return None
         rows = compiled.neighbourhood(*self.w_arrays[:2], worst, LOCAL_HOPS)
         swept = self.local_sweeps(forces, LOCAL_SWEEPS, rows)

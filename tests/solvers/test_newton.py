@@ -1411,6 +1411,25 @@ def test_the_neighbourhood_of_some_rows_is_found_step_by_step_in_the_pattern(hop
     assert hops == 0 or rows.size > 3 * hops
 
 
+@pytest.mark.parametrize("size", [1, 7, 300, 301, 5000])
+def test_the_rows_of_largest_squares_are_those_a_full_sort_finds(size):
+    """kernels.largest_squares: the LOCAL_ROWS rows (all of them below) whose squares are largest
+    in a vector of both signs and magnitudes over nine decades, as a full sort of the squares
+    finds them, and the share of the sum of squares they hold (to rounding); a zero vector's
+    share is 1."""
+    from lubcontact.solvers import kernels as kernel
+
+    rng = np.random.default_rng(size)
+    values = rng.standard_normal(size) * 10.0 ** rng.uniform(-6, 3, size)
+    count = min(newton.LOCAL_ROWS, size)
+    rows, share = kernel.largest_squares(values, count)
+    squares = values**2
+    expected = np.argsort(squares)[::-1][:count]
+    assert np.array_equal(np.sort(rows), np.sort(expected))
+    assert share == pytest.approx(squares[expected].sum() / squares.sum(), rel=1e-12)
+    assert kernel.largest_squares(np.zeros(size), count)[1] == 1.0
+
+
 @pytest.mark.parametrize("pattern", ["symmetric", "asymmetric", "forest"])
 def test_the_static_lu_has_the_fill_of_symbolic_elimination_and_solves(pattern):
     """On a grid's pattern (random values, randomly ordered) the patterns of
