@@ -296,7 +296,7 @@ def test_the_products_go_through_the_factor_where_it_has_under_half_the_entries_
     assert np.abs(function.product(vector) - expected).max() <= 1e-13 * np.abs(expected).max()
     calls.clear()
     factored = settings.solve(problem, warm_start, warm_shift)
-    assert len(calls) >= 2 * factored.info["newton_iterations"]   # the search's, the residual's
+    assert len(calls) >= factored.info["newton_iterations"]   # the line search's, one a direction
     assert plain.status == factored.status == CONVERGED
     assert plain.info["newton_iterations"] == factored.info["newton_iterations"] == 188
     assert scaled_coulomb_error(problem, factored.forces) <= 1e-6
@@ -304,22 +304,24 @@ def test_the_products_go_through_the_factor_where_it_has_under_half_the_entries_
 
 def test_a_phase_started_where_the_last_ended_takes_its_velocity_and_error(monkeypatch):
     """Where ``_proximal_newton`` hands a Newton phase the velocity and the FCLIB error of its
-    start (the last phase's last iterate, re-centred), they are those of its forces, to the bit,
-    as the phase would compute them: on the gluey flow's step every phase but the first is
-    handed them (eight re-centred ones of one iteration, then a subproblem of at most
-    UNION_INNER_CAP iterations, a gluey step's), and the step takes the same 10 Newton
-    iterations."""
+    start (the last phase's last iterate, re-centred), they are those of its forces: the
+    velocity, carried from the last line search on this lane, is ``W r + q`` to rounding, and
+    the error that of that velocity, to the bit, and of a fresh product's to rounding. On the
+    gluey flow's step every phase but the first is handed them (eight re-centred ones of one
+    iteration, then a subproblem of at most UNION_INNER_CAP iterations, a gluey step's), and the
+    step takes the same 10 Newton iterations."""
     with np.load(Path(__file__).parents[1] / "flow" / "data" / "gluey-flow-step.npz") as data:
         problem = StepProblem.from_arrays(data)
         warm_start, warm_shift = data["warm_start"], data["warm_shift"]
     phase = newton._newton_phase
-    handed = []
+    handed, drift, errors = [], [], []
 
     def spy(function, unshifted, forces, tol, max_iter, inner_tol=0.0, **known):
         if known.get("velocity") is not None:
             velocity = function.product(forces) + function.q
-            assert np.array_equal(known["velocity"], velocity)
-            assert known["error"] == function.coulomb_error(unshifted, forces, velocity)
+            drift.append(np.abs(known["velocity"] - velocity).max() / np.abs(velocity).max())
+            assert known["error"] == function.coulomb_error(unshifted, forces, known["velocity"])
+            errors.append(abs(known["error"] / function.coulomb_error(unshifted, forces, velocity) - 1))
             handed.append(max_iter)
         return phase(function, unshifted, forces, tol, max_iter, inner_tol, **known)
 
@@ -329,6 +331,7 @@ def test_a_phase_started_where_the_last_ended_takes_its_velocity_and_error(monke
     result = settings.solve(problem, warm_start, warm_shift)
     assert result.status == CONVERGED and result.info["newton_iterations"] == 10
     assert handed == [1] * 8 + [newton.UNION_INNER_CAP] and newton.UNION_INNER_CAP < newton.INNER_CAP
+    assert max(drift) <= 1e-14 and max(errors) <= 1e-12       # measured: 3.5e-16, 1.3e-14
 
 
 def scripted_recentring(monkeypatch, errors):
@@ -612,9 +615,11 @@ def test_a_strategy_stalled_near_tol_goes_to_the_fallbacks_without_the_other_str
     assert alone.info["strategies"] == [(1e-3, "cold")]
     assert alone.info["error"] <= STRATEGY_GAP * 1e-8
     rescued = solve_coulomb(problem, "newton-ac", tol=1e-8)
-    # Gauss-Seidel's answer, polished by the proximal loop with its local sweeps (4 040 rows),
-    # reaches tol; without the sweeps that polish ended above Newton's best and apgd-jacobi ran
-    assert rescued.status == CONVERGED and rescued.info["fallbacks"] == ["nsgs"]
+    # Gauss-Seidel's rounds first, each polished by the proximal loop with its local sweeps
+    # (4 040 rows); whether a polish reaches tol or apgd-jacobi, the chain's next, finishes
+    # follows the rounding of the stalled strategy's iterates (the first polish reached tol
+    # while the sparse lane took W r afresh after each line search; since, apgd-jacobi finishes)
+    assert rescued.status == CONVERGED and rescued.info["fallbacks"][0] == "nsgs"
     assert rescued.info["local_sweeps"] > 0
     assert scaled_coulomb_error(problem, rescued.forces) <= 1e-8
 
@@ -709,10 +714,12 @@ def test_a_fallback_that_solves_coulomb_itself_runs_in_rounds_each_polished(stal
     assert newton.fallback_rounds("apgd-jacobi") == (None,)
 
 
-def test_a_fallback_worse_than_newton_never_replaces_its_best_iterate(stalling):
+def test_a_fallback_worse_than_newton_never_replaces_its_best_iterate(stalling, monkeypatch):
     """A fallback whose answer is worse than the best Newton iterate (here: zero forces said to be
-    converged) leaves that iterate as the answer; the status stays honest."""
+    converged, unpolished: 30 Newton iterations from zero forces may do better than the stalled
+    strategy's best) leaves that iterate as the answer; the status stays honest."""
     problem, alone = stalling
+    monkeypatch.setattr(newton, "FALLBACK_POLISH_ITERATIONS", 0)
 
     @register("zero-forces-test", kind=FIRST_ORDER, cones=ALL_CONES)
     def zero_forces(problem, *, tol, max_iter=1, warm_start=None):
@@ -1042,6 +1049,23 @@ def gluey_flow_function():
         problem = StepProblem.from_arrays(data).normalized()
         start = data["warm_start"] / problem.scaling.force
     return AlartCurnier(problem), start
+
+
+def test_a_newton_phase_carries_the_accepted_trials_velocity_within_rounding():
+    """The sparse lane's Newton iterations go on from the line search's accepted trial, whose
+    velocity is ``v + alpha W d``, not ``W r + q`` afresh: after 30 iterations on the gluey flow
+    step (1 635 rows; a proximal weight, so that they do not stop at tol) the last iterate's
+    carried velocity is ``W r + q`` to 1e-13 of its size, its FCLIB error that of the fresh
+    velocity to 1e-9 of itself, and the phase took Newton steps, not gradient steps."""
+    function, start = gluey_flow_function()
+    assert not function.compiled                # a 2D problem: its FCLIB error reads no problem
+    function.set_proximal(1e-3 * function.typical, start)
+    phase = newton._newton_phase(function, None, start, 1e-14, 30)
+    assert phase.iterations == 30 and phase.gradient_steps == 0
+    fresh = function.W @ phase.last + function.q
+    assert np.abs(phase.last_velocity - fresh).max() <= 1e-13 * np.abs(fresh).max()
+    assert function.coulomb_error(None, phase.last, fresh) == \
+        pytest.approx(phase.last_error, rel=1e-9)
 
 
 def test_the_lane_carries_out_a_flow_steps_rules_without_choosing_them(monkeypatch):
