@@ -20,6 +20,7 @@ forced to zero (their velocity rows are unconstrained).
 """
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from enum import IntEnum
 from functools import cached_property
@@ -206,18 +207,24 @@ class Cones:
         self._require_convex()
         return self.projector.polar(forces)
 
-    def natural_residual(self, forces: np.ndarray, gradient: np.ndarray) -> float:
+    def natural_residual(self, forces: np.ndarray, gradient: np.ndarray,
+                         project: Callable[[Cones, np.ndarray], np.ndarray] | None = None) -> float:
         """``|lam - P_K(lam - grad)|``, the natural-map residual (Euclidean norm).
 
         A UNION contact is measured on the piece its force lies on (pulled if
         ``lam_n < 0``, else pushed): stationarity on a union of convex sets is
         local, and the projection of ``lam - grad`` onto the whole union can
         jump to the other piece at a point that is optimal on its own.
+
+        ``project(cones, x)``: ``P_K(x)`` for ``cones`` (convex here), where the caller has a
+        faster one with the same floating-point operations (the solvers' compiled 2D projection,
+        :func:`lubcontact.solvers.registry.solve`'s check); default :meth:`project`.
         """
         cones = self
         if not self.is_convex:
             cones = self.with_branches(self.pulled(forces))
-        difference = forces - cones.project(forces - gradient)
+        projected = cones.project(forces - gradient) if project is None else project(cones, forces - gradient)
+        difference = forces - projected
         return float(np.sqrt(difference @ difference))      # np.linalg.norm's own sum, without its overhead
 
     def velocity_violation(self, constraint: np.ndarray) -> np.ndarray:

@@ -30,9 +30,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import checks
-from ..problem.cones import ConeKind
+from ..problem.cones import ConeKind, Cones
 from ..problem.conic import ConicProblem
 from ..problem.step import StepProblem
+from .compiled_modules import kernels
 from .result import (
     CONVERGED,
     DIVERGED,
@@ -267,8 +268,8 @@ def solve(problem: ConicProblem, method: str = "clarabel", *, tol: float = 1e-9,
         status = FAILED if status == FAILED else DIVERGED
         forces = np.zeros_like(forces)
     scaled_velocities = scaled.velocity(forces)      # the residual's and the result's
-    residual = scaled.cones.natural_residual(forces, scaled.constraint_values(scaled_velocities)) \
-        if forces.size else 0.0
+    residual = scaled.cones.natural_residual(forces, scaled.constraint_values(scaled_velocities),
+                                             project=compiled_projection) if forces.size else 0.0
     if status == CONVERGED and residual_per_row(residual, forces.size) > SUSPICIOUS_RESIDUAL:
         status = INACCURATE          # the method's claim does not survive an independent check
         out.info["claimed_status"] = CONVERGED
@@ -283,6 +284,23 @@ def solve(problem: ConicProblem, method: str = "clarabel", *, tol: float = 1e-9,
                        setup_time=setup_time + normalise_time,
                        solve_time=solve_time, residual_history=out.residual_history,
                        info=out.info, shift=np.array(problem.shift, dtype=float))
+
+
+def compiled_projection(cones: Cones, x: np.ndarray) -> np.ndarray:
+    """``P_K(x)`` for convex ``cones``: compiled on 2D cones once the compiled kernels are loaded
+    (:func:`~lubcontact.solvers.kernels.project_cones`, the floating-point operations of
+    :class:`~lubcontact.problem.cones.ConeProjector`), else ``cones.project(x)`` (a solve by a
+    method without compiled loops does not import numba for its check). :func:`solve`'s check of a
+    result: on small 2D problems the numpy projection's dozen array operations were about 5 % of
+    a solve (docs/records/benchmarks.md, "small solves: the shift and the check's projection")."""
+    if cones.tangent_dim != 1 or not kernels.cache_info().currsize:
+        return cones.project(x)
+    projector = cones.projector
+    out = np.empty_like(x)
+    kernels().project_cones(x, projector.lower, projector.upper, projector.friction_normal,
+                            projector.planar_tangent, projector.friction_mu,
+                            projector.friction_union, out)
+    return out
 
 
 def capable_methods(problem: ConicProblem, kind: str | None = None) -> list[str]:

@@ -567,6 +567,23 @@ def test_solves_coulomb_natively_in_one_solve():
     assert result.outer_iterations == 1 and result.fixed_point_converged
 
 
+@pytest.mark.parametrize("name", ["dt_large_friction", "cone_apex_2d", "mu_ten", "tetrahedron_3d_friction",
+                                  "gamma_states_gluey_coulomb"])
+def test_the_native_solve_s_shift_is_mu_times_the_tangential_velocity_of_its_forces(name):
+    """s* = mu |g_T(r*)|, the fixed point by construction, whichever way it is computed: from the
+    normalised problem's dense W on small 2D problems (W r + b), from its g(v(r)) elsewhere
+    (3D), against the physical problem's g(v(r)), to rounding; the first four slide, the gluey
+    one's contacts stick or are pulled (no shift)."""
+    problem = load_cases()[name].problem
+    result = solve_coulomb(problem, "newton-ac", tol=1e-10)
+    unshifted = problem.with_shift(np.zeros(problem.n_contacts))
+    expected = coulomb_shift(unshifted, result.forces)
+    rounding = 1e-12 * np.abs(unshifted.gradient(result.forces)).max()
+    assert result.status == CONVERGED
+    assert (expected.max() > 1e6 * rounding) == (name != "gamma_states_gluey_coulomb")
+    np.testing.assert_allclose(result.shift, expected, rtol=1e-12, atol=rounding)
+
+
 def test_union_contacts_are_solved_natively_in_one_solve():
     """Gluey + friction at gamma_min (UNION): one Newton solve of the union law (bilateral normal
     row, friction while pushed) gives Clarabel's fixed point on s with its branch rule."""
