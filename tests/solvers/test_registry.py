@@ -302,10 +302,10 @@ def test_open_contacts_get_exactly_zero_force(method, tol, trio):
     assert np.array_equal(result.velocities, problem.free_velocity)
 
 
-def test_the_check_s_compiled_projection_is_the_numpy_one_to_the_bit():
+def test_the_check_s_compiled_projection_is_the_numpy_one_to_the_bit(monkeypatch):
     """solve()'s check projects 2D cones with the compiled kernel: the same floating-point
     operations as Cones.project on every kind (mu = 0 included), inside, on the boundary, in the
-    polar cone and beyond; 3D cones keep Cones.project. The natural residual is the same."""
+    polar cone and beyond, and the same natural residual; 3D cones never reach the 2D kernel."""
     from lubcontact.problem.cones import Cones
     from lubcontact.solvers.compiled_modules import kernels
     from lubcontact.solvers.registry import compiled_projection
@@ -313,19 +313,31 @@ def test_the_check_s_compiled_projection_is_the_numpy_one_to_the_bit():
     kernels()                               # loaded, as after any compiled solve
     rng = np.random.default_rng(7)
     convex = [ConeKind.NONNEG, ConeKind.FREE, ConeKind.NONPOS, ConeKind.COULOMB]
-    for tangent_dim in (1, 2):
-        for _ in range(50):
-            count = int(rng.integers(1, 12))
-            kinds = rng.choice(np.array(convex, dtype=np.int8), size=count)
-            mu = rng.choice([0.0, 0.3, 1.0, 2.5], size=count)
-            tangential = np.flatnonzero((kinds == ConeKind.COULOMB) | (rng.random(count) < 0.3))
-            cones = Cones(kinds=kinds, mu=mu, tangential=tangential, tangent_dim=tangent_dim)
-            x = rng.normal(scale=3.0, size=cones.n_rows)
-            x[rng.random(cones.n_rows) < 0.2] = 0.0                  # ties and zeros
-            if tangent_dim == 1 and tangential.size:                # one on the cone's edge
-                c = rng.integers(tangential.size)
-                x[count + c] = mu[tangential[c]] * x[tangential[c]]
-            np.testing.assert_array_equal(compiled_projection(cones, x), cones.project(x))
-            forces, gradient = cones.project(x), rng.normal(size=cones.n_rows)
-            assert cones.natural_residual(forces, gradient, project=compiled_projection) \
-                == cones.natural_residual(forces, gradient)
+
+    def random_case(tangent_dim):
+        count = int(rng.integers(1, 12))
+        kinds = rng.choice(np.array(convex, dtype=np.int8), size=count)
+        mu = rng.choice([0.0, 0.3, 1.0, 2.5], size=count)
+        tangential = np.flatnonzero((kinds == ConeKind.COULOMB) | (rng.random(count) < 0.3))
+        cones = Cones(kinds=kinds, mu=mu, tangential=tangential, tangent_dim=tangent_dim)
+        x = rng.normal(scale=3.0, size=cones.n_rows)
+        x[rng.random(cones.n_rows) < 0.2] = 0.0                      # ties and zeros
+        if tangent_dim == 1 and tangential.size:                    # one on the cone's edge
+            c = rng.integers(tangential.size)
+            x[count + c] = mu[tangential[c]] * x[tangential[c]]
+        return cones, x
+
+    for _ in range(100):
+        cones, x = random_case(1)
+        np.testing.assert_array_equal(compiled_projection(cones, x), cones.project(x))
+        forces, gradient = cones.project(x), rng.normal(size=cones.n_rows)
+        assert cones.natural_residual(forces, gradient, project=compiled_projection) \
+            == cones.natural_residual(forces, gradient)
+
+    def planar_only(*args):
+        raise AssertionError("a 3D problem reached the 2D kernel")
+
+    monkeypatch.setattr(kernels(), "project_cones", planar_only)
+    for _ in range(20):
+        cones, x = random_case(2)
+        np.testing.assert_array_equal(compiled_projection(cones, x), cones.project(x))
