@@ -211,13 +211,14 @@ def test_on_a_gluey_flow_step_the_re_centred_weight_follows_the_error(monkeypatc
     """A 2 000-grain gluey flow's step (8 279 rows): each re-centred Newton iteration's weight is
     at most its centre's FCLIB error (in units of the median diagonal of ``W``), so it falls with
     the error from the first weight on, and the step reaches tol in 10 Newton iterations against
-    14 at the first weight throughout (``UNION_RECENTRE_FOLLOWS`` off), to the same tol."""
-    with np.load(Path(__file__).parent / "data" / "gluey-2000-recentred-step.npz") as data:
-        problem = StepProblem.from_arrays(data)
-        warm_start, warm_shift = data["warm_start"], data["warm_shift"]
+    14 at the first weight throughout (``UNION_RECENTRE_FOLLOWS`` off), to the same tol; without
+    the line search's corrected full steps (``CORRECTED_SWEEPS`` 0), which take fewer
+    iterations still (the test of corrected full steps below)."""
+    problem, warm_start, warm_shift = _recentred_gluey_step()
     assert not problem.cones.is_convex
     settings = SolveSettings(method="newton-ac", tol=1e-6, exact_coulomb=True,
                              options={"fallback": None})
+    monkeypatch.setattr(newton, "CORRECTED_SWEEPS", 0)
     phase, re_centred = newton._newton_phase, []
 
     def spied(function, unshifted, forces, tol, max_iter, inner_tol=0.0, **known):
@@ -245,13 +246,15 @@ def test_on_a_gluey_flow_step_the_re_centred_weight_follows_the_error(monkeypatc
 def test_local_sweeps_take_a_flow_step_to_tol_in_fewer_newton_iterations(monkeypatch):
     """A 2 000-grain gluey flow's step (8 337 rows): where the FCLIB error's residual concentrates
     on a few rows, Gauss-Seidel sweeps over them start the next proximal subproblem, and the step
-    reaches tol in 6 Newton iterations against 14 without them (``LOCAL_SWEEPS`` 0), or on a
-    problem under ``LOCAL_MIN_ROWS`` rows (none are swept there)."""
+    reaches tol in 6 Newton iterations against 13 without them (``LOCAL_SWEEPS`` 0), or on a
+    problem under ``LOCAL_MIN_ROWS`` rows (none are swept there). The line search's corrected
+    full steps (``CORRECTED_SWEEPS``, which sweep too) are left out here: the next tests."""
     with np.load(Path(__file__).parent / "data" / "gluey-2000-step.npz") as data:
         problem = StepProblem.from_arrays(data)
         warm_start, warm_shift = data["warm_start"], data["warm_shift"]
     settings = SolveSettings(method="newton-ac", tol=1e-6, exact_coulomb=True,
                              options={"fallback": None})
+    monkeypatch.setattr(newton, "CORRECTED_SWEEPS", 0)
     outcomes = []
     for sweeps, least in ((newton.LOCAL_SWEEPS, newton.LOCAL_MIN_ROWS), (0, newton.LOCAL_MIN_ROWS),
                           (newton.LOCAL_SWEEPS, problem.n_rows)):
@@ -263,6 +266,78 @@ def test_local_sweeps_take_a_flow_step_to_tol_in_fewer_newton_iterations(monkeyp
     swept, plain, small = outcomes
     assert swept[0] <= 7 and swept[1] >= 3
     assert plain == small and plain[0] >= 2 * swept[0] and plain[1] == 0
+
+
+def _recentred_gluey_step() -> tuple[StepProblem, np.ndarray, np.ndarray]:
+    """The 2 000-grain gluey flow's step of ``gluey-2000-recentred-step.npz`` (8 279 rows) and
+    its warm start and shift."""
+    with np.load(Path(__file__).parent / "data" / "gluey-2000-recentred-step.npz") as data:
+        return StepProblem.from_arrays(data), data["warm_start"], data["warm_shift"]
+
+
+def test_a_full_step_corrected_on_the_rows_where_it_fails_is_taken(monkeypatch):
+    """Where a full Newton step of a flow's step fails the line search's bound on a few rows, the
+    line search sweeps them (``AlartCurnier.corrected``) and takes the corrected point: its merit
+    is below the full step's bound, it is the full step but on the swept rows (and their
+    contacts' other rows), whose residual held at least ``CORRECTED_SHARE`` of the full step's;
+    without the correction the same search cuts the step."""
+    from lubcontact.solvers import kernels
+
+    problem, warm_start, warm_shift = _recentred_gluey_step()
+    calls = []
+    search = newton._line_search
+
+    def spied(function, forces, velocity, direction, slope, reference):
+        kept = function.corrections_kept
+        accepted = search(function, forces, velocity, direction, slope, reference)
+        if function.corrections_kept > kept and not calls:
+            calls.append((function, forces.copy(), velocity.copy(), direction.copy(), slope,
+                          reference, accepted, function.sigma, function.center.copy()))
+        return accepted
+
+    monkeypatch.setattr(newton, "_line_search", spied)
+    SolveSettings(method="newton-ac", tol=1e-6, exact_coulomb=True).solve(problem, warm_start,
+                                                                          warm_shift)
+    assert calls, "no full step was corrected"
+    function, forces, velocity, direction, slope, reference, accepted, sigma, center = calls[0]
+    function.set_proximal(sigma, center)
+    bound = reference - newton.ARMIJO * slope
+    full = forces + direction
+    phi_full = function.residual(full)[0]
+    assert 0.5 * phi_full @ phi_full > bound                        # the full step fails
+    corrected, phi = accepted[0], accepted[1]
+    assert 0.5 * phi @ phi <= bound
+    np.testing.assert_array_equal(function.residual(corrected)[0], phi)
+    moved = np.flatnonzero(corrected != full)
+    worst = np.argsort(phi_full ** 2)[::-1][:newton.CORRECTED_ROWS]
+    near = kernels.neighbourhood(*function.w_arrays[:2], worst, newton.LOCAL_HOPS)
+    touched = np.isin(function.cone_n, near) | np.isin(function.tangent_rows, near)
+    swept = np.concatenate([near, function.cone_n[touched], function.tangent_rows[touched]])
+    assert moved.size > 0 and np.isin(moved, swept).all()       # a contact swept whole
+    assert (phi_full[worst] ** 2).sum() >= newton.CORRECTED_SHARE * (phi_full ** 2).sum()
+    monkeypatch.setattr(newton, "CORRECTED_SWEEPS", 0)
+    cut = search(function, forces, velocity, direction, slope, reference)[0]
+    step = np.abs(cut - forces).max() / np.abs(direction).max()
+    assert step <= 0.5
+
+
+@pytest.mark.parametrize("tol", [1e-6, 1e-7])
+def test_corrected_full_steps_take_a_flow_step_to_tol_in_fewer_newton_iterations(monkeypatch, tol):
+    """On the 2 000-grain gluey step the corrected full steps take 8 Newton iterations to tol,
+    against 10 (tol 1e-6) and 11 (1e-7) without them (``CORRECTED_SWEEPS`` 0), to an FCLIB
+    error below tol either way."""
+    problem, warm_start, warm_shift = _recentred_gluey_step()
+    settings = SolveSettings(method="newton-ac", tol=tol, exact_coulomb=True,
+                             options={"fallback": None})
+    outcomes = []
+    for sweeps in (newton.CORRECTED_SWEEPS, 0):
+        monkeypatch.setattr(newton, "CORRECTED_SWEEPS", sweeps)
+        result = settings.solve(problem, warm_start, warm_shift)
+        assert result.status == CONVERGED and scaled_coulomb_error(problem, result.forces) <= tol
+        outcomes.append((result.info["newton_iterations"], result.info["corrected_steps"]))
+    (corrected, taken), (plain, none) = outcomes
+    assert taken >= 1 and none == 0
+    assert corrected <= plain - 2
 
 
 def test_the_products_go_through_the_factor_where_it_has_under_half_the_entries_of_w(monkeypatch):
