@@ -339,10 +339,13 @@ Newton iterations summed over captured consecutive steps (exact Coulomb, tol 1e-
 with the correction: gluey 10 000 grains, three beds (20, 15 and 15 steps, and 20 later steps
 of the second) 270, 232, 243 and 268 against 243, 209, 210 and 211; gluey 4 000 grains (30)
 433 against 371; dry 10 000 grains, two beds (15 and 20) 129 and 168 against 126 and 166;
-gluey 10^5 grains, three beds (6, 2 and 3 steps) 121, 63 and 51 against 115, 46 and 51. 10 or
-100 rows, a share of 0.8 or 0.95, 5 or 10 sweeps, no step or two steps away: 1-8 % fewer
-iterations against 12 % (docs/records/benchmarks.md, "a full Newton step corrected on the rows
-where it fails")."""
+gluey 10^5 grains, three beds (6, 2 and 3 steps) 121, 63 and 51 against 115, 46 and 51. On 65
+of the 10 000-grain steps (the three gluey beds' first and the first dry bed's), 10 or 100
+rows, a share of 0.8 or 0.95, 5 or 10 sweeps, no step or two steps away took 1-9 % fewer
+iterations against 10 %; at 10^5 grains 100 rows left one step of six 1 067 iterations long,
+300 another 72. Not on smaller problems (the sparse lane from 700 rows): the tests' creeping
+300-grain bed (1 334 rows) ends ``max_iter`` with it
+(docs/records/benchmarks.md, "a full Newton step corrected on the rows where it fails")."""
 
 POLISH_ITERATIONS = 10
 """Proximal Newton iterations of the finish from the joint phase's forces (:data:`JOINT_FINISH`)."""
