@@ -664,17 +664,14 @@ class AlartCurnier:
         velocity ``W r + q`` and FCLIB error; None, without sweeping, where those rows hold less
         than :data:`LOCAL_SHARE` of the residual's square (an error spread over the problem).
         ``velocity``: that of ``forces`` where known. Where :attr:`sweeps_apply`."""
-        compiled = kernels()
         if velocity is None:
             velocity = self.product(forces) + self.q
-        residual = compiled.coulomb_residual_2d(forces, velocity, self.lower, self.upper,
-                                                self.cone_n, self.tangent_rows, self.cone_mu,
-                                                self.unilateral)
-        worst, share = compiled.largest_squares(residual, min(LOCAL_ROWS, residual.size))
-        if share < LOCAL_SHARE:
+        residual = kernels().coulomb_residual_2d(forces, velocity, self.lower, self.upper,
+                                                 self.cone_n, self.tangent_rows, self.cone_mu,
+                                                 self.unilateral)
+        swept = self._swept_where_largest(forces, residual, LOCAL_ROWS, LOCAL_SHARE, LOCAL_SWEEPS)
+        if swept is None:
             return None
-        rows = compiled.neighbourhood(*self.w_arrays[:2], worst, LOCAL_HOPS)
-        swept = self.local_sweeps(forces, LOCAL_SWEEPS, rows)
         velocity = self.product(swept) + self.q
         return swept, velocity, self.coulomb_error(None, swept, velocity)
 
@@ -686,13 +683,22 @@ class AlartCurnier:
         velocity (:meth:`residual`'s); None, without sweeping, where those rows hold less than
         :data:`CORRECTED_SHARE` of ``phi``'s square (the step fails all over the problem).
         Where :attr:`sweeps_apply`."""
+        swept = self._swept_where_largest(forces, phi, CORRECTED_ROWS, CORRECTED_SHARE,
+                                          CORRECTED_SWEEPS)
+        return None if swept is None else (swept, *self.residual(swept))
+
+    def _swept_where_largest(self, forces: np.ndarray, values: np.ndarray, count: int,
+                             share: float, sweeps: int) -> np.ndarray | None:
+        """``forces`` after ``sweeps`` Gauss-Seidel sweeps (:attr:`local_sweeps`) over the rows
+        within :data:`LOCAL_HOPS` of the ``count`` rows where ``values`` (a residual, shape
+        (n_rows,)) is largest; None, without sweeping, where those rows hold less than
+        ``share`` of its square (:meth:`swept`, :meth:`corrected`)."""
         compiled = kernels()
-        worst, share = compiled.largest_squares(phi, min(CORRECTED_ROWS, phi.size))
-        if share < CORRECTED_SHARE:
+        worst, held = compiled.largest_squares(values, min(count, values.size))
+        if held < share:
             return None
         rows = compiled.neighbourhood(*self.w_arrays[:2], worst, LOCAL_HOPS)
-        swept = self.local_sweeps(forces, CORRECTED_SWEEPS, rows)
-        return (swept, *self.residual(swept))
+        return self.local_sweeps(forces, sweeps, rows)
 
     def jacobian(self, y: np.ndarray) -> tuple[sp.csr_matrix | np.ndarray, np.ndarray, int]:
         """The rows of ``J = I - G + G diag(rho) (W + sigma I)`` at ``y`` where ``G`` is not zero.
@@ -1558,9 +1564,9 @@ def _line_search(function: AlartCurnier, forces: np.ndarray, velocity: np.ndarra
             bound = reference - ARMIJO * alpha * slope
             if np.isfinite(merit) and merit <= bound:
                 return trial, phi, y, trial_velocity
-            if correct and np.isfinite(merit):      # the full step, failing on a few rows?
+            if correct:                             # the full step, failing on a few rows?
                 correct = False
-                corrected = function.corrected(trial, phi)
+                corrected = function.corrected(trial, phi) if np.isfinite(merit) else None
                 if corrected is not None and 0.5 * float(corrected[1] @ corrected[1]) <= bound:
                     function.corrections_kept += 1
                     return corrected
