@@ -685,17 +685,6 @@ def largest_squares(values, count):
 
 
 @numba.njit(cache=True)
-def add_changed_columns(indptr, indices, data, rows, change, out):
-    """``out += A[:, rows] change[rows]`` for a symmetric ``A`` in CSR arrays, row ``j`` read as
-    column ``j``: the change of ``W r`` where ``r`` changed on ``rows`` only (``change``,
-    shape (n,)), in the work of those rows."""
-    for j in rows:
-        step = change[j]
-        for e in range(indptr[j], indptr[j + 1]):
-            out[indices[e]] += data[e] * step
-
-
-@numba.njit(cache=True)
 def neighbourhood(indptr, indices, seeds, hops):
     """The rows within ``hops`` steps of the rows ``seeds`` in the pattern of a square matrix
     (CSR arrays ``indptr``, ``indices``; a step from row ``i`` reaches the columns of its

@@ -675,28 +675,17 @@ class AlartCurnier:
         velocity = self.product(swept) + self.q
         return swept, velocity, self.coulomb_error(None, swept, velocity)
 
-    def corrected(self, forces: np.ndarray, phi: np.ndarray, velocity: np.ndarray
+    def corrected(self, forces: np.ndarray, phi: np.ndarray
                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
         """``forces`` (a full Newton step, ``phi`` its residual) after :data:`CORRECTED_SWEEPS`
         Gauss-Seidel sweeps over the rows within :data:`LOCAL_HOPS` of the
         :data:`CORRECTED_ROWS` rows where ``phi`` is largest, with their ``phi``, ``y`` and
         velocity (:meth:`residual`'s); None, without sweeping, where those rows hold less than
         :data:`CORRECTED_SHARE` of ``phi``'s square (the step fails all over the problem).
-        ``velocity``: the full step's ``W r + q``, brought to the swept forces through the
-        columns of ``W`` whose force changed
-        (:func:`~lubcontact.solvers.kernels.add_changed_columns`), not a product afresh (as the
-        line search carries its trials' velocities): 0.965-0.993 of the time on 85 captured
-        4 000- and 10 000-grain gluey steps, the same Newton iterations on three of the four
-        sets and 214 against 210 on the other (rounding; docs/records/benchmarks.md).
         Where :attr:`sweeps_apply`."""
         swept = self._swept_where_largest(forces, phi, CORRECTED_ROWS, CORRECTED_SHARE,
                                           CORRECTED_SWEEPS)
-        if swept is None:
-            return None
-        change = swept - forces
-        velocity = velocity.copy()
-        kernels().add_changed_columns(*self.w_arrays, np.flatnonzero(change), change, velocity)
-        return swept, *self.residual(swept, velocity)
+        return None if swept is None else (swept, *self.residual(swept))
 
     def _swept_where_largest(self, forces: np.ndarray, values: np.ndarray, count: int,
                              share: float, sweeps: int) -> np.ndarray | None:
@@ -1577,8 +1566,7 @@ def _line_search(function: AlartCurnier, forces: np.ndarray, velocity: np.ndarra
                 return trial, phi, y, trial_velocity
             if correct:                             # the full step, failing on a few rows?
                 correct = False
-                corrected = function.corrected(trial, phi, trial_velocity) if np.isfinite(merit) \
-                    else None
+                corrected = function.corrected(trial, phi) if np.isfinite(merit) else None
                 if corrected is not None and 0.5 * float(corrected[1] @ corrected[1]) <= bound:
                     function.corrections_kept += 1
                     return corrected
