@@ -332,9 +332,10 @@ step fails the line search's bound and the ``CORRECTED_ROWS`` rows with the larg
 them and the rows :data:`LOCAL_HOPS` step away, from the full step, the other rows' forces as the
 step left them; the corrected point is taken where it passes the bound of the full step
 (:meth:`AlartCurnier.corrected`; ``CORRECTED_SWEEPS`` 0: never). Traced on the hard steps of
-developed gluey flows, the full steps that the line search cut to 1/128-1/8 failed on two to
-five rows crossing a kink of the Alart-Curnier function (a contact opening, or sliding), the
-same few rows at one iteration after another, while the active set changed by 0-7 rows.
+developed gluey flows, the full steps that the line search cut to 1/128-1/8 failed on 2 to 17
+rows (90 % of the full step's merit) crossing a kink of the Alart-Curnier function (a contact
+opening, or sliding), the same few rows at one iteration after another, while the active set
+changed by 0-7 rows.
 Newton iterations summed over captured consecutive steps (exact Coulomb, tol 1e-6), without and
 with the correction: gluey 10 000 grains, three beds (20, 15 and 15 steps, and 20 later steps
 of the second) 270, 232, 243 and 268 against 243, 209, 210 and 211; gluey 4 000 grains (30)
