@@ -21,18 +21,27 @@ whose only neighbour is the new element are eliminated with the pivot (mass elim
 rows with the same lists are merged (supervariables, found by a hash). Not implemented: the
 special handling of dense rows (none in contact networks; a row next to all others makes the
 order quadratic in time: 0.4 s for a 20 000-row star) and aggressive absorption beyond the
-elements whose rows all lie in the new one. The lists and the per-row arrays hold 32-bit
-integers (the marks 64-bit: they count up by pivot and by candidate supervariable): the same
-orders in 11 % less time than with 64-bit ones (195 against 220 ms for the 43 blocks of three
-12 000-grain gluey steps, docs/records/benchmarks.md).
+elements whose rows all lie in the new one. Its integers are 32-bit: the same orders in 11 % less
+time than with 64-bit ones (195 against 220 ms for the 43 blocks of three 12 000-grain gluey steps,
+docs/records/benchmarks.md). The lists hold unsigned ones (no wrap-around check on an index read
+from them), and a row's fields are one record (:data:`KIND` and the others), not an array each:
+on blocks of 10^5-grain gluey steps (150 000 rows) the elimination jumps all over the rows, and
+with one cache line a row instead of one a field the orders took 0.7 of the time, 0.84 on the
+blocks of 10 000-grain steps (docs/records/benchmarks.md, "the order postordered along its
+assembly tree").
 
-The order is returned postordered: rearranged along its elimination tree (Liu's algorithm) so
-that each subtree is a contiguous run of places ending at its root. Any order that keeps the tree's
-parents after their children has the same factor pattern up to relabelling, so the fill is
-unchanged; but the columns that update a column now lie next to it in memory, where the minimum
-degree picks its pivots all over the graph. On the blocks of 10^5-grain gluey flows (150 000
-rows) the permutation, the static patterns and the static LU together took 2.6 times less time
-(docs/records/benchmarks.md, "the minimum-degree order postordered").
+The order is returned postordered: rearranged so that each subtree of its elimination tree is a
+contiguous run of places ending at its root. Any order that keeps the tree's parents after their
+children has the same factor pattern up to relabelling, so the fill is unchanged; but the columns
+that update a column now lie next to it in memory, where the minimum degree picks its pivots all
+over the graph. On the blocks of 10^5-grain gluey flows (150 000 rows) the permutation, the static
+patterns and the static LU together took 2.6 times less time (docs/records/benchmarks.md, "the
+minimum-degree order postordered"). The tree is the elimination's own assembly tree, each pivot's
+element a child of the element that absorbed it (its supervariables' rows a chain), as
+SuiteSparse's AMD postorders: no pass over the pattern after the elimination. Against the
+elimination tree found afresh from the pattern (Liu's algorithm), the same fill on the blocks of
+10 000-grain gluey steps in a quarter less time for the whole order (docs/records/benchmarks.md,
+"the order postordered along its assembly tree").
 """
 from __future__ import annotations
 
@@ -65,29 +74,10 @@ def _both_triangles(pointers: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray,
 
 
 @numba.njit(cache=True)
-def _compacted(lists: np.ndarray, start: np.ndarray, length: np.ndarray, live: np.ndarray,
-               room: int) -> tuple[np.ndarray, int]:
-    """The live lists (``live``) of ``lists`` moved to the front of a new array with ``room``
-    more entries; ``start`` updated in place. Returns ``(lists, free)``."""
-    total = 0
-    for i in range(start.size):
-        if live[i]:
-            total += length[i]
-    moved = np.empty(total + room, dtype=np.int32)
-    free = 0
-    for i in range(start.size):
-        if live[i]:
-            for k in range(length[i]):
-                moved[free + k] = lists[start[i] + k]
-            start[i] = free
-            free += length[i]
-    return moved, free
-
-
-@numba.njit(cache=True)
 def approximate_minimum_degree(pointers: np.ndarray, rows: np.ndarray) -> np.ndarray:
     """An elimination order of a square ``A`` that keeps the fill of its factors low: the
-    approximate minimum degree of ``A + A^T``'s pattern (module docstring).
+    approximate minimum degree of ``A + A^T``'s pattern, postordered along its assembly tree
+    (module docstring).
 
     Parameters
     ----------
@@ -107,45 +97,103 @@ def approximate_minimum_degree(pointers: np.ndarray, rows: np.ndarray) -> np.nda
         more: their places are 32-bit; or where no row is left to pick (not met on a valid
         pattern).
     """
+    pivots, first_member, next_member, absorber = _pivots(pointers, rows)
+    return _rows_of(_assembly_postorder(pivots, absorber), first_member, next_member)
+
+
+VARIABLE, ELEMENT, GONE = 0, 1, 2
+"""A row's kind in :func:`_pivots`: a (super)variable still to eliminate, an element (an eliminated
+pivot standing for its clique), or neither (absorbed, merged or mass-eliminated)."""
+
+KIND, WEIGHT, MARK, TAG, OUTSIDE, DEGREE, START, LENGTH = 0, 1, 2, 3, 4, 5, 6, 7
+ELEMENTS, AFTER, BEFORE, NEW_DEGREE, HASH, BUCKET_NEXT = 8, 9, 10, 11, 12, 13
+"""The fields of a row's record in :func:`_pivots` (``state[row, FIELD]``): its kind; the rows a
+(super)variable stands for (0 once merged); its mark (the pivot's stamp where it is in the new
+element) and its element's tag (the stamp at which ``OUTSIDE`` was set); ``|L_e \\ L_p|`` for an
+element next to the new one; its approximate external degree (an element's: its weight); where
+its list starts in the lists and how long it is; how many of its list's entries are elements
+(they come first); its neighbours in the list of rows of its degree; its degree and hash after
+the pivot; the next row in its hash bucket. One record of 16 32-bit fields a row, 64 bytes: what
+the elimination reads of a neighbour comes in one cache line, where with an array a field each
+every field read was a miss of its own (module docstring)."""
+
+STAMP_LIMIT = 2**30
+"""The marks and tags are 32-bit: where the stamp (one a pivot, one a row compared for a
+supervariable, at most n a pivot) reaches this, they are cleared and it starts again."""
+
+
+@numba.njit(cache=True)
+def _compacted(lists: np.ndarray, state: np.ndarray, room: int) -> tuple[np.ndarray, int]:
+    """The lists of the rows not ``GONE`` (``state``: :data:`KIND`) moved to the front of a new
+    array with ``room`` more entries; their :data:`START` updated in place. Returns
+    ``(lists, free)``."""
+    total = 0
+    for i in range(state.shape[0]):
+        if state[i, KIND] != GONE:
+            total += state[i, LENGTH]
+    moved = np.empty(total + room, dtype=np.uint32)
+    free = 0
+    for i in range(state.shape[0]):
+        if state[i, KIND] != GONE:
+            first = state[i, START]
+            for k in range(state[i, LENGTH]):
+                moved[free + k] = lists[first + k]
+            state[i, START] = free
+            free += state[i, LENGTH]
+    return moved, free
+
+
+@numba.njit(cache=True)
+def _pivots(pointers: np.ndarray, rows: np.ndarray
+            ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The approximate minimum degree's pivots (:func:`approximate_minimum_degree`'s arguments
+    and errors), in the order it picked them.
+
+    Returns
+    -------
+    tuple of ndarray of int32
+        ``(pivots, first_member, next_member, absorber)``: the pivots (supervariables, each
+        named by one of its rows); the rows each stands for, linked from ``first_member[p]``
+        through ``next_member`` (-1 ends the chain), its own row first; per pivot, the pivot
+        whose element absorbed its element (-1: none, a root of the assembly tree).
+    """
     if 4 * rows.size + 4 * pointers.size + 16 >= 2**30:
         raise ValueError("approximate_minimum_degree: more than 2^30 entries in the lists "
                          "(32-bit)")
     pointers, neighbours = _both_triangles(pointers, rows)
     n = pointers.size - 1
     if n == 0:
-        return np.empty(0, dtype=np.int64)
-    VARIABLE, ELEMENT, GONE = 0, 1, 2
-    lists = np.empty(2 * neighbours.size + 4 * n + 16, dtype=np.int32)
-    start = pointers[:-1].copy()
-    length = pointers[1:] - pointers[:-1]
+        empty = np.empty(0, dtype=np.int32)
+        return empty, empty, empty, empty
+    lists = np.empty(2 * neighbours.size + 4 * n + 16, dtype=np.uint32)
     lists[:neighbours.size] = neighbours
-    free = neighbours.size
-    elements = np.zeros(n, dtype=np.int32)     # a row's list: its elements first, then rows
-    kind = np.zeros(n, dtype=np.int32)
-    weight = np.ones(n, dtype=np.int32)         # rows a (super)variable stands for; 0 once merged
-    degree = length.copy()                      # approximate external degree; an element's weight
-    head = np.full(n + 1, -1, dtype=np.int32)   # rows by degree, doubly linked
-    after = np.full(n, -1, dtype=np.int32)
-    before = np.full(n, -1, dtype=np.int32)
+    state = np.zeros((n, 16), dtype=np.int32)     # a record a row: the fields above
     for i in range(n):
-        d = degree[i]
-        after[i] = head[d]
+        state[i, START] = pointers[i]
+        state[i, LENGTH] = pointers[i + 1] - pointers[i]
+        state[i, DEGREE] = pointers[i + 1] - pointers[i]
+        state[i, WEIGHT] = 1
+        state[i, MARK] = -1
+        state[i, TAG] = -1
+        state[i, AFTER] = -1
+        state[i, BEFORE] = -1
+        state[i, BUCKET_NEXT] = -1
+    free = neighbours.size
+    head = np.full(n + 1, -1, dtype=np.int32)   # rows by degree, doubly linked
+    for i in range(n):
+        d = state[i, DEGREE]
+        state[i, AFTER] = head[d]
         if head[d] >= 0:
-            before[head[d]] = i
+            state[head[d], BEFORE] = i
         head[d] = i
-    mark = np.full(n, -1, dtype=np.int64)
     stamp = 0
-    outside_tag = np.full(n, -1, dtype=np.int64)
-    outside = np.zeros(n, dtype=np.int32)       # |L_e \ L_p| for the elements next to L_p
-    new_degree = np.zeros(n, dtype=np.int32)
-    hashes = np.zeros(n, dtype=np.int32)
     bucket_head = np.full(n, -1, dtype=np.int32)
-    bucket_next = np.full(n, -1, dtype=np.int32)
-    copy = np.empty(n + 1, dtype=np.int32)
+    copy = np.empty(n + 1, dtype=np.uint32)
     first_member = np.arange(n, dtype=np.int32)     # the rows a (super)variable stands for,
     last_member = np.arange(n, dtype=np.int32)      # linked
     next_member = np.full(n, -1, dtype=np.int32)
     pivots = np.empty(n, dtype=np.int32)
+    absorber = np.full(n, -1, dtype=np.int32)
     n_pivots = eliminated = least = 0
     while eliminated < n:
         while least <= n and head[least] < 0:
@@ -153,65 +201,71 @@ def approximate_minimum_degree(pointers: np.ndarray, rows: np.ndarray) -> np.nda
         if least > n:
             raise ValueError("approximate_minimum_degree: no row left of any degree")
         p = head[least]
-        head[least] = after[p]
-        if after[p] >= 0:
-            before[after[p]] = -1
-        eliminated += weight[p]
-        kind[p] = ELEMENT
+        head[least] = state[p, AFTER]
+        if state[p, AFTER] >= 0:
+            state[state[p, AFTER], BEFORE] = -1
+        eliminated += state[p, WEIGHT]
+        state[p, KIND] = ELEMENT
         pivots[n_pivots] = p
         n_pivots += 1
+        if stamp >= STAMP_LIMIT:
+            state[:, MARK] = -1
+            state[:, TAG] = -1
+            stamp = 0
         stamp += 1
-        mark[p] = stamp
+        state[p, MARK] = stamp
         # the new element's rows, at the end of the lists
-        bound = length[p] - elements[p]
-        for k in range(elements[p]):
-            bound += length[lists[start[p] + k]]
+        bound = state[p, LENGTH] - state[p, ELEMENTS]
+        for k in range(state[p, ELEMENTS]):
+            bound += state[lists[state[p, START] + k], LENGTH]
         if free + bound > lists.size:
-            lists, free = _compacted(lists, start, length, kind != GONE, bound + lists.size // 2)
+            lists, free = _compacted(lists, state, bound + lists.size // 2)
         new = free
         size = new_weight = 0
-        for k in range(length[p]):
-            node = lists[start[p] + k]
-            if k < elements[p]:
-                if kind[node] != ELEMENT:
+        for k in range(state[p, LENGTH]):
+            adjacent = lists[state[p, START] + k]
+            if k < state[p, ELEMENTS]:
+                if state[adjacent, KIND] != ELEMENT:
                     continue
-                for q in range(start[node], start[node] + length[node]):
+                for q in range(state[adjacent, START], state[adjacent, START] + state[adjacent, LENGTH]):
                     j = lists[q]
-                    if kind[j] == VARIABLE and weight[j] > 0 and mark[j] != stamp:
-                        mark[j] = stamp
+                    if state[j, KIND] == VARIABLE and state[j, WEIGHT] > 0 and state[j, MARK] != stamp:
+                        state[j, MARK] = stamp
                         lists[new + size] = j
                         size += 1
-                        new_weight += weight[j]
-                kind[node] = GONE                   # absorbed by the new element
-            elif kind[node] == VARIABLE and weight[node] > 0 and mark[node] != stamp:
-                mark[node] = stamp
-                lists[new + size] = node
+                        new_weight += state[j, WEIGHT]
+                state[adjacent, KIND] = GONE         # absorbed by the new element
+                absorber[adjacent] = p
+            elif state[adjacent, KIND] == VARIABLE and state[adjacent, WEIGHT] > 0 \
+                    and state[adjacent, MARK] != stamp:
+                state[adjacent, MARK] = stamp
+                lists[new + size] = adjacent
                 size += 1
-                new_weight += weight[node]
+                new_weight += state[adjacent, WEIGHT]
         free += size
-        start[p], length[p], elements[p] = new, size, 0
+        state[p, START], state[p, LENGTH], state[p, ELEMENTS] = new, size, 0
         for q in range(new, new + size):            # out of the degree lists
             i = lists[q]
-            if before[i] >= 0:
-                after[before[i]] = after[i]
+            if state[i, BEFORE] >= 0:
+                state[state[i, BEFORE], AFTER] = state[i, AFTER]
             else:
-                head[degree[i]] = after[i]
-            if after[i] >= 0:
-                before[after[i]] = before[i]
-            after[i] = before[i] = -1
+                head[state[i, DEGREE]] = state[i, AFTER]
+            if state[i, AFTER] >= 0:
+                state[state[i, AFTER], BEFORE] = state[i, BEFORE]
+            state[i, AFTER] = state[i, BEFORE] = -1
         for q in range(new, new + size):            # |L_e \ L_p|
             i = lists[q]
-            for k in range(start[i], start[i] + elements[i]):
+            for k in range(state[i, START], state[i, START] + state[i, ELEMENTS]):
                 e = lists[k]
-                if kind[e] != ELEMENT or e == p:
+                if state[e, KIND] != ELEMENT or e == p:
                     continue
-                if outside_tag[e] != stamp:
-                    outside_tag[e] = stamp
-                    outside[e] = degree[e]
-                outside[e] -= weight[i]
+                if state[e, TAG] != stamp:
+                    state[e, TAG] = stamp
+                    state[e, OUTSIDE] = state[e, DEGREE]
+                state[e, OUTSIDE] -= state[i, WEIGHT]
         for q in range(new, new + size):            # each row's lists pruned, its degree
             i = lists[q]
-            s, count, n_elements = start[i], length[i], elements[i]
+            s, count, n_elements = state[i, START], state[i, LENGTH], state[i, ELEMENTS]
             for k in range(count):
                 copy[k] = lists[s + k]
             lists[s] = p                            # the new element first
@@ -220,72 +274,74 @@ def approximate_minimum_degree(pointers: np.ndarray, rows: np.ndarray) -> np.nda
             hashed = p
             for k in range(n_elements):
                 e = copy[k]
-                if kind[e] != ELEMENT or e == p:
+                if state[e, KIND] != ELEMENT or e == p:
                     continue
-                if outside[e] <= 0:                 # all its rows in L_p: absorbed
-                    kind[e] = GONE
+                if state[e, OUTSIDE] <= 0:                 # all its rows in L_p: absorbed
+                    state[e, KIND] = GONE
+                    absorber[e] = p
                     continue
                 lists[end] = e
                 end += 1
-                external += outside[e]
+                external += state[e, OUTSIDE]
                 hashed += e
             kept_elements = end - s
             for k in range(n_elements, count):
                 j = copy[k]
-                if kind[j] != VARIABLE or weight[j] == 0 or mark[j] == stamp:
+                if state[j, KIND] != VARIABLE or state[j, WEIGHT] == 0 or state[j, MARK] == stamp:
                     continue
                 lists[end] = j
                 end += 1
-                external += weight[j]
+                external += state[j, WEIGHT]
                 hashed += j
             if end - s > count:
                 raise ValueError("approximate_minimum_degree: a list grew")
-            length[i], elements[i] = end - s, kept_elements
+            state[i, LENGTH], state[i, ELEMENTS] = end - s, kept_elements
             if external == 0 and kept_elements == 1:    # next to the new element only
-                weight[p] += weight[i]
-                eliminated += weight[i]
+                state[p, WEIGHT] += state[i, WEIGHT]
+                eliminated += state[i, WEIGHT]
                 next_member[last_member[p]] = first_member[i]
                 last_member[p] = last_member[i]
-                weight[i] = 0
-                kind[i] = GONE
+                state[i, WEIGHT] = 0
+                state[i, KIND] = GONE
                 continue
-            d = min(degree[i] + new_weight - weight[i], external + new_weight - weight[i])
-            new_degree[i] = min(d, n - eliminated - weight[i])
-            hashes[i] = hashed % n
+            others = new_weight - state[i, WEIGHT]
+            d = min(state[i, DEGREE] + others, external + others)
+            state[i, NEW_DEGREE] = min(d, n - eliminated - state[i, WEIGHT])
+            state[i, HASH] = hashed % n
         for q in range(new, new + size):            # supervariables: the same lists
             i = lists[q]
-            if weight[i] > 0:
-                bucket_next[i] = bucket_head[hashes[i]]
-                bucket_head[hashes[i]] = i
+            if state[i, WEIGHT] > 0:
+                state[i, BUCKET_NEXT] = bucket_head[state[i, HASH]]
+                bucket_head[state[i, HASH]] = i
         for q in range(new, new + size):
-            b = hashes[lists[q]]
+            b = state[lists[q], HASH]
             while bucket_head[b] >= 0:
                 i = bucket_head[b]
-                bucket_head[b] = bucket_next[i]
-                if weight[i] == 0:
+                bucket_head[b] = state[i, BUCKET_NEXT]
+                if state[i, WEIGHT] == 0 or bucket_head[b] < 0:     # no other row left to compare
                     continue
                 stamp += 1
-                for k in range(start[i], start[i] + length[i]):
-                    mark[lists[k]] = stamp
+                for k in range(state[i, START], state[i, START] + state[i, LENGTH]):
+                    state[lists[k], MARK] = stamp
                 previous, j = -1, bucket_head[b]
                 while j >= 0:
-                    following = bucket_next[j]
-                    same = weight[j] > 0 and length[j] == length[i] \
-                        and elements[j] == elements[i]
+                    following = state[j, BUCKET_NEXT]
+                    same = state[j, WEIGHT] > 0 and state[j, LENGTH] == state[i, LENGTH] \
+                        and state[j, ELEMENTS] == state[i, ELEMENTS]
                     if same:
-                        for k in range(start[j], start[j] + length[j]):
-                            if mark[lists[k]] != stamp:
+                        for k in range(state[j, START], state[j, START] + state[j, LENGTH]):
+                            if state[lists[k], MARK] != stamp:
                                 same = False
                                 break
                     if same:                        # j merged into i, out of the bucket
-                        weight[i] += weight[j]
-                        new_degree[i] -= weight[j]
+                        state[i, WEIGHT] += state[j, WEIGHT]
+                        state[i, NEW_DEGREE] -= state[j, WEIGHT]
                         next_member[last_member[i]] = first_member[j]
                         last_member[i] = last_member[j]
-                        weight[j] = 0
-                        kind[j] = GONE
+                        state[j, WEIGHT] = 0
+                        state[j, KIND] = GONE
                         if previous >= 0:
-                            bucket_next[previous] = following
+                            state[previous, BUCKET_NEXT] = following
                         else:
                             bucket_head[b] = following
                     else:
@@ -294,99 +350,66 @@ def approximate_minimum_degree(pointers: np.ndarray, rows: np.ndarray) -> np.nda
         count = total = 0
         for q in range(new, new + size):            # the element's rows, back by degree
             i = lists[q]
-            if weight[i] == 0:
+            if state[i, WEIGHT] == 0:
                 continue
             lists[new + count] = i
             count += 1
-            total += weight[i]
-            d = max(new_degree[i], 0)
-            degree[i] = d
-            after[i], before[i] = head[d], -1
+            total += state[i, WEIGHT]
+            d = max(state[i, NEW_DEGREE], 0)
+            state[i, DEGREE] = d
+            state[i, AFTER], state[i, BEFORE] = head[d], -1
             if head[d] >= 0:
-                before[head[d]] = i
+                state[head[d], BEFORE] = i
             head[d] = i
             least = min(least, d)
-        length[p], degree[p] = count, total
-    order = np.empty(n, dtype=np.int64)
-    k = 0
-    for t in range(n_pivots):
-        row = first_member[pivots[t]]
-        while row >= 0:
-            order[k] = row
-            k += 1
-            row = next_member[row]
-    return order[_postorder(elimination_tree(pointers, neighbours, order))]
+        state[p, LENGTH], state[p, DEGREE] = count, total
+    return pivots[:n_pivots], first_member, next_member, absorber
 
 
 @numba.njit(cache=True)
-def elimination_tree(pointers: np.ndarray, neighbours: np.ndarray, order: np.ndarray
-                     ) -> np.ndarray:
-    """The elimination tree of a symmetric pattern factorised in ``order``: the parent of each
-    place ``k`` is the first place after ``k`` whose row of the Cholesky factor ``L`` has an
-    entry in column ``k`` (Liu's algorithm, with path compression).
-
-    Parameters
-    ----------
-    pointers, neighbours : ndarray of int
-        The pattern's adjacency, both triangles, no diagonal (:func:`_both_triangles`).
-    order : ndarray of int64, shape (n,)
-        The rows in elimination order.
-
-    Returns
-    -------
-    ndarray of int64, shape (n,)
-        ``parent[k]``, a place after ``k``, or -1 for a root; places, not rows.
-    """
-    n = order.size
-    place = np.empty(n, dtype=np.int64)
-    for k in range(n):
-        place[order[k]] = k
-    parent = np.full(n, -1, dtype=np.int64)
-    ancestor = np.full(n, -1, dtype=np.int64)       # a shortcut towards the root found so far
-    for k in range(n):
-        row = order[k]
-        for e in range(pointers[row], pointers[row + 1]):
-            i = place[neighbours[e]]
-            if i >= k:
-                continue
-            while ancestor[i] != -1 and ancestor[i] != k:   # up to the root of i's subtree
-                following = ancestor[i]
-                ancestor[i] = k
-                i = following
-            if ancestor[i] == -1:                   # that root joins k
-                ancestor[i] = k
-                parent[i] = k
-    return parent
-
-
-@numba.njit(cache=True)
-def _postorder(parent: np.ndarray) -> np.ndarray:
-    """The places of a forest (``parent``: :func:`elimination_tree`) in a postorder: each
-    subtree a contiguous run ending at its root, children in increasing place, roots too."""
-    n = parent.size
-    first_child = np.full(n, -1, dtype=np.int64)
-    next_sibling = np.full(n, -1, dtype=np.int64)
-    for k in range(n - 1, -1, -1):
-        if parent[k] >= 0:
-            next_sibling[k] = first_child[parent[k]]
-            first_child[parent[k]] = k
-    post = np.empty(n, dtype=np.int64)
-    stack = np.empty(n, dtype=np.int64)
+def _assembly_postorder(pivots: np.ndarray, absorber: np.ndarray) -> np.ndarray:
+    """``pivots`` (:func:`_pivots`) in a postorder of their assembly tree: each subtree a
+    contiguous run ending at its root, children in the order they were picked, roots too."""
+    first_child = np.full(absorber.size, -1, dtype=np.int32)
+    next_sibling = np.full(absorber.size, -1, dtype=np.int32)
+    for t in range(pivots.size - 1, -1, -1):
+        child = pivots[t]
+        if absorber[child] >= 0:
+            next_sibling[child] = first_child[absorber[child]]
+            first_child[absorber[child]] = child
+    post = np.empty(pivots.size, dtype=np.int32)
+    stack = np.empty(pivots.size, dtype=np.int32)
     count = 0
-    for root in range(n):
-        if parent[root] >= 0:
+    for root in pivots:
+        if absorber[root] >= 0:
             continue
         top = 0
         stack[0] = root
         while top >= 0:
-            k = stack[top]
-            child = first_child[k]
-            if child == -1:                         # every child done: k follows them
+            pivot = stack[top]
+            child = first_child[pivot]
+            if child == -1:                         # every child done: the pivot follows them
                 top -= 1
-                post[count] = k
+                post[count] = pivot
                 count += 1
             else:
-                first_child[k] = next_sibling[child]
+                first_child[pivot] = next_sibling[child]
                 top += 1
                 stack[top] = child
     return post
+
+
+@numba.njit(cache=True)
+def _rows_of(pivots: np.ndarray, first_member: np.ndarray, next_member: np.ndarray
+             ) -> np.ndarray:
+    """The rows ``pivots`` stand for (:func:`_pivots`), pivot after pivot: an elimination order,
+    int64, shape (n,)."""
+    order = np.empty(first_member.size, dtype=np.int64)
+    k = 0
+    for pivot in pivots:
+        row = first_member[pivot]
+        while row >= 0:
+            order[k] = row
+            k += 1
+            row = next_member[row]
+    return order

@@ -7,14 +7,9 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from lubcontact.problem import StepProblem
-from lubcontact.solvers import factorisations, kernels
+from lubcontact.solvers import factorisations, kernels, ordering
 from lubcontact.solvers.newton import AlartCurnier
-from lubcontact.solvers.ordering import (
-    _both_triangles,
-    _postorder,
-    approximate_minimum_degree,
-    elimination_tree,
-)
+from lubcontact.solvers.ordering import _both_triangles, _pivots, _rows_of, approximate_minimum_degree
 
 
 def grid(m: int) -> sp.csr_matrix:
@@ -92,53 +87,66 @@ def test_the_adjacency_has_both_triangles_of_the_symmetrised_pattern_without_its
                               expected.indices[expected.indptr[row]:expected.indptr[row + 1]])
 
 
-def adjacency(matrix: sp.spmatrix) -> tuple[np.ndarray, np.ndarray]:
-    """Both triangles of ``matrix``'s symmetrised pattern, as the order reads it."""
-    matrix = sp.csr_matrix(matrix)
-    return _both_triangles(*kernels.symmetrised_pattern(matrix.indptr, matrix.indices))
-
-
-@pytest.mark.parametrize("pattern", ["grid", "random", "two_components"])
-def test_the_elimination_tree_is_the_factor_s_and_its_postorder_keeps_the_fill(pattern):
-    """In a random order of a 12 x 12 grid, of a random pattern and of two components, the
-    elimination tree is the one the static pattern of the factor holds (each column's least row
-    below the diagonal), and the order rearranged by its postorder factorises with exactly as
-    many entries; postordering that order again leaves it as it is."""
-    matrix = {"grid": lambda: grid(12),
-              "random": lambda: sp.random(150, 150, 0.02, random_state=4) + sp.identity(150),
-              "two_components": lambda: sp.block_diag([grid(5), np.ones((9, 9))])}[pattern]()
-    order = np.random.default_rng(5).permutation(matrix.shape[0])
-    pointers, neighbours = adjacency(matrix)
-    parent = elimination_tree(pointers, neighbours, order)
+def factor_tree(matrix: sp.spmatrix, order: np.ndarray) -> np.ndarray:
+    """The elimination tree of ``matrix[order][:, order]``'s factor, read from its static pattern
+    (kernels.static_pattern): the parent of each place is the least row below the diagonal of
+    its column of ``L`` (-1: a root)."""
     permuted = sp.csc_matrix(matrix)[order][:, order].tocsc()
     permuted.sort_indices()
     lower_ptr, lower_idx, *_ = kernels.static_pattern(permuted.indptr.astype(np.int64),
                                                       permuted.indices.astype(np.uint32))
-    expected = np.array([lower_idx[lower_ptr[k] + 1:lower_ptr[k + 1]].min()
-                         if lower_ptr[k + 1] - lower_ptr[k] > 1 else -1
-                         for k in range(order.size)])
-    assert np.array_equal(parent, expected)
-    postordered = order[_postorder(parent)]
-    assert is_permutation(postordered, order.size)
-    assert factor_entries(matrix, postordered) == factor_entries(matrix, order)
-    again = _postorder(elimination_tree(pointers, neighbours, postordered))
-    assert np.array_equal(again, np.arange(order.size))
+    return np.array([lower_idx[lower_ptr[k] + 1:lower_ptr[k + 1]].min()
+                     if lower_ptr[k + 1] - lower_ptr[k] > 1 else -1 for k in range(order.size)])
 
 
-def test_the_order_is_postordered():
-    """The minimum-degree order of a 30 x 30 grid comes postordered: each subtree of its
-    elimination tree a contiguous run of places ending at its root (the same fill; a column's
-    descendants next to it in memory)."""
-    matrix = grid(30)
+def flow_block() -> sp.csr_matrix:
+    """A gluey + friction flow step's reduced Newton block (some 700 rows, the sparse lane)."""
+    with np.load(Path(__file__).parents[1] / "flow" / "data" / "gluey-flow-step.npz") as data:
+        problem = StepProblem.from_arrays(data).normalized()
+        start = data["warm_start"] / problem.scaling.force
+    function = AlartCurnier(problem)
+    function.set_proximal(1e-3 * function.typical, start)
+    phi, y, _ = function.residual(start)
+    return function.reduced_system(y, phi)[1]
+
+
+PATTERNS = {"grid": lambda: grid(30),
+            "random": lambda: sp.random(150, 150, 0.02, random_state=4) + sp.identity(150),
+            "two_components": lambda: sp.block_diag([grid(5), np.ones((9, 9))]),
+            "twins": lambda: sp.kron(grid(6), sp.csr_matrix(np.ones((2, 2)))),
+            "flow_block": flow_block}
+
+
+@pytest.mark.parametrize("pattern", PATTERNS)
+def test_the_postorder_keeps_the_fill_of_the_pivots_order(pattern):
+    """Rearranged along the elimination's assembly tree, the order factorises with exactly as
+    many entries as the rows in the order the pivots were picked, and is another order of them
+    (a grid, a random pattern, two components, twin rows, a flow step's block)."""
+    matrix = sp.csr_matrix(PATTERNS[pattern]())
+    upper = kernels.symmetrised_pattern(matrix.indptr, matrix.indices)
+    pivots, first_member, next_member, _ = _pivots(*upper)
+    picked = _rows_of(pivots, first_member, next_member)
+    order = approximate_minimum_degree(*upper)
+    assert is_permutation(picked, matrix.shape[0]) and is_permutation(order, matrix.shape[0])
+    assert not np.array_equal(order, picked)             # the postorder moved rows
+    assert factor_entries(matrix, order) == factor_entries(matrix, picked)
+
+
+@pytest.mark.parametrize("pattern", ["grid", "flow_block"])
+def test_the_order_is_postordered(pattern):
+    """The minimum-degree order of a 30 x 30 grid and of a flow step's block comes postordered:
+    each subtree of its factor's elimination tree a contiguous run of places ending at its root
+    (the same fill; a column's descendants next to it in memory)."""
+    matrix = PATTERNS[pattern]()
     order = order_of(matrix)
-    parent = elimination_tree(*adjacency(matrix), order)
-    assert np.all((parent == -1) | (parent > np.arange(900)))
-    assert np.array_equal(_postorder(parent), np.arange(900))
-    size = np.ones(900, dtype=int)                  # each subtree's rows (children come first)
-    for k in range(900):
+    parent = factor_tree(matrix, order)
+    n = order.size
+    assert np.all((parent == -1) | (parent > np.arange(n)))
+    size = np.ones(n, dtype=int)                    # each subtree's rows (children come first)
+    for k in range(n):
         if parent[k] >= 0:
             size[parent[k]] += size[k]
-    for k in range(900):                            # the subtree of k: the places k - size + 1 .. k
+    for k in range(n):                              # the subtree of k: the places k - size + 1 .. k
         for j in range(k - size[k] + 1, k):
             while 0 <= j < k:                       # up the tree: a root (-1) ends it too
                 j = parent[j]
@@ -185,3 +193,18 @@ def test_a_fresh_2d_block_is_factorised_in_this_order_by_the_static_lu(monkeypat
     monkeypatch.undo()
     superlu = spla.splu(block.tocsc(), **factorisations.SPARSE_LU)
     assert factors.nnz <= 1.1 * superlu.nnz
+
+
+def test_the_marks_cleared_at_the_stamp_limit_leave_the_pivots_as_they_are(monkeypatch):
+    """The 32-bit marks and tags are cleared where the stamp reaches its limit: with a limit of
+    5 (cleared every few pivots) the elimination of a 12 x 12 grid and of a pattern with twin
+    rows (supervariables compared) picks the same pivots, merges and absorptions as without."""
+    for matrix in (grid(12), sp.kron(grid(5), sp.csr_matrix(np.ones((2, 2))))):
+        matrix = sp.csr_matrix(matrix)
+        upper = kernels.symmetrised_pattern(matrix.indptr, matrix.indices)
+        expected = _pivots(*upper)
+        monkeypatch.setattr(ordering, "STAMP_LIMIT", 5)
+        cleared = _pivots.py_func(*upper)             # reads the limit at run time
+        monkeypatch.undo()
+        for got, wanted in zip(cleared, expected):
+            assert np.array_equal(got, wanted)
