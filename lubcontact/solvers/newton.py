@@ -995,7 +995,7 @@ def _block_solve(block: sp.spmatrix | np.ndarray, rhs: np.ndarray, rows: np.ndar
     return None
 
 @register("newton-ac", kind=NEWTON, cones=ALL_CONES, warm_start=True, native_coulomb=True)
-def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = 500,
+def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = 1000,
                          warm_start: np.ndarray | None = None, fallback: str | None = "auto",
                          joint: int = 0, replay: MethodOutput | None = None) -> MethodOutput:
     """Semismooth Newton on the Alart-Curnier function (exact Coulomb, one LU per iteration).
@@ -1008,8 +1008,15 @@ def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = 5
         Stop when the FCLIB error is below it.
     max_iter : int
         Cap on Newton iterations (one LU each, of the active rows, less the sliding ones on
-        the 2D sparse lane: dense up to :data:`DENSE_LIMIT` rows, sparse above); the joint
-        phase (``joint``) has its own cap, :data:`JOINT_START_ITERATIONS`.
+        the 2D sparse lane: dense up to :data:`DENSE_LIMIT` rows, sparse above), shared by the
+        strategies; the joint phase (``joint``) has its own cap, :data:`JOINT_START_ITERATIONS`.
+        1 000 by default: at 500 the last strategy on the 800-grain frictional pile at rest of
+        ``lubcontact compare`` (from zero forces, tol 1e-8) was cut at its 351st iteration,
+        still progressing (1.2e-5), and whether the fallbacks then reached tol turned on the
+        rounding (a change of elimination order flipped it); with 1 000 every strategy stalls
+        by its own rule (774-789 iterations) and the fallbacks converge under either order
+        (docs/records/benchmarks.md, "the minimum-degree order postordered along its assembly
+        tree").
     warm_start : ndarray, shape (n_rows,), optional
         Initial forces (scaled); zero otherwise.
     fallback : str or None
