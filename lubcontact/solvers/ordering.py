@@ -276,7 +276,7 @@ def _pivots(pointers: np.ndarray, rows: np.ndarray
                 e = copy[k]
                 if state[e, KIND] != ELEMENT or e == p:
                     continue
-                if state[e, OUTSIDE] <= 0:                 # all its rows in L_p: absorbed
+                if state[e, OUTSIDE] <= 0:          # all its rows in L_p: absorbed
                     state[e, KIND] = GONE
                     absorber[e] = p
                     continue

@@ -99,22 +99,24 @@ def factor_tree(matrix: sp.spmatrix, order: np.ndarray) -> np.ndarray:
                      if lower_ptr[k + 1] - lower_ptr[k] > 1 else -1 for k in range(order.size)])
 
 
-def flow_block() -> sp.csr_matrix:
-    """A gluey + friction flow step's reduced Newton block (some 700 rows, the sparse lane)."""
+def flow_system() -> tuple[AlartCurnier, np.ndarray, sp.csr_matrix, np.ndarray]:
+    """A gluey + friction flow step's reduced Newton system (some 700 rows, the sparse lane) at
+    its warm start, the weight 1e-3: ``(function, kept rows, block, right-hand side)``."""
     with np.load(Path(__file__).parents[1] / "flow" / "data" / "gluey-flow-step.npz") as data:
         problem = StepProblem.from_arrays(data).normalized()
         start = data["warm_start"] / problem.scaling.force
     function = AlartCurnier(problem)
     function.set_proximal(1e-3 * function.typical, start)
     phi, y, _ = function.residual(start)
-    return function.reduced_system(y, phi)[1]
+    kept, block, rhs, *_ = function.reduced_system(y, phi)
+    return function, kept, block, rhs
 
 
 PATTERNS = {"grid": lambda: grid(30),
             "random": lambda: sp.random(150, 150, 0.02, random_state=4) + sp.identity(150),
             "two_components": lambda: sp.block_diag([grid(5), np.ones((9, 9))]),
             "twins": lambda: sp.kron(grid(6), sp.csr_matrix(np.ones((2, 2)))),
-            "flow_block": flow_block}
+            "flow_block": lambda: flow_system()[2]}
 
 
 @pytest.mark.parametrize("pattern", PATTERNS)
@@ -173,14 +175,8 @@ def test_a_fresh_2d_block_is_factorised_in_this_order_by_the_static_lu(monkeypat
     factorised afresh in this order without pivoting, no SuperLU call, and solved to a
     backward error below 1e-13; its fill within 10 % of SuperLU's own order's (which took a
     third of SuperLU's factorisation on 20 000-row blocks)."""
-    with np.load(Path(__file__).parents[1] / "flow" / "data" / "gluey-flow-step.npz") as data:
-        problem = StepProblem.from_arrays(data).normalized()
-        start = data["warm_start"] / problem.scaling.force
-    function = AlartCurnier(problem)
+    function, kept, block, rhs = flow_system()
     assert function.compiled_rows and not function.dense
-    function.set_proximal(1e-3 * function.typical, start)
-    phi, y, _ = function.residual(start)
-    kept, block, rhs, *_ = function.reduced_system(y, phi)
     calls = []
     monkeypatch.setattr(factorisations.spla, "splu", lambda *args, **kwargs: calls.append(1))
     kept_factors = factorisations.Factorisations(carry=True)
