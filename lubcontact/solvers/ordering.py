@@ -27,8 +27,8 @@ docs/records/benchmarks.md). The lists hold unsigned ones (no wrap-around check 
 from them), and a row's fields are one record (:data:`KIND` and the others), not an array each:
 on blocks of 10^5-grain gluey steps (150 000 rows) the elimination jumps all over the rows, and
 with one cache line a row instead of one a field the orders took 0.7 of the time, 0.84 on the
-blocks of 10 000-grain steps (docs/records/benchmarks.md, "the order postordered along its
-assembly tree").
+blocks of 10 000-grain steps (docs/records/benchmarks.md, "the minimum-degree order postordered
+along its assembly tree").
 
 The order is returned postordered: rearranged so that each subtree of its elimination tree is a
 contiguous run of places ending at its root. Any order that keeps the tree's parents after their
@@ -41,7 +41,7 @@ element a child of the element that absorbed it (its supervariables' rows a chai
 SuiteSparse's AMD postorders: no pass over the pattern after the elimination. Against the
 elimination tree found afresh from the pattern (Liu's algorithm), the same fill on the blocks of
 10 000-grain gluey steps in a quarter less time for the whole order (docs/records/benchmarks.md,
-"the order postordered along its assembly tree").
+"the minimum-degree order postordered along its assembly tree").
 """
 from __future__ import annotations
 
