@@ -121,7 +121,8 @@ def test_newton_that_runs_out_hands_over_to_the_fallback_and_says_so():
 def test_the_strategies_stall_by_their_own_rule_on_a_frictional_pile_at_rest_before_the_cap():
     """The 800-grain frictional pile at rest of ``lubcontact compare`` (3 296 rows, from zero
     forces, tol 1e-8; singular W): every Newton strategy stalls by its own rule within the
-    default cap (774 iterations), and the Gauss-Seidel rounds with their polishes then reach tol.
+    default cap (774 iterations), and the solve reaches tol (today through Gauss-Seidel's rounds
+    and their polishes).
     At a cap of 500 the last strategy was cut at its 351st iteration while still progressing
     (1.2e-5), and the run ended max_iter at 9.4e-7 with this package's elimination order."""
     from lubcontact.bench.problem_sets import build_frictional_piles
@@ -130,7 +131,7 @@ def test_the_strategies_stall_by_their_own_rule_on_a_frictional_pile_at_rest_bef
     result = SolveSettings(method="newton-ac", tol=1e-8, exact_coulomb=True).solve(pile.problem)
     assert result.status == CONVERGED
     assert scaled_coulomb_error(pile.problem, result.forces) <= 1e-8
-    assert result.info["newton_status"] != MAX_ITER and result.info["fallbacks"]
+    assert result.info["newton_status"] != MAX_ITER          # stalled by its rule, not capped
 
 
 def test_a_gluey_problem_falls_back_on_gauss_seidel_alone():
