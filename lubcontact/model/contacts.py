@@ -6,10 +6,9 @@ kind) to a free grain ``b``; its normal points from ``a`` to ``b`` and the
 relative velocity is ``u = v_b(contact point) - v_a(contact point)``. A
 positive normal force pushes the bodies apart.
 
-Periodic scenes (``scene.period`` = L along x): grains and fixed grains within
-reach of either end are copied as ghost images shifted by +/- L before the
-neighbour search; a pair found through an image is mapped back to the original
-bodies and measured with the minimum-image separation, so its key is the same
+Periodic scenes (``scene.period`` = L along x): the neighbour search's cells tile
+the period, those at either end neighbours of each other, and a pair across the
+boundary is measured with the minimum-image separation, so its key is the same
 on both sides of the boundary and the pair keeps its gluey state when a grain
 crosses it.
 """
@@ -82,7 +81,7 @@ class Contacts:
 
 
 def find_contacts(scene: Scene, d_max: float) -> Contacts:
-    """All pairs with gap ``D < d_max``, found with a k-d tree (no O(N^2) search).
+    """All pairs with gap ``D < d_max``, found with a cell list (no O(N^2) search).
 
     Parameters
     ----------

@@ -1,13 +1,12 @@
 """Vectorised geometry (any dimension): the pair search, tangent bases and lever arms.
 
 Bodies are numbered globally: free grains ``0..N-1``, fixed grains
-``N..N+F-1``, planes ``N+F..N+F+P-1``. Periodic boundaries along x are
-handled by ghost images (see :mod:`lubcontact.model.contacts`).
+``N..N+F-1``, planes ``N+F..N+F+P-1``. Periodic boundaries along x: see
+:mod:`lubcontact.model.contacts`.
 """
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 
 def tangent_basis(normals: np.ndarray) -> np.ndarray:
@@ -59,7 +58,7 @@ def smaller_radius(radius_a: np.ndarray, radius_b: np.ndarray) -> np.ndarray:
 def close_pairs(centres: np.ndarray, radii: np.ndarray, n_free: int, d_max: float,
                 period: float | None, plane_points: np.ndarray, plane_normals: np.ndarray
                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Every pair of bodies with gap ``D < d_max``, sorted by pair key (a k-d tree search).
+    """Every pair of bodies with gap ``D < d_max``, sorted by pair key (a cell list search).
 
     Parameters
     ----------
@@ -91,76 +90,46 @@ def close_pairs(centres: np.ndarray, radii: np.ndarray, n_free: int, d_max: floa
     gaps = np.concatenate([p[2] for p in parts])
     normals = np.vstack([p[3] for p in parts]).reshape(-1, dim)
     radius_a = np.concatenate([p[4] for p in parts])
-    keys = a.astype(np.int64) * (len(radii) + len(plane_points)) + b
-    order = np.argsort(keys, kind="stable")
-    return a[order], b[order], keys[order], gaps[order], normals[order], radius_a[order]
+    keys = a.astype(np.int64) * (len(radii) + len(plane_points)) + b    # sorted: the grain pairs
+    return a, b, keys, gaps, normals, radius_a      # by (a, b), then the planes' (numbered after)
 
 
 _Pairs = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]
-"""body_a, body_b, gaps, normals, radius_a of some pairs (unsorted)."""
+"""body_a, body_b, gaps, normals, radius_a of some pairs, sorted by pair key."""
 
 
 def _grain_pairs(centres: np.ndarray, radii: np.ndarray, n_free: int, d_max: float,
                  period: float | None = None) -> _Pairs:
-    dim = centres.shape[1]
-    empty = (np.zeros(0, int), np.zeros(0, int), np.zeros(0), np.zeros((0, dim)), np.zeros(0))
-    if len(radii) < 2 or n_free == 0:
-        return empty
-    reach = 2.0 * radii.max() + d_max
-    points, owner = _with_ghosts(centres, reach, period)
-    pairs = cKDTree(points).query_pairs(reach, output_type="ndarray")
-    if pairs.size == 0:
-        return empty
-    first, second = owner[pairs[:, 0]], owner[pairs[:, 1]]
-    i, j = np.minimum(first, second), np.maximum(first, second)   # a fixed grain can only be j
-    keep = (i < n_free) & (i != j)
-    i, j = i[keep], j[keep]
-    if period is not None:                   # a pair seen directly and through images: once
-        _, unique = np.unique(i * len(radii) + j, return_index=True)
-        i, j = i[unique], j[unique]
-    delta = centres[j] - centres[i]
-    if period is not None:
-        delta[:, 0] -= period * np.round(delta[:, 0] / period)
-    dist = np.linalg.norm(delta, axis=1)
-    gaps = dist - radii[i] - radii[j]
-    keep = gaps < d_max
-    i, j, delta, dist, gaps = i[keep], j[keep], delta[keep], dist[keep], gaps[keep]
-    fixed_j = j >= n_free                    # orient so that b is always free
-    a = np.where(fixed_j, j, i)
-    b = np.where(fixed_j, i, j)
-    normals = np.where(fixed_j[:, None], -delta, delta) / dist[:, None]
-    return a, b, gaps, normals, radii[a]
-
-
-def _with_ghosts(centres: np.ndarray, reach: float,
-                 period: float | None) -> tuple[np.ndarray, np.ndarray]:
-    """Centres plus their periodic images near the ends of ``[0, period)``, and the owner of each.
+    """The grain pairs of :func:`close_pairs`, by a cell list
+    (:func:`~lubcontact.model.pair_search.grain_pairs`).
 
     Raises
     ------
     ValueError
-        If the period is not larger than twice the search reach (the minimum
-        image would be ambiguous).
+        If a centre is not finite, or the period is not larger than twice the search reach
+        (the minimum image would be ambiguous).
     """
-    owner = np.arange(len(centres))
-    if period is None:
-        return centres, owner
-    if not period > 2.0 * reach:
+    from .pair_search import grain_pairs  # numba, imported on first use
+
+    dim = centres.shape[1]
+    if len(radii) < 2 or n_free == 0:
+        return np.zeros(0, int), np.zeros(0, int), np.zeros(0), np.zeros((0, dim)), np.zeros(0)
+    if not np.isfinite(centres).all():
+        raise ValueError("positions: the grains' and fixed grains' centres must be finite, got nan or inf")
+    reach = 2.0 * radii.max() + d_max
+    if period is not None and not period > 2.0 * reach:
         raise ValueError(f"period: must exceed twice the contact reach 2 (2 r_max + d_max) = "
                          f"{2.0 * reach:.6g}, got {period}")
-    x = np.mod(centres[:, 0], period)
-    wrapped = centres.copy()
-    wrapped[:, 0] = x
-    near_start, near_end = np.flatnonzero(x < reach), np.flatnonzero(x >= period - reach)
-    shift = np.zeros(centres.shape[1])
-    shift[0] = period
-    points = np.vstack([wrapped, wrapped[near_start] + shift, wrapped[near_end] - shift])
-    return points, np.concatenate([owner, near_start, near_end])
+    a, b, gaps, normals = grain_pairs(np.ascontiguousarray(centres, dtype=float),
+                                      np.ascontiguousarray(radii, dtype=float), n_free,
+                                      float(d_max), reach, 0.0 if period is None else float(period))
+    return a, b, gaps, normals, radii[a]
 
 
 def _plane_pairs(centres: np.ndarray, radii: np.ndarray, plane_points: np.ndarray,
                  plane_normals: np.ndarray, first_plane_id: int, d_max: float) -> _Pairs:
+    """The grain-plane pairs of :func:`close_pairs`, by plane, then grain (by pair key)."""
     offsets = np.einsum("pd,pd->p", plane_points, plane_normals)
-    gaps = centres @ plane_normals.T - offsets[None, :] - radii[:, None]
-    b, p = np.nonzero(gaps < d_max)
-    return (first_plane_id + p, b, gaps[b, p], plane_normals[p], np.zeros(len(b)))
+    gaps = (centres @ plane_normals.T - offsets[None, :] - radii[:, None]).T     # (P, N)
+    p, b = np.nonzero(gaps < d_max)
+    return (first_plane_id + p, b, gaps[p, b], plane_normals[p], np.zeros(len(b)))

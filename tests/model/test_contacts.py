@@ -41,9 +41,14 @@ def brute_force_gaps(scene, d_max):
     return found
 
 
+@pytest.mark.parametrize("far", [False, True])
 @pytest.mark.parametrize("dim", [2, 3])
-def test_kd_tree_search_finds_exactly_the_brute_force_pairs(dim):
+def test_cell_search_finds_exactly_the_brute_force_pairs(dim, far):
+    """``far``: one grain 10^5 away, so that reach-wide cells would be 10^10 (10^15 in 3D) and
+    the search widens them (``pair_search.CELLS_PER_GRAIN``)."""
     scene = random_scene(dim, seed=dim)
+    if far:
+        scene.grains.positions[7] += 1e5
     d_max = 0.2
     contacts = find_contacts(scene, d_max)
     expected = brute_force_gaps(scene, d_max)
@@ -224,3 +229,10 @@ def test_gamma_is_kept_by_pair_identity_and_forgotten_when_the_pair_leaves():
     sim.run(60)
     assert find_contacts(sim.scene, 0.05).count == 0
     assert sim.gamma_of([key])[0] == 0.0
+
+
+def test_a_centre_that_is_not_finite_is_refused_by_the_search():
+    scene = random_scene(2, seed=5)
+    scene.grains.positions[3, 1] = np.nan
+    with pytest.raises(ValueError, match="positions"):
+        find_contacts(scene, 0.2)

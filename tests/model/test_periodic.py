@@ -31,6 +31,34 @@ def test_contacts_invariant_under_periodic_shift():
     assert row.size == 12
 
 
+@pytest.mark.parametrize("reaches", [2.05, 2.9, 3.5, 7.3])
+def test_periodic_search_finds_exactly_the_minimum_image_pairs(reaches):
+    """Every pair within ``d_max`` by the minimum image along x, found once, on periods of
+    ``reaches`` contact reaches (2 r_max + d_max): under three, two cells tile the period and
+    one of them is a neighbour on both sides."""
+    rng = np.random.default_rng(int(10 * reaches))
+    d_max, radii = 0.1, rng.uniform(0.3, 0.5, 40)
+    period = reaches * (2.0 * radii.max() + d_max)
+    centres = np.stack([rng.uniform(-period, 2.0 * period, 40), rng.uniform(0.0, 6.0, 40)], axis=1)
+    scene = Scene.create(Grains.create(centres, radii, masses=1.0), period=period,
+                         check_overlaps=False)
+    contacts = find_contacts(scene, d_max)
+    expected = {}
+    for a in range(40):
+        for b in range(a + 1, 40):
+            delta = centres[b] - centres[a]
+            delta[0] -= period * np.round(delta[0] / period)
+            gap = np.linalg.norm(delta) - radii[a] - radii[b]
+            if gap < d_max:
+                expected[(a, b)] = gap
+    found = {(int(a), int(b)): gap for a, b, gap in zip(contacts.body_a, contacts.body_b,
+                                                        contacts.gaps)}
+    assert len(expected) > 10 and found.keys() == expected.keys()
+    for pair, gap in expected.items():
+        assert found[pair] == pytest.approx(gap, abs=1e-12)
+    assert np.all(np.diff(contacts.keys) > 0)
+
+
 def test_pair_across_boundary_has_inside_key_and_gap():
     radii = [0.5, 0.5]
     inside = Scene.create(Grains.create([[4.0, 1.0], [5.02, 1.0]], radii, masses=1.0), period=10.0)
