@@ -2,12 +2,12 @@
 
 :func:`~lubcontact.model.geometry.close_pairs` finds the grain pairs here: the centres binned in
 cells at least the contact reach ``2 r_max + d_max`` wide (periodic along x where the scene is,
-the cells then tiling the period), each grain's pairs looked for in its cell and the neighbouring
-ones, and the gaps, normals and the pairs' orientation computed in the same pass. The k-d tree it
-replaces (scipy's ``query_pairs`` on the centres and their periodic images, then numpy passes over
-the candidates) took 12.6 ms of a 10 000-grain flow's step against about 2 here
-(docs/records/benchmarks.md, "the pair search by cells"). Imported on first use, as the
-solvers' kernels.
+the cells then tiling the period), the pairs looked for within each cell and between each pair of
+neighbouring cells, once, and the gaps, normals and the pairs' orientation computed in the same
+pass. The k-d tree it replaces (scipy's ``query_pairs`` on the centres and their periodic images,
+then numpy passes over the candidates, then a sort by pair key) took 11-12 ms of a 10 000-grain
+flow's step against about 3 here (docs/records/benchmarks.md, "the pair search by cells").
+Imported on first use, as the solvers' kernels.
 """
 from __future__ import annotations
 
@@ -79,7 +79,7 @@ def grain_pairs(centres: np.ndarray, radii: np.ndarray, n_free: int, d_max: floa
             else:
                 at = int((x - lower[d]) / width[d])
             key[i] += min(max(at, 0), counts[d] - 1) * stride[d]
-    first = np.zeros(total_cells(counts) + 1, dtype=np.int64)      # counting sort by cell
+    first = np.zeros(np.prod(counts) + 1, dtype=np.int64)      # counting sort by cell
     for i in range(n):
         first[key[i] + 1] += 1
     for c in range(first.size - 1):
@@ -180,15 +180,6 @@ def _by_bodies(body_a: np.ndarray, body_b: np.ndarray, gaps: np.ndarray, normals
                 before -= 1
             order[before] = pair
     return body_a[order], body_b[order], gaps[order], normals[order]
-
-
-@numba.njit(cache=True)
-def total_cells(counts: np.ndarray) -> int:
-    """The cells of a grid of ``counts`` cells along each axis."""
-    total = 1
-    for count in counts:
-        total *= count
-    return total
 
 
 @numba.njit(cache=True)

@@ -236,3 +236,17 @@ def test_a_centre_that_is_not_finite_is_refused_by_the_search():
     scene.grains.positions[3, 1] = np.nan
     with pytest.raises(ValueError, match="positions"):
         find_contacts(scene, 0.2)
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_a_cluster_with_more_pairs_than_the_first_guess_has_every_pair(dim):
+    """Forty grains overlapping one another: 780 pairs, beyond the search's first arrays (four a
+    grain), which grow."""
+    rng = np.random.default_rng(dim)
+    grains = Grains.create(rng.uniform(0.0, 0.1, (40, dim)), 0.5, masses=1.0)
+    contacts = find_contacts(Scene.create(grains, check_overlaps=False), 0.0)
+    assert contacts.count == 40 * 39 // 2
+    assert np.all(np.diff(contacts.keys) > 0)
+    expected = [np.linalg.norm(grains.positions[b] - grains.positions[a]) - 1.0
+                for a, b in zip(contacts.body_a, contacts.body_b)]
+    np.testing.assert_allclose(contacts.gaps, expected, atol=1e-14)
