@@ -79,16 +79,7 @@ def grain_pairs(centres: np.ndarray, radii: np.ndarray, n_free: int, d_max: floa
             else:
                 at = int((x - lower[d]) / width[d])
             key[i] += min(max(at, 0), counts[d] - 1) * stride[d]
-    first = np.zeros(np.prod(counts) + 1, dtype=np.int64)      # counting sort by cell
-    for i in range(n):
-        first[key[i] + 1] += 1
-    for c in range(first.size - 1):
-        first[c + 1] += first[c]
-    filled = first[:-1].copy()
-    members = np.empty(n, dtype=np.int64)
-    for i in range(n):
-        members[filled[key[i]]] = i
-        filled[key[i]] += 1
+    first, members = _counting_order(key, np.prod(counts))     # each cell's centres
     capacity = 4 * n + 16
     body_a = np.empty(capacity, dtype=np.int64)
     body_b = np.empty(capacity, dtype=np.int64)
@@ -161,16 +152,7 @@ def _by_bodies(body_a: np.ndarray, body_b: np.ndarray, gaps: np.ndarray, normals
                n_bodies: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The pairs sorted by ``a``, then ``b`` (by their pair keys): counted by ``a``, each
     ``a``'s few pairs then sorted by insertion."""
-    start = np.zeros(n_bodies + 1, dtype=np.int64)
-    for a in body_a:
-        start[a + 1] += 1
-    for a in range(n_bodies):
-        start[a + 1] += start[a]
-    filled = start[:-1].copy()
-    order = np.empty(body_a.size, dtype=np.int64)
-    for pair in range(body_a.size):
-        order[filled[body_a[pair]]] = pair
-        filled[body_a[pair]] += 1
+    start, order = _counting_order(body_a, n_bodies)
     for a in range(n_bodies):
         for slot in range(start[a] + 1, start[a + 1]):
             pair = order[slot]
@@ -180,6 +162,24 @@ def _by_bodies(body_a: np.ndarray, body_b: np.ndarray, gaps: np.ndarray, normals
                 before -= 1
             order[before] = pair
     return body_a[order], body_b[order], gaps[order], normals[order]
+
+
+@numba.njit(cache=True)
+def _counting_order(keys: np.ndarray, n_keys: int) -> tuple[np.ndarray, np.ndarray]:
+    """``keys``' places (``keys``: integers in ``[0, n_keys)``) by increasing key, in their own
+    order within a key (a counting sort), and where each key's run of them starts: ``(start,
+    order)``, shapes (n_keys + 1,) and (keys.size,)."""
+    start = np.zeros(n_keys + 1, dtype=np.int64)
+    for key in keys:
+        start[key + 1] += 1
+    for key in range(n_keys):
+        start[key + 1] += start[key]
+    filled = start[:-1].copy()
+    order = np.empty(keys.size, dtype=np.int64)
+    for place in range(keys.size):
+        order[filled[keys[place]]] = place
+        filled[keys[place]] += 1
+    return start, order
 
 
 @numba.njit(cache=True)
