@@ -49,6 +49,17 @@ def matvec(indptr, indices, values, x, out):
         start = end
 
 
+@numba.njit(cache=True)
+def add_columns(indptr, indices, values, change, rows, out):
+    """``out += W change`` for a symmetric ``W`` in CSR arrays and a ``change`` (n,) that is zero
+    but on the rows ``rows``: column ``i`` of ``W`` read as its row ``i``, so that the cost is
+    that of those rows, not of a product (the few rows local sweeps move)."""
+    for i in rows:
+        moved = change[i]
+        for k in range(indptr[i], indptr[i + 1]):
+            out[indices[k]] += values[k] * moved
+
+
 @numba.njit(cache=True, inline="always")
 def apply_operator(indptr, indices, values, t_indptr, t_indices, t_values, scratch, x, out):
     """``out = W x``: from the rows of ``W`` (``t_indptr`` empty), or as ``F^T (F x)`` with the

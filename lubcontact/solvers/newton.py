@@ -673,20 +673,33 @@ class AlartCurnier:
         swept = self._swept_where_largest(forces, residual, LOCAL_ROWS, LOCAL_SHARE, LOCAL_SWEEPS)
         if swept is None:
             return None
-        velocity = self.product(swept) + self.q
+        velocity = self.moved_velocity(forces, velocity, swept)
         return swept, velocity, self.coulomb_error(None, swept, velocity)
 
-    def corrected(self, forces: np.ndarray, phi: np.ndarray
+    def corrected(self, forces: np.ndarray, phi: np.ndarray, velocity: np.ndarray
                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
-        """``forces`` (a full Newton step, ``phi`` its residual) after :data:`CORRECTED_SWEEPS`
-        Gauss-Seidel sweeps over the rows within :data:`LOCAL_HOPS` of the
-        :data:`CORRECTED_ROWS` rows where ``phi`` is largest, with their ``phi``, ``y`` and
-        velocity (:meth:`residual`'s); None, without sweeping, where those rows hold less than
-        :data:`CORRECTED_SHARE` of ``phi``'s square (the step fails all over the problem).
-        Where :attr:`sweeps_apply`."""
+        """``forces`` (a full Newton step, ``phi`` its residual, ``velocity`` its ``W r + q``)
+        after :data:`CORRECTED_SWEEPS` Gauss-Seidel sweeps over the rows within
+        :data:`LOCAL_HOPS` of the :data:`CORRECTED_ROWS` rows where ``phi`` is largest, with
+        their ``phi``, ``y`` and velocity (:meth:`residual`'s); None, without sweeping, where
+        those rows hold less than :data:`CORRECTED_SHARE` of ``phi``'s square (the step fails
+        all over the problem). Where :attr:`sweeps_apply`."""
         swept = self._swept_where_largest(forces, phi, CORRECTED_ROWS, CORRECTED_SHARE,
                                           CORRECTED_SWEEPS)
-        return None if swept is None else (swept, *self.residual(swept))
+        return None if swept is None else \
+            (swept, *self.residual(swept, self.moved_velocity(forces, velocity, swept)))
+
+    def moved_velocity(self, forces: np.ndarray, velocity: np.ndarray, moved: np.ndarray
+                       ) -> np.ndarray:
+        """The velocity ``W r + q`` at ``moved`` (n_rows,), forces that differ from ``forces``
+        on the few rows that local sweeps moved, from ``velocity``, the one at ``forces``: the
+        change through those rows of ``W`` (:func:`~lubcontact.solvers.kernels.add_columns`,
+        ``W`` symmetric), not a product with all of it. On the sparse lane of a 2D problem
+        (``compiled_rows``: :attr:`w_arrays`), as the line search carries its velocities."""
+        change = moved - forces
+        out = velocity.copy()
+        kernels().add_columns(*self.w_arrays, change, np.flatnonzero(change), out)
+        return out
 
     def _swept_where_largest(self, forces: np.ndarray, values: np.ndarray, count: int,
                              share: float, sweeps: int) -> np.ndarray | None:
@@ -1574,7 +1587,7 @@ def _line_search(function: AlartCurnier, forces: np.ndarray, velocity: np.ndarra
                 return trial, phi, y, trial_velocity
             if correct:                             # the full step, failing on a few rows?
                 correct = False
-                corrected = function.corrected(trial, phi) if np.isfinite(merit) else None
+                corrected = function.corrected(trial, phi, trial_velocity) if np.isfinite(merit) else None
                 if corrected is not None and 0.5 * float(corrected[1] @ corrected[1]) <= bound:
                     function.corrections_kept += 1
                     return corrected
