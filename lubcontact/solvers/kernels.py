@@ -532,9 +532,10 @@ def gauss_seidel_2d(indptr, indices, values, q, lower, upper, box_rows, box_diag
 # On a problem of a few tens of rows a Newton iteration written with numpy is some forty array
 # calls (the Alart-Curnier residual, the rows of the generalised Jacobian, the LU of the Newton
 # system's block, the line search's residuals, the FCLIB error), 100-300 us, where the arithmetic
-# takes a few. newton_phase_2d runs the iterations of one phase (newton._newton_phase) with the
-# same rules: the regularisations of a singular active block, the non-monotone Armijo line search,
-# the steepest-descent direction where Newton's gives no decrease, the stopping tests and the best
+# takes a few. newton_phase_2d runs the iterations of one phase (newton._newton_phase), and the
+# proximal loop's solved subproblems after it (newton.CHAINED_SUBPROBLEMS), with the same rules:
+# the regularisations of a singular active block, the non-monotone Armijo line search, the
+# steepest-descent direction where Newton's gives no decrease, the stopping tests and the best
 # iterate. Its formulas are those of newton.AlartCurnier and metrics.coulomb_error written per row
 # for 2D contacts (one tangential row each); the tests hold each to its numpy twin. Its Newton
 # system is reduced to the rows of diag(rho) (W + sigma I) (fold_sliding_rows_2d: the sliding rows
@@ -1480,24 +1481,35 @@ def newton_direction_2d(W, w_arrays, rho, lower, upper, box, cone_n, cone_t, con
 @numba.njit(cache=True)
 def newton_phase_2d(W, w_arrays, q, rho, lower, upper, box, cone_n, cone_t, cone_mu, unilateral,
                     sigma, center, q_scale, forces, tol, max_iter, inner_tol, regularisations,
-                    places, backward_error, memory, armijo, max_halvings):
+                    places, backward_error, memory, armijo, max_halvings, total_iter, chain_until,
+                    decrease, sigma_floor, reduction):
     """Newton iterations from ``forces`` until the FCLIB error is below ``tol``, ``|phi| <=
-    inner_tol``, a failed line search or ``max_iter`` (:func:`newton._newton_phase`).
+    inner_tol``, a failed line search or ``max_iter`` (:func:`newton._newton_phase`); then, while
+    the subproblem was solved (``|phi| <= inner_tol``), the proximal loop's next subproblems in
+    the same call, by its rule after a solved one (:func:`newton._proximal_newton`): centred at
+    the last iterate, the weight divided by ``decrease`` down to ``sigma_floor``, ``inner_tol``
+    ``reduction`` times the centre's FCLIB error times ``q_scale``; each of at most ``max_iter``
+    iterations, until ``total_iter`` iterations in all, the FCLIB error below ``tol``, one not
+    solved or ``chain_until`` iterations (0: one subproblem). A next subproblem solved at its
+    centre, with no iteration to make, is left to the proximal loop.
 
     Returns
     -------
     tuple
         ``(best, best_error, last, last_error, iterations, gradient_steps, code, history,
-        solved)``: the best iterate and its FCLIB error, the last iterate and its error, the
+        solved, sigma, subproblems, centre_error, overall, overall_error)``: the last
+        subproblem's best iterate and its FCLIB error, the last iterate and its error, the
         iterations, the steepest-descent steps, a status code (:data:`CONVERGED_CODE`, ...),
-        the FCLIB error of each iterate (the start first) and whether ``|phi| <= inner_tol``.
+        the FCLIB error of each iterate (the start first), whether the last subproblem was
+        solved, its weight, the subproblems, the FCLIB error at the last one's centre, and the
+        best iterate of all and its error.
 
     ``W``, ``w_arrays``, ``places`` and ``backward_error``: as :func:`newton_direction_2d`
     takes them (the products ``W x`` by :func:`product_2d`, by rows where ``w_arrays`` holds
     them).
     """
     n = forces.size
-    forces = forces.copy()
+    forces, center = forces.copy(), center.copy()
     phi, y, velocity = np.empty(n), np.empty(n), np.empty(n)
     product_2d(W, *w_arrays, forces, q, velocity)
     merit = alart_curnier_2d(rho, lower, upper, cone_n, cone_t, cone_mu, unilateral, sigma,
@@ -1507,71 +1519,97 @@ def newton_phase_2d(W, w_arrays, q, rho, lower, upper, box, cone_n, cone_t, cone
     count = 1
     error = coulomb_error_2d(forces, velocity, lower, upper, cone_n, cone_t, cone_mu, unilateral,
                              q_scale)
-    history = np.empty(max_iter + 1)
+    total_iter = max(total_iter, max_iter)
+    history = np.empty(total_iter + 1)
     history[0] = error
     best, best_error = forces.copy(), error
-    iterations = gradient_steps = 0
+    overall, overall_error = forces.copy(), error
+    centre_error = error
+    iterations = gradient_steps = subproblem_iterations = 0
+    subproblems = 1
     code = MAX_ITER_CODE
     trial, trial_phi, trial_y = np.empty(n), np.empty(n), np.empty(n)
     change, trial_velocity, no_offset = np.empty(n), np.empty(n), np.zeros(n)
-    while error > tol and iterations < max_iter and np.sqrt(2.0 * merit) > inner_tol:
-        iterations += 1
-        reference = recent.max()
-        accepted = False
-        for attempt in range(2):            # Newton's direction, then steepest descent
-            if attempt == 0:
-                direction, ok = newton_direction_2d(W, w_arrays, rho, lower, upper, box, cone_n,
-                                                    cone_t, cone_mu, unilateral, sigma, y, phi,
-                                                    regularisations, places, backward_error)
-                if not ok:
-                    continue
-                slope = 2.0 * merit
-            else:
-                rows, J = jacobian_rows_2d(W, rho, lower, upper, box, cone_n, cone_t, cone_mu,
-                                           unilateral, sigma, y)
-                gradient = phi.copy()
-                gradient[rows] = 0.0
-                for a in range(rows.size):
-                    weight = phi[rows[a]]
+    while True:
+        while error > tol and subproblem_iterations < max_iter and iterations < total_iter \
+                and np.sqrt(2.0 * merit) > inner_tol:
+            iterations += 1
+            subproblem_iterations += 1
+            reference = recent.max()
+            accepted = False
+            for attempt in range(2):            # Newton's direction, then steepest descent
+                if attempt == 0:
+                    direction, ok = newton_direction_2d(W, w_arrays, rho, lower, upper, box, cone_n,
+                                                        cone_t, cone_mu, unilateral, sigma, y, phi,
+                                                        regularisations, places, backward_error)
+                    if not ok:
+                        continue
+                    slope = 2.0 * merit
+                else:
+                    rows, J = jacobian_rows_2d(W, rho, lower, upper, box, cone_n, cone_t, cone_mu,
+                                               unilateral, sigma, y)
+                    gradient = phi.copy()
+                    gradient[rows] = 0.0
+                    for a in range(rows.size):
+                        weight = phi[rows[a]]
+                        for j in range(n):
+                            gradient[j] += J[a, j] * weight
+                    direction = -gradient
+                    slope = 0.0
                     for j in range(n):
-                        gradient[j] += J[a, j] * weight
-                direction = -gradient
-                slope = 0.0
-                for j in range(n):
-                    slope += gradient[j] * gradient[j]
-                gradient_steps += 1
-            if not slope > 0.0:
-                continue
-            product_2d(W, *w_arrays, direction, no_offset, change)  # a trial's velocity: v + alpha W d
-            alpha = 1.0
-            for _ in range(max_halvings):
-                for j in range(n):
-                    trial[j] = forces[j] + alpha * direction[j]
-                    trial_velocity[j] = velocity[j] + alpha * change[j]
-                value = alart_curnier_2d(rho, lower, upper, cone_n, cone_t, cone_mu, unilateral,
-                                         sigma, center, trial, trial_velocity, trial_phi, trial_y)
-                if value <= reference - armijo * alpha * slope:
-                    accepted = True
+                        slope += gradient[j] * gradient[j]
+                    gradient_steps += 1
+                if not slope > 0.0:
+                    continue
+                product_2d(W, *w_arrays, direction, no_offset, change)  # a trial's velocity: v + alpha W d
+                alpha = 1.0
+                for _ in range(max_halvings):
+                    for j in range(n):
+                        trial[j] = forces[j] + alpha * direction[j]
+                        trial_velocity[j] = velocity[j] + alpha * change[j]
+                    value = alart_curnier_2d(rho, lower, upper, cone_n, cone_t, cone_mu, unilateral,
+                                             sigma, center, trial, trial_velocity, trial_phi, trial_y)
+                    if value <= reference - armijo * alpha * slope:
+                        accepted = True
+                        break
+                    alpha *= 0.5
+                if accepted:
                     break
-                alpha *= 0.5
-            if accepted:
+            if not accepted:
+                code = FAILED_CODE
                 break
-        if not accepted:
-            code = FAILED_CODE
+            forces[:] = trial
+            product_2d(W, *w_arrays, forces, q, velocity)            # W r afresh: no drift
+            merit = alart_curnier_2d(rho, lower, upper, cone_n, cone_t, cone_mu, unilateral, sigma,
+                                     center, forces, velocity, phi, y)
+            recent[count % memory] = merit        # the last `memory` merits, in a ring
+            count += 1
+            error = coulomb_error_2d(forces, velocity, lower, upper, cone_n, cone_t, cone_mu,
+                                     unilateral, q_scale)
+            history[iterations] = error
+            if error < best_error:
+                best[:], best_error = forces, error
+            if error < overall_error:
+                overall[:], overall_error = forces, error
+        if code == FAILED_CODE or error <= tol or not np.sqrt(2.0 * merit) <= inner_tol \
+                or iterations >= min(total_iter, chain_until):
             break
-        forces[:] = trial
-        product_2d(W, *w_arrays, forces, q, velocity)            # W r afresh: no drift
-        merit = alart_curnier_2d(rho, lower, upper, cone_n, cone_t, cone_mu, unilateral, sigma,
-                                 center, forces, velocity, phi, y)
-        recent[count % memory] = merit        # the last `memory` merits, in a ring
-        count += 1
-        error = coulomb_error_2d(forces, velocity, lower, upper, cone_n, cone_t, cone_mu,
-                                 unilateral, q_scale)
-        history[iterations] = error
-        if error < best_error:
-            best[:], best_error = forces, error
+        next_sigma, next_tol = max(sigma / decrease, sigma_floor), reduction * error * q_scale
+        center[:] = forces
+        next_merit = alart_curnier_2d(rho, lower, upper, cone_n, cone_t, cone_mu, unilateral,
+                                      next_sigma, center, forces, velocity, phi, y)
+        if not np.sqrt(2.0 * next_merit) > next_tol:
+            break
+        sigma, merit, inner_tol = next_sigma, next_merit, next_tol
+        recent[:] = -np.inf
+        recent[0] = merit
+        count = 1
+        best[:], best_error, centre_error = forces, error, error
+        subproblem_iterations = 0
+        subproblems += 1
     recorded = iterations if code == FAILED_CODE else iterations + 1   # a failed one: no iterate
     if best_error <= tol:
         code = CONVERGED_CODE
     return (best, best_error, forces, error, iterations, gradient_steps, code,
-            history[:recorded], np.sqrt(2.0 * merit) <= inner_tol)
+            history[:recorded], np.sqrt(2.0 * merit) <= inner_tol, sigma, subproblems,
+            centre_error, overall, overall_error)

@@ -259,6 +259,14 @@ steps) 483, 479, 476, 474, 481; 8 000 (40) 708, 700, 689, 678, 657; 12 000 (70) 
 fallback at 4 000 and 10^5 grains (with 2 at 8 000, 12 000 and 10^5). Not on dry problems: the
 tests' creeping 300-grain bed ends ``inaccurate`` with a cap of 6 (docs/records/benchmarks.md,
 "a shorter proximal step on gluey flows")."""
+CHAINED_SUBPROBLEMS = True
+"""On the compiled lane (``AlartCurnier.compiled``), while no weight has failed, the proximal loop
+hands the subproblems that follow a solved one to the same compiled call, which centres and weighs
+each as the loop would (:func:`~lubcontact.solvers.kernels.newton_phase_2d`): the same iterates,
+without a return to Python per subproblem. A small system's warm-started step solves one
+subproblem per Newton iteration, two to five in all; chained, its solve took 0.93-0.97 of the
+time at 7 to 63 contacts (docs/records/benchmarks.md, "Small solves: the solved subproblems in one
+call"). False: one call per subproblem, as on the sparse lane."""
 
 RECENTRE_WINDOW = 6
 RECENTRE_UNTIL = 100.0
@@ -1317,7 +1325,9 @@ def _proximal_newton(function: AlartCurnier, unshifted: ConicProblem, forces: np
     posed the same subproblem again, and on creeping beds the weight then alternated between a
     subproblem that moved nothing and a smaller one not solved in :data:`INNER_CAP` iterations
     until the phase stalled (docs/records/benchmarks.md, "creeping beds"). The best iterate is what
-    the phase returns. The phase stalls by :class:`_StallRule`.
+    the phase returns. The phase stalls by :class:`_StallRule`. On the compiled lane the
+    subproblems that follow a solved one run in the same compiled call while no weight has failed
+    and the stall test could not stop the phase (:data:`CHAINED_SUBPROBLEMS`).
     On a flow's step (:data:`RECENTRE_WINDOW`) each subproblem first gets one Newton iteration,
     re-centred at its result at the same weight (on a gluey flow's step a weight at most the
     centre's FCLIB error, :data:`UNION_RECENTRE_FOLLOWS`), until the error stops halving or nears
@@ -1370,16 +1380,23 @@ def _proximal_newton(function: AlartCurnier, unshifted: ConicProblem, forces: np
         if recentring:
             inner = _newton_phase(function, unshifted, forces, tol, 1, **known)
         elif scale > 0:
+            # on the compiled lane, while no weight has failed, the solved subproblems in one call
+            chained = CHAINED_SUBPROBLEMS and function.compiled and floor == 0.0
+            chain = (max_iter - iterations, STALL_WINDOW + 1 - len(history), decrease) if chained else None
             inner = _newton_phase(function, unshifted, forces, tol, min(cap, max_iter - iterations),
-                                  inner_tol=INNER_REDUCTION * error * function.q_scale, **known)
+                                  inner_tol=INNER_REDUCTION * error * function.q_scale, chain=chain,
+                                  **known)
         else:                           # plain Newton: one run, its line search's memory intact
             inner = _newton_phase(function, unshifted, forces, tol, min(STALL_WINDOW, max_iter - iterations),
                                   **known)
-        proximal_steps += 1
+        if inner.chained is not None:      # the last subproblem's weight and centre error
+            scale, centre_error = inner.chained.sigma, inner.chained.centre_error
+        proximal_steps += 1 if inner.chained is None else inner.chained.subproblems
         iterations += inner.iterations
         gradient_steps += inner.gradient_steps
         history.extend(inner.history[1:])
-        best = min(best, (inner.error, inner.forces), key=lambda pair: pair[0])
+        best = min(best, (inner.error, inner.forces) if inner.chained is None else inner.chained.best,
+                   key=lambda pair: pair[0])
         solved = inner.solved or (recentring and inner.iterations > 0)
         if solved:                          # centred at the subproblem's solution, even where its
             forces, velocity, error = inner.last, inner.last_velocity, inner.last_error  # error is
@@ -1477,19 +1494,37 @@ class _Phase:
     last: np.ndarray | None = None
     last_error: float = np.inf
     last_velocity: np.ndarray | None = None
+    chained: _Chained | None = None
+
+
+@dataclass
+class _Chained:
+    """What a compiled phase that ran the proximal loop's solved subproblems in one call
+    (:data:`CHAINED_SUBPROBLEMS`) hands back beyond a phase's record, which is its last
+    subproblem's: the subproblems, the last one's weight and the FCLIB error at its centre, and
+    the best iterate of all, ``(error, forces)``."""
+
+    subproblems: int
+    sigma: float
+    centre_error: float
+    best: tuple[float, np.ndarray]
 
 
 def _newton_phase(function: AlartCurnier, unshifted: ConicProblem, forces: np.ndarray,
                   tol: float, max_iter: int, inner_tol: float = 0.0, *,
-                  velocity: np.ndarray | None = None, error: float | None = None) -> _Phase:
+                  velocity: np.ndarray | None = None, error: float | None = None,
+                  chain: tuple[int, int, float] | None = None) -> _Phase:
     """Newton iterations on ``function`` from ``forces`` until the FCLIB error of ``unshifted``
     is below ``tol``, ``|phi| <= inner_tol``, a failed line search or the cap (in one compiled
     call on a small 2D problem, :func:`~lubcontact.solvers.kernels.newton_phase_2d`).
     ``velocity`` (``W r + q``) and ``error`` (the FCLIB error) at ``forces``, where the caller
     has them (the last phase's last iterate, re-centred: 0.6 and 0.2 ms of a 17 ms iteration at
-    12 000 grains), are not computed again."""
+    12 000 grains), are not computed again. ``chain`` (compiled lane only): ``(iterations,
+    until, decrease)``, the proximal loop's iterations left, the iterations after which no next
+    subproblem may start (its stall test could then stop it) and its weight's divisor: the solved
+    subproblems that follow run in the same call (:func:`_compiled_phase`)."""
     if function.compiled:
-        return _compiled_phase(function, forces, tol, max_iter, inner_tol)
+        return _compiled_phase(function, forces, tol, max_iter, inner_tol, chain)
     phi, y, velocity = function.residual(forces, velocity)
     merit = 0.5 * float(phi @ phi)
     recent = [merit]
@@ -1531,22 +1566,27 @@ def _newton_phase(function: AlartCurnier, unshifted: ConicProblem, forces: np.nd
 
 
 def _compiled_phase(function: AlartCurnier, forces: np.ndarray, tol: float, max_iter: int,
-                    inner_tol: float) -> _Phase:
-    """:func:`_newton_phase` by :func:`~lubcontact.solvers.kernels.newton_phase_2d`."""
+                    inner_tol: float, chain: tuple[int, int, float] | None = None) -> _Phase:
+    """:func:`_newton_phase` by :func:`~lubcontact.solvers.kernels.newton_phase_2d`, with the
+    solved subproblems that follow where ``chain`` is given (:func:`_newton_phase`)."""
     compiled = kernels()
+    total, until, decrease = (max_iter, 0, 1.0) if chain is None else chain
     (best, best_error, last, last_error, iterations, gradient_steps, code, history,
-     solved) = compiled.newton_phase_2d(
+     solved, sigma, subproblems, centre_error, overall, overall_error) = compiled.newton_phase_2d(
         function.W, function.w_arrays, function.q, function.rho, function.lower, function.upper,
         function.box, function.cone_n, function.tangent_rows, function.cone_mu, function.unilateral,
         function.sigma, function.center, function.q_scale, np.asarray(forces, dtype=float),
         float(tol), int(max_iter), float(inner_tol), REGULARISATIONS,
         function.elimination_places, STATIC_LU_BACKWARD_ERROR, LINE_SEARCH_MEMORY, ARMIJO,
-        MAX_HALVINGS)
+        MAX_HALVINGS, int(total), int(until), float(decrease), SIGMA_MIN * function.typical,
+        INNER_REDUCTION)
     status = FAILED if code == compiled.FAILED_CODE else \
         CONVERGED if code == compiled.CONVERGED_CODE else MAX_ITER
+    chained = None if chain is None else \
+        _Chained(int(subproblems), float(sigma), float(centre_error), (float(overall_error), overall))
     return _Phase(forces=best, status=status, iterations=int(iterations),
                   error=float(best_error), history=history, gradient_steps=int(gradient_steps),
-                  solved=bool(solved), last=last, last_error=float(last_error))
+                  solved=bool(solved), last=last, last_error=float(last_error), chained=chained)
 
 
 def _line_search(function: AlartCurnier, forces: np.ndarray, velocity: np.ndarray,

@@ -2283,3 +2283,61 @@ def test_a_native_coulomb_method_without_a_joint_option_is_not_given_one():
         unregister("native-without-joint-test")
     assert has_joint_phase("newton-ac") and has_joint_phase("apgd-jacobi")
     assert result.status == CONVERGED and result.joint_iterations == 0
+
+
+
+def chained_and_not(problem, monkeypatch, **options):
+    """newton-ac's exact Coulomb on ``problem`` with the proximal loop's solved subproblems
+    chained in one compiled call, then one call per subproblem (CHAINED_SUBPROBLEMS): the two
+    answers, and each chained call's subproblems and whether its last one was solved."""
+    chains = []
+    compiled_phase = newton._compiled_phase
+
+    def recorded(*args, **kwargs):
+        phase = compiled_phase(*args, **kwargs)
+        if phase.chained is not None:
+            chains.append((phase.chained.subproblems, phase.solved))
+        return phase
+
+    monkeypatch.setattr(newton, "_compiled_phase", recorded)
+    answers = []
+    for chained in (True, False):
+        monkeypatch.setattr(newton, "CHAINED_SUBPROBLEMS", chained)
+        answers.append(solve_coulomb(problem, "newton-ac", tol=1e-8, **options))
+    mine, theirs = answers
+    assert mine.status == theirs.status == CONVERGED
+    assert np.array_equal(mine.forces, theirs.forces)
+    assert mine.iterations == theirs.iterations
+    assert mine.info["proximal_steps"] == theirs.info["proximal_steps"]
+    assert np.array_equal(mine.residual_history, theirs.residual_history)
+    return chains
+
+
+def test_the_chained_subproblems_take_the_proximal_loops_own_steps(monkeypatch):
+    """On the compiled lane the subproblems that follow a solved one run in the same compiled
+    call (CHAINED_SUBPROBLEMS), centred and weighed as the proximal loop would: on warm-started
+    steps of a settling frictional pile, the same forces to the bit, iterations and proximal
+    steps as one call per subproblem, with calls that ran several."""
+    from lubcontact import scenes
+    from lubcontact.model.laws import Coulomb
+    from lubcontact.sim.simulation import Simulation
+
+    sim = Simulation(scenes.settling_pile(20, seed=1), Coulomb(0.3), 0.02, solver="newton-ac",
+                     tol=1e-8, fixed_point=True, tol_fp=1e-6, on_failure="ignore")
+    sim.run(40)
+    chains = []
+    for _ in range(8):
+        _, _, problem, forces, shift = sim.next_problem()
+        chains += chained_and_not(problem, monkeypatch, warm_start=forces, shift=shift)
+        sim.step()
+    assert max(count for count, _ in chains) >= 3
+
+
+@pytest.mark.parametrize("name", ["hex_box_lid_friction", "mu_zero_friction"])
+def test_a_chain_that_ends_on_a_subproblem_not_solved_is_weighed_from_its_centre(name, monkeypatch):
+    """With one Newton iteration per subproblem (``INNER_CAP`` 1) some chains end on a subproblem
+    not solved: the loop raises its weight from that subproblem's centre error, not the chain's
+    first, and goes on from that subproblem's best iterate: the same steps as one call each."""
+    monkeypatch.setattr(newton, "INNER_CAP", 1)
+    chains = chained_and_not(load_cases()[name].problem, monkeypatch, tol_fp=1e-8)
+    assert any(count > 1 and not solved for count, solved in chains)
