@@ -7,6 +7,8 @@ Benchmarks are listed in :data:`BENCHMARKS` and imported lazily:
   (:mod:`lubcontact.bench.friction`);
 - ``flow``: exact-Coulomb steps of developed inclined flows (:mod:`lubcontact.bench.flow_steps`).
 - ``small``: the fixed cost of a solve on small systems (:mod:`lubcontact.bench.small_steps`).
+- ``switch``: one change of a solver's setting, timed step by step in one process
+  (:mod:`lubcontact.bench.switch`).
 """
 from __future__ import annotations
 
@@ -17,6 +19,7 @@ BENCHMARKS = {
     "friction": ("lubcontact.bench.friction", "main", "friction benchmarks"),
     "flow": ("lubcontact.bench.flow_steps", "main", "exact-Coulomb steps of developed inclined flows"),
     "small": ("lubcontact.bench.small_steps", "main", "the fixed cost of a solve on small systems"),
+    "switch": ("lubcontact.bench.switch", "main", "one setting changed, timed step by step in one process"),
 }
 """Name -> (module, function, one line of help); ``function(argv) -> int``."""
 
