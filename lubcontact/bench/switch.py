@@ -17,8 +17,9 @@ constants read once, when their module is imported, do not.
 Steps come from ``bench small``'s settling piles (``--small``: grains per pile, the pile settled
 by :func:`~lubcontact.bench.small_steps.settled`, then stepped with ``--method``) or from a
 developed flow widened as ``bench flow --layer`` widens it (``--layer`` and ``--sizes``, stepped
-with ``--method`` at the flow's own tolerance, unless ``--tol``, and friction law). Per set: the steps, mean contacts, Newton (or first-order)
-iterations summed over the steps for ``A`` and ``B``, the median microseconds of a solve for each,
+with ``--method`` at the flow's own tolerance, unless ``--tol``, and friction law). Per set: the
+steps, mean contacts, Newton (or first-order) iterations summed over the steps for ``A`` and
+``B``, the median microseconds of a solve for each,
 the median of the per-step ratios ``B / A``, the ratio of the sums, and the largest difference of
 the forces (relative to the largest force), 0 where ``B`` takes the same steps to the bit.
 """
