@@ -19,9 +19,9 @@ by :func:`~lubcontact.bench.small_steps.settled`, then stepped with ``--method``
 developed flow widened as ``bench flow --layer`` widens it (``--layer`` and ``--sizes``, stepped
 with ``--method`` at the flow's own tolerance, unless ``--tol``, and friction law). Per set: the
 steps, mean contacts, Newton (or first-order) iterations summed over the steps for ``A`` and
-``B``, the median microseconds of a solve for each,
-the median of the per-step ratios ``B / A``, the ratio of the sums, and the largest difference of
-the forces (relative to the largest force), 0 where ``B`` takes the same steps to the bit.
+``B``, the median microseconds of a solve for each, the median of the per-step ratios ``B / A``,
+the ratio of the sums, and the largest difference of the forces (relative to the largest force),
+0 where ``B`` takes the same steps to the bit.
 """
 from __future__ import annotations
 
