@@ -180,18 +180,22 @@ forces). Newton iterations summed over 150 captured steps of settling frictional
 SIGMA_DECREASE = 10.0
 """The factor dividing the proximal weight after an outer iteration whose subproblem was solved
 (:func:`_proximal_newton`), but on gluey flows' steps (:data:`UNION_SIGMA_DECREASE`)."""
-UNION_SIGMA_DECREASE = 3.0
+UNION_SIGMA_DECREASE = 1.5
 """The factor dividing the proximal weight after a solved subproblem on a flow's step
 (``AlartCurnier.flow_step``) with UNION contacts (a gluey flow's step, whose contacts change
 piece): more outer iterations, each in Newton's fast local phase. Newton iterations summed over
-captured steps of developed gluey flows (exact Coulomb, tol 1e-6), factor 10 against 3: 12 000 grains (70
-consecutive steps) 2 712 against 2 027 (one of the two steps that stalled into the Gauss-Seidel
-fallback converges, the other needs one round of it instead of two), 8 000 (90 steps) 2 599
-against 2 489, 4 000 (80) 1 929 against 1 844, 2 000 (8) 179 against 172. Not on dry problems: the
-tests' creeping 300-grain bed stalls with 3 or 4 (converges with 5 and 10), and on dry flows the
-steps cost more time with 3 (docs/records/benchmarks.md, "a slower decrease of the proximal
-weight on gluey flows"); nor on small problems, where small piles near rest took 2-6 % more
-iterations with 5 or 3."""
+captured steps of developed gluey flows (exact Coulomb, tol 1e-6), factor 10 against 3: 12 000
+grains (70 consecutive steps) 2 712 against 2 027 (one of the two steps that stalled into the
+Gauss-Seidel fallback converges, the other needs one round of it instead of two), 8 000 (90 steps)
+2 599 against 2 489, 4 000 (80) 1 929 against 1 844, 2 000 (8) 179 against 172. Factor 3 against
+1.5 (``bench switch``, three beds, 16 steps each at 10 000 grains, 40 at 2 000): 10 000 grains 280,
+257 and 254 against 269, 244 and 214 (0.97, 0.97 and 0.86 of the time), 2 000 grains 453, 1 379 and
+307 against 434, 1 378 and 307; 10^5 grains (two beds, 4 steps) 117 and 89 against 98 and 88 (0.89
+and 0.96); 2 against 1.5 at 10 000 grains: 284, 239 and 215. Not on dry problems: the tests'
+creeping 300-grain bed stalls with 3 or 4 (converges with 5 and 10), and on dry flows the steps
+cost more time with 3 (docs/records/benchmarks.md, "a slower decrease of the proximal weight on
+gluey flows"); nor on small problems, where small piles near rest took 2-6 % more iterations with 5
+or 3."""
 PLAIN_TRY = 5
 """Plain Newton iterations (no proximal weight), at most, tried first from a warm start on a
 small 2D problem (``AlartCurnier.small``) without friction cones, unless plain Newton's block is

@@ -508,9 +508,9 @@ def test_a_stuck_proximal_step_raises_the_weight_a_hundredfold(monkeypatch):
 @pytest.mark.parametrize(("name", "factor"), [("gamma_states_gluey_coulomb", "UNION_SIGMA_DECREASE"),
                                              ("mu_ten", "SIGMA_DECREASE")])
 def test_the_proximal_weight_falls_slower_on_a_gluey_sparse_problem(name, factor, monkeypatch):
-    """After each solved subproblem the weight is divided by UNION_SIGMA_DECREASE (3) on a 2D
+    """After each solved subproblem the weight is divided by UNION_SIGMA_DECREASE (1.5) on a 2D
     problem of the sparse lane with UNION contacts (a gluey flow's step: 2 712 -> 2 027 Newton
-    iterations on 70 steps at 12 000 grains), by SIGMA_DECREASE (10) on a dry one (each
+    iterations on 70 steps at 12 000 grains with 3), by SIGMA_DECREASE (10) on a dry one (each
     subproblem solved: no re-centring after one iteration, RECENTRE_WINDOW)."""
     use_the_sparse_lane(monkeypatch)
     monkeypatch.setattr(newton, "RECENTRE_WINDOW", 0)
