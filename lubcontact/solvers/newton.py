@@ -269,7 +269,7 @@ hands the subproblems that follow a solved one to the same compiled call, which 
 each as the loop would (:func:`~lubcontact.solvers.kernels.newton_phase_2d`): the same iterates,
 without a return to Python per subproblem. A small system's warm-started step solves one
 subproblem per Newton iteration, two to five in all; chained, its solve took 0.92-0.97 of the
-time at 7 to 63 contacts (docs/records/benchmarks.md, "Small solves: the solved subproblems in one
+time at 6 to 63 contacts (docs/records/benchmarks.md, "Small solves: the solved subproblems in one
 call"). False: one call per subproblem, as on the sparse lane."""
 
 RECENTRE_WINDOW = 6
