@@ -59,6 +59,12 @@ def settled(n_grains: int, law: str, steps: int, tol: float) -> Simulation:
     return sim
 
 
+def step_settings(method: str, tol: float, exact: bool) -> SolveSettings:
+    """The settings a pile's timed steps are solved with: ``method`` at ``tol``, exact Coulomb
+    (fixed point to 1e-6) where ``exact``."""
+    return SolveSettings(method=method, tol=tol, exact_coulomb=exact, tol_fp=1e-6)
+
+
 def time_steps(sim: Simulation, method: str, steps: int, tol: float, exact: bool) -> dict[str, Any]:
     """Time ``steps`` steps of ``sim`` with ``method`` after one untimed step; the state is kept.
 
@@ -68,7 +74,7 @@ def time_steps(sim: Simulation, method: str, steps: int, tol: float, exact: bool
         The row's measured columns (:data:`COLUMNS` but ``n_grains`` and ``law``).
     """
     start = sim.state.copy()              # the steps below move sim.state in place
-    settings = SolveSettings(method=method, tol=tol, exact_coulomb=exact, tol_fp=1e-6)
+    settings = step_settings(method, tol, exact)
     sim.step(settings)                      # untimed: compilation, imports, caches
     solves, totals, iterations, contacts, statuses = [], [], [], [], set()
     for _ in range(steps):

@@ -181,7 +181,7 @@ def main(argv: list[str] | None = None) -> int:
         check_methods("--method", names(args.method))
     except ValueError as exc:
         parser.error(f"argument {exc}")
-    from .small_steps import LAWS, settled
+    from .small_steps import LAWS, settled, step_settings
 
     if args.law not in LAWS:
         parser.error(f"argument --law: unknown {args.law!r}; known: {', '.join(LAWS)}")
@@ -202,8 +202,7 @@ def main(argv: list[str] | None = None) -> int:
         if layer is None:           # a settling pile, stepped as bench small steps it
             tol = 1e-8 if args.tol is None else args.tol
             sim = settled(n_grains, args.law, SETTLE_STEPS, tol)
-            settings = SolveSettings(method=args.method, tol=tol, exact_coulomb=args.law == "exact",
-                                     tol_fp=1e-6)
+            settings = step_settings(args.method, tol, args.law == "exact")
         else:                       # a widened flow, with its own settings but --method and --tol
             try:
                 sim = _widened(layer, n_grains, args.cache)

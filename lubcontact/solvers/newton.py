@@ -1385,8 +1385,8 @@ def _proximal_newton(function: AlartCurnier, unshifted: ConicProblem, forces: np
             inner = _newton_phase(function, unshifted, forces, tol, 1, **known)
         elif scale > 0:
             # on the compiled lane, while no weight has failed, the solved subproblems in one call
-            chained = CHAINED_SUBPROBLEMS and function.compiled and floor == 0.0
-            chain = (max_iter - iterations, STALL_WINDOW + 1 - len(history), decrease) if chained else None
+            chain = (max_iter - iterations, STALL_WINDOW + 1 - len(history), decrease) \
+                if CHAINED_SUBPROBLEMS and function.compiled and floor == 0.0 else None
             inner = _newton_phase(function, unshifted, forces, tol, min(cap, max_iter - iterations),
                                   inner_tol=INNER_REDUCTION * error * function.q_scale, chain=chain,
                                   **known)
