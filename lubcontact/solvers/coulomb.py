@@ -54,7 +54,7 @@ from ..problem.cones import ConeKind
 from ..problem.conic import ConicProblem
 from ..problem.metrics import coulomb_shift
 from .compiled_apgd import joint_applies, joint_coulomb_apgd
-from .registry import FIRST_ORDER, accepting_solver, solve, solver_info
+from .registry import FIRST_ORDER, accepting_solver, checked, solve, solver_info
 from .result import CONVERGED, FAILED, MAX_ITER, CoulombResult
 
 JOINT_MAX_ITER = 20_000
@@ -202,10 +202,9 @@ def solve_native_coulomb(problem: ConicProblem, method: str, *, tol: float = 1e-
     """Exact Coulomb by a method that solves it natively (``native_coulomb``).
 
     The method solves the Coulomb problem of ``problem`` (``q = b`` without
-    the shift) once, giving ``r*``; its forces then go through
-    :func:`~lubcontact.solvers.solve` at the shift ``s* = mu |u_T(r*)|`` (the
-    method's ``replay`` option hands them over without solving again), so that
-    the usual checks apply where the convex problem's natural residual is
+    the shift) once, giving ``r*``; its forces then go through the check of every
+    result (:func:`~lubcontact.solvers.registry.checked`) at the shift
+    ``s* = mu |u_T(r*)|``, where the convex problem's natural residual is
     Coulomb's. ``s*`` is a fixed point of ``s -> mu |g_T(s)|`` by construction
     (``g_T`` does not depend on ``s``): shift change 0.
 
@@ -252,11 +251,10 @@ def solve_native_coulomb(problem: ConicProblem, method: str, *, tol: float = 1e-
         iterations += out.iterations
         shift = np.zeros(problem.cones.count)
         if out.status == FAILED or not np.isfinite(out.forces).all():
-            convex, settled = branches.on(unshifted), True
+            settled = True
             break
         if native_union and not branches.convex:     # each contact's piece from its force's sign
             branches.pulled = problem.cones.pulled(out.forces)
-        convex = branches.on(unshifted)
         # s* from the normalised problem the method solved: on a small one through the dense W
         # it built (W r + b, one product; g(v(r)) takes two through H), 3 % of a 35-contact solve
         prepared = branches.on(scaled)
@@ -264,11 +262,11 @@ def solve_native_coulomb(problem: ConicProblem, method: str, *, tol: float = 1e-
         gradient = None if dense is None else dense @ out.forces + prepared.offset
         shift = branches.restrict(coulomb_shift(prepared, out.forces, gradient) * length)
         start = out.forces
-        if native_union or not branches.update(convex.with_shift(shift), out.forces * force, length, force):
+        if native_union or not branches.update(branches.on(unshifted).with_shift(shift), out.forces * force,
+                                               length, force):
             settled = True
             break
-    result = solve(convex.with_shift(shift), method, tol=tol, max_iter=max_iter,
-                   normalized=branches.on(scaled).with_shift(shift / length), replay=out, **options)
+    result = checked(out, branches.on(scaled).with_shift(shift / length), method, shift, 0.0, 0.0)
     status = result.status if settled else MAX_ITER
     return CoulombResult(**{**vars(result), "status": status, "iterations": iterations,
                             "setup_time": setup_time, "solve_time": solve_time},

@@ -42,8 +42,7 @@ at round-off level, whose ratio between checks is about 1, still stops the sweep
           native_coulomb=True,
           description="Non-smooth Gauss-Seidel, exact local Coulomb solves (2D, as Siconos' NSGS).")
 def nonsmooth_gauss_seidel(problem: ConicProblem, *, tol: float, max_iter: int = 20_000,
-                           warm_start: np.ndarray | None = None,
-                           replay: MethodOutput | None = None) -> MethodOutput:
+                           warm_start: np.ndarray | None = None) -> MethodOutput:
     """Sweeps until the FCLIB error is below ``tol`` (module docstring).
 
     Parameters
@@ -57,8 +56,6 @@ def nonsmooth_gauss_seidel(problem: ConicProblem, *, tol: float, max_iter: int =
         Cap on sweeps.
     warm_start : ndarray, shape (n_rows,), optional
         Initial forces (scaled), projected onto the box rows' bounds; zero otherwise.
-    replay : MethodOutput, optional
-        Returned as is (``native_coulomb``, :class:`~lubcontact.solvers.SolverInfo`).
 
     Returns
     -------
@@ -66,8 +63,6 @@ def nonsmooth_gauss_seidel(problem: ConicProblem, *, tol: float, max_iter: int =
         ``iterations``: sweeps; ``residual_history``: the FCLIB error at each
         check; ``info["error"]``: the last one.
     """
-    if replay is not None:
-        return replay
     start = time.perf_counter()
     cones = problem.cones
     nc = cones.count

@@ -1022,7 +1022,7 @@ def _block_solve(block: sp.spmatrix | np.ndarray, rhs: np.ndarray, rows: np.ndar
 @register("newton-ac", kind=NEWTON, cones=ALL_CONES, warm_start=True, native_coulomb=True)
 def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = 1000,
                          warm_start: np.ndarray | None = None, fallback: str | None = "auto",
-                         joint: int = 0, replay: MethodOutput | None = None) -> MethodOutput:
+                         joint: int = 0) -> MethodOutput:
     """Semismooth Newton on the Alart-Curnier function (exact Coulomb, one LU per iteration).
 
     Parameters
@@ -1082,8 +1082,6 @@ def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = 1
         phase after stalled strategies"). Not with UNION contacts there either: after the
         first strategy, with the contacts on the pieces of the warm start, it cost gluey
         90-grain flows more time.
-    replay : MethodOutput, optional
-        Returned as is (see ``native_coulomb`` in :class:`~lubcontact.solvers.SolverInfo`).
 
     Returns
     -------
@@ -1109,8 +1107,6 @@ def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = 1
         ``fallback_status`` (the last call's: for a fallback run in rounds,
         :func:`fallback_rounds`, its last round's) when a fallback ran.
     """
-    if replay is not None:
-        return replay
     start = time.perf_counter()
     function = AlartCurnier(problem)
     unshifted = problem.with_shift(np.zeros(problem.cones.count)) if problem.shift.any() else problem

@@ -88,9 +88,7 @@ class SolverInfo:
         the Coulomb problem with ``q = b - [s, 0]``, e.g. Siconos):
         :func:`~lubcontact.solvers.solve_coulomb` then runs it once and checks
         its forces at their own shift instead of iterating on ``s``
-        (:func:`~lubcontact.solvers.coulomb.solve_native_coulomb`). Such a
-        method accepts a ``replay`` option (a :class:`MethodOutput` to return
-        as is).
+        (:func:`~lubcontact.solvers.coulomb.solve_native_coulomb`).
     description : str
         One line for tables and ``--help``.
     parameters : frozenset of str
@@ -262,6 +260,35 @@ def solve(problem: ConicProblem, method: str = "clarabel", *, tol: float = 1e-9,
     else:
         out = info.function(scaled, **kwargs)
     call_time = time.perf_counter() - called
+    return checked(out, scaled, method, problem.shift, call_time, normalise_time)
+
+
+def checked(out: MethodOutput, scaled: ConicProblem, method: str, shift: np.ndarray,
+            call_time: float, normalise_time: float) -> SolveResult:
+    """A method's output checked on the problem it solved and mapped back to physical units.
+
+    The check every result goes through (:func:`solve`, and
+    :func:`~lubcontact.solvers.coulomb.solve_native_coulomb` on the forces of a method that solves
+    exact Coulomb itself, at their own shift): non-finite forces are ``diverged`` (``failed``
+    kept) and set to zero; the natural residual is computed from the forces, not taken from the
+    method; a ``converged`` claim whose residual per row is above :data:`SUSPICIOUS_RESIDUAL`
+    becomes ``inaccurate`` (``info["claimed_status"]`` keeps the claim).
+
+    Parameters
+    ----------
+    out : MethodOutput
+        In the units of ``scaled``.
+    scaled : ConicProblem
+        The normalised problem the forces are checked on (its ``scaling`` maps back).
+    method : str
+        The method's name, for the result.
+    shift : ndarray, shape (nc,)
+        The shift of the problem in physical units, for the result.
+    call_time, normalise_time : float
+        Seconds of the method's call (its own split where it gives one: :meth:`MethodOutput.times`)
+        and of normalising, counted as set-up.
+    """
+    scale = scaled.scaling
     status = out.status
     forces = out.forces
     if not np.isfinite(forces).all():
@@ -283,7 +310,7 @@ def solve(problem: ConicProblem, method: str = "clarabel", *, tol: float = 1e-9,
                        force_scale=scale.force, length_scale=scale.length,
                        setup_time=setup_time + normalise_time,
                        solve_time=solve_time, residual_history=out.residual_history,
-                       info=out.info, shift=np.array(problem.shift, dtype=float))
+                       info=out.info, shift=np.array(shift, dtype=float))
 
 
 def compiled_projection(cones: Cones, x: np.ndarray) -> np.ndarray:

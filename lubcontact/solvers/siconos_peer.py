@@ -69,10 +69,9 @@ returns ``r*`` (FCLIB error 4.8e-13 on ``Box_Stacks-i0122-82-5``), but
 ``inaccurate`` and the fixed point stops after that one solve. Started at
 ``s* = mu |u_T(r*)|`` (``shift=``) it converges in one outer iteration. Use
 :func:`~lubcontact.solvers.coulomb.solve_native_coulomb` (what ``solve_coulomb`` does for these
-methods, registered with ``native_coulomb=True``): one Siconos run, then the forces go through ``solve``
-at ``s*`` (the method's ``replay`` option hands them over without running
-Siconos again), so the registry's checks, unit mapping and timings apply
-where the relaxed residual is Coulomb's; it returns a
+methods, registered with ``native_coulomb=True``): one Siconos run, then the forces go through the
+registry's check at ``s*`` (:func:`~lubcontact.solvers.registry.checked`: the check and unit
+mapping of every result), where the relaxed residual is Coulomb's; it returns a
 :class:`~lubcontact.solvers.CoulombResult` with ``shift = s*``, one outer
 iteration and shift change 0 (``g_T`` does not depend on ``s``). It is what
 ``compare`` should call for these methods.
@@ -313,12 +312,7 @@ def unregister_siconos() -> list[str]:
 def _make_method(name: str, key_2d: str | None, key_3d: str) -> Callable[..., MethodOutput]:
     def method(problem: ConicProblem, *, tol: float, max_iter: int | None = None,
                warm_start: np.ndarray | None = None, timeout: float = DEFAULT_TIMEOUT,
-               rho: float | None = None, criterion: str = "fclib",
-               replay: MethodOutput | None = None) -> MethodOutput:
-        if replay is not None:            # solve_native_coulomb: its one Siconos solve, checked by solve()
-            checks.require(replay.forces.shape == (problem.n_rows,), "replay",
-                           f"expected forces of shape ({problem.n_rows},)", replay.forces.shape)
-            return replay
+               rho: float | None = None, criterion: str = "fclib") -> MethodOutput:
         return solve_with_siconos(problem, key_2d, key_3d, tol=tol, max_iter=max_iter,
                                   warm_start=warm_start, timeout=timeout, rho=rho,
                                   criterion=criterion)
@@ -343,8 +337,6 @@ def _make_method(name: str, key_2d: str | None, key_3d: str) -> Callable[..., Me
         Step of ``siconos-desaxce-fp`` only (default ``1 / lambda_max(W)``).
     criterion : str
         ``"fclib"`` (default) or ``"siconos"``: the stopping test.
-    replay : MethodOutput, optional
-        Internal (:func:`~lubcontact.solvers.coulomb.solve_native_coulomb`): returned as is.
     """
     return method
 

@@ -793,9 +793,7 @@ def test_a_fallback_that_solves_coulomb_itself_runs_in_rounds_each_polished(stal
         ``answer(k, warm_start)``; the calls' caps and warm starts."""
         calls = []
 
-        def fake(problem, *, tol, max_iter=20_000, warm_start=None, replay=None):
-            if replay is not None:
-                return replay
+        def fake(problem, *, tol, max_iter=20_000, warm_start=None):
             calls.append((max_iter, np.array(warm_start, dtype=float)))
             forces, status = answer(len(calls), calls[-1][1])
             return MethodOutput(forces, status, max_iter)
@@ -2273,8 +2271,8 @@ def test_a_native_coulomb_method_without_a_joint_option_is_not_given_one():
     problem = siconos_test_problem("FrictionContactProblem00237.dat")
 
     @register("native-without-joint-test", kind=FIRST_ORDER, cones=ALL_CONES, native_coulomb=True)
-    def native(problem, *, tol, max_iter=None, warm_start=None, replay=None):
-        return replay or newton_alart_curnier(problem, tol=tol, warm_start=warm_start)
+    def native(problem, *, tol, max_iter=None, warm_start=None):
+        return newton_alart_curnier(problem, tol=tol, warm_start=warm_start)
 
     try:
         assert not has_joint_phase("native-without-joint-test")

@@ -85,7 +85,7 @@ def test_an_unsupported_problem_is_rejected_before_a_native_coulomb_solve():
 
     @register("test-planar-coulomb", cones={ConeKind.NONNEG, ConeKind.FREE, ConeKind.COULOMB},
               second_order=False, native_coulomb=True)
-    def _never(problem, *, tol, warm_start=None, replay=None):
+    def _never(problem, *, tol, warm_start=None):
         calls.append(1)
         return MethodOutput(np.zeros(problem.n_rows), CONVERGED, 1)
 
