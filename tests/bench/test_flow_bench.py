@@ -6,21 +6,7 @@ import pytest
 
 from lubcontact.bench import flow_steps
 from lubcontact.bench.statistics import power_law_exponent
-from lubcontact.flow.bed import initial_scene
-from lubcontact.flow.config import RunConfig
-from lubcontact.flow.run import FlowRun
 from lubcontact.problem.metrics import velocity_error
-
-
-def dry_layer(tmp_path, steps: int = 6, **options):
-    """The folder of a 24-grain dry layer run ``steps`` steps at 24 degrees (its last
-    checkpoint, ``checkpoint.npz``, is the ``--layer`` of the tests)."""
-    layer = tmp_path / "layer"
-    config = RunConfig(scene="inclined_flow", n_grains=24, width=12.0, model="dry", angle=24.0,
-                       steps=steps, dt_fraction=0.05, settle_steps=0, checkpoint_every=steps,
-                       **options)
-    FlowRun(config, initial_scene(config, layer), layer).advance(steps)
-    return layer
 
 
 def test_bench_flow_prints_a_row_per_method_and_reuses_its_cache(tmp_path, capsys):
@@ -58,10 +44,10 @@ def test_bad_flags_are_one_line_errors(bad, flag, capsys):
     assert flag in capsys.readouterr().err.strip().splitlines()[-1]
 
 
-def test_a_layer_widened_to_each_size_gives_rows_an_exponent_and_a_figure(tmp_path, capsys):
+def test_a_layer_widened_to_each_size_gives_rows_an_exponent_and_a_figure(tmp_path, dry_layer, capsys):
     """A 24-grain run's checkpoint widened to 24 and 48 grains: twice the contacts at twice the
     grains, both frictions timed, the rows kept as JSON, the figure drawn (no cold solves)."""
-    layer = dry_layer(tmp_path, sample_every=3)
+    layer = dry_layer(sample_every=3)
     argv = ["--sizes", "24", "48", "--layer", str(layer / "checkpoint.npz"), "--methods", "apgd",
             "--friction", "exact,relaxation", "--steps", "2", "--cache", str(tmp_path / "cache"),
             "--json", str(tmp_path / "rows.json"), "--figure", str(tmp_path / "scaling.png"),
@@ -80,7 +66,7 @@ def test_a_layer_widened_to_each_size_gives_rows_an_exponent_and_a_figure(tmp_pa
     assert len(list((tmp_path / "cache").glob("widened-*-2x.npz"))) == 1
 
 
-def test_exact_rows_with_the_joint_phase_are_labelled_and_converge(tmp_path, monkeypatch):
+def test_exact_rows_with_the_joint_phase_are_labelled_and_converge(tmp_path, dry_layer, monkeypatch):
     """``--joint 5``: the exact rows of the methods it applies to (a first-order method's fixed
     point, newton-ac's start) are labelled ``+joint5`` and converge to the FCLIB tolerance; the
     first-order method's take fewer inner iterations than the plain fixed point on the same
@@ -91,7 +77,7 @@ def test_exact_rows_with_the_joint_phase_are_labelled_and_converge(tmp_path, mon
     monkeypatch.setattr(dual_data, "DENSE_OPERATOR_LIMIT", 0)
     monkeypatch.setattr(newton, "DENSE_LIMIT", 0)
     monkeypatch.setattr(newton, "COMPILED_LIMIT", 0)
-    layer = dry_layer(tmp_path)
+    layer = dry_layer()
     argv = ["--sizes", "24", "--layer", str(layer / "checkpoint.npz"), "--methods",
             "apgd-jacobi,newton-ac", "--joint", "5", "--steps", "2", "--cache", str(tmp_path),
             "--json", str(tmp_path / "rows.json")]
@@ -112,13 +98,13 @@ def test_exact_rows_with_the_joint_phase_are_labelled_and_converge(tmp_path, mon
 
 
 @pytest.mark.filterwarnings("ignore::lubcontact.solvers.result.SolverWarning")  # tol 1e-2 steps
-def test_sampled_steps_are_checked_against_the_reference_and_newton_has_no_relaxation(tmp_path,
+def test_sampled_steps_are_checked_against_the_reference_and_newton_has_no_relaxation(tmp_path, dry_layer,
                                                                                     capsys):
     """``--reference 1``: every timed step re-solved by Clarabel at tol 1e-9 (exact Coulomb by
     its fixed point, the relaxation by one solve), each row's velocity error against it below
     what the law's difference would give; ``newton-ac`` solves exact Coulomb only, so its
     relaxation row is skipped with a note instead of timing exact Coulomb under that name."""
-    layer = dry_layer(tmp_path)
+    layer = dry_layer()
     argv = ["--sizes", "24", "--layer", str(layer / "checkpoint.npz"), "--methods",
             "apgd-jacobi,newton-ac", "--friction", "exact,relaxation", "--steps", "2",
             "--reference", "1", "--no-cold", "--tol", "1e-8", "--cache", str(tmp_path),
@@ -145,10 +131,10 @@ def test_sampled_steps_are_checked_against_the_reference_and_newton_has_no_relax
     assert all(row["v_err"] > 1e-6 for row in json.loads((tmp_path / "rows.json").read_text()))
 
 
-def test_a_reference_not_trusted_gives_no_velocity_error(tmp_path, capsys, monkeypatch):
+def test_a_reference_not_trusted_gives_no_velocity_error(tmp_path, dry_layer, capsys, monkeypatch):
     """A reference stopped at its first iteration is not trusted: said on its own line, its
     status in the row, and no ``v_err`` measured against it."""
-    layer = dry_layer(tmp_path)
+    layer = dry_layer()
     settings = flow_steps.reference_settings
     monkeypatch.setattr(flow_steps, "reference_settings",
                         lambda method, friction: replace(settings(method, friction), max_iter=1))
@@ -161,8 +147,8 @@ def test_a_reference_not_trusted_gives_no_velocity_error(tmp_path, capsys, monke
     assert row["ref_statuses"] == "not trusted" and "v_err" not in row
 
 
-def test_a_size_that_is_not_a_multiple_of_the_layer_is_a_one_line_error(tmp_path, capsys):
-    layer = dry_layer(tmp_path, steps=3)
+def test_a_size_that_is_not_a_multiple_of_the_layer_is_a_one_line_error(tmp_path, dry_layer, capsys):
+    layer = dry_layer(steps=3)
     with pytest.raises(SystemExit):
         flow_steps.main(["--sizes", "30", "--layer", str(layer / "checkpoint.npz"),
                          "--cache", str(tmp_path)])

@@ -50,12 +50,10 @@ def test_bad_flags_are_one_line_errors(args, flag, capsys):
     assert flag in capsys.readouterr().err.strip().splitlines()[-1]
 
 
-def test_steps_of_a_widened_layer_are_taken_with_the_flows_own_settings(tmp_path):
+def test_steps_of_a_widened_layer_are_taken_with_the_flows_own_settings(tmp_path, dry_layer):
     """``--layer`` and ``--sizes``: a 24-grain dry layer widened to 48 grains, stepped as ``bench
     flow --layer`` steps it; a size that is not a multiple of the layer's is a one-line error."""
-    from tests.bench.test_flow_bench import dry_layer
-
-    checkpoint = str(dry_layer(tmp_path) / "checkpoint.npz")
+    checkpoint = str(dry_layer() / "checkpoint.npz")
     out = tmp_path / "rows.json"
     assert switch.main(["--switch", "lubcontact.solvers.newton.CHAINED_SUBPROBLEMS=False",
                         "--layer", checkpoint, "--sizes", "48", "--steps", "3", "--rounds", "1",
