@@ -1478,6 +1478,53 @@ def newton_direction_2d(W, w_arrays, rho, lower, upper, box, cone_n, cone_t, con
     return direction, True
 
 
+@numba.njit(cache=True, inline="always")
+def steepest_descent_2d(W, rho, lower, upper, box, cone_n, cone_t, cone_mu, unilateral, sigma, y,
+                        phi):
+    """The steepest-descent direction ``-J^T phi`` of the merit ``|phi|^2 / 2`` at ``y`` (``J``'s
+    inactive rows the identity's, its active rows :func:`jacobian_rows_2d`'s) and its slope
+    ``|J^T phi|^2``: :func:`newton_phase_2d`'s step where Newton's direction is not taken."""
+    n = phi.size
+    rows, J = jacobian_rows_2d(W, rho, lower, upper, box, cone_n, cone_t, cone_mu, unilateral,
+                               sigma, y)
+    gradient = phi.copy()
+    gradient[rows] = 0.0
+    for a in range(rows.size):
+        weight = phi[rows[a]]
+        for j in range(n):
+            gradient[j] += J[a, j] * weight
+    slope = 0.0
+    for j in range(n):
+        slope += gradient[j] * gradient[j]
+    return -gradient, slope
+
+
+@numba.njit(cache=True, inline="always")
+def backtracked_2d(W, w_arrays, rho, lower, upper, cone_n, cone_t, cone_mu, unilateral, sigma,
+                   center, forces, velocity, direction, slope, reference, armijo, max_halvings,
+                   trial, trial_velocity, trial_phi, trial_y, change):
+    """:func:`newton_phase_2d`'s line search along ``direction`` (decrease rate ``slope`` of the
+    merit): from the full step, halved until the merit is at most ``reference - armijo alpha
+    slope`` (the non-monotone Armijo bound), at most ``max_halvings`` trials. Whether a trial
+    passed; the last one's forces, velocity ``v + alpha W d``, ``phi`` and ``y`` in ``trial``,
+    ``trial_velocity``, ``trial_phi`` and ``trial_y`` (``change`` holds ``W d``)."""
+    if not slope > 0.0:
+        return False
+    n = forces.size
+    product_2d(W, *w_arrays, direction, np.zeros(n), change)      # a trial's velocity: v + alpha W d
+    alpha = 1.0
+    for _ in range(max_halvings):
+        for j in range(n):
+            trial[j] = forces[j] + alpha * direction[j]
+            trial_velocity[j] = velocity[j] + alpha * change[j]
+        value = alart_curnier_2d(rho, lower, upper, cone_n, cone_t, cone_mu, unilateral, sigma,
+                                 center, trial, trial_velocity, trial_phi, trial_y)
+        if value <= reference - armijo * alpha * slope:
+            return True
+        alpha *= 0.5
+    return False
+
+
 @numba.njit(cache=True)
 def newton_phase_2d(W, w_arrays, q, rho, lower, upper, box, cone_n, cone_t, cone_mu, unilateral,
                     sigma, center, q_scale, forces, tol, max_iter, inner_tol, regularisations,
@@ -1529,52 +1576,28 @@ def newton_phase_2d(W, w_arrays, q, rho, lower, upper, box, cone_n, cone_t, cone
     subproblems = 1
     code = MAX_ITER_CODE
     trial, trial_phi, trial_y = np.empty(n), np.empty(n), np.empty(n)
-    change, trial_velocity, no_offset = np.empty(n), np.empty(n), np.zeros(n)
+    change, trial_velocity = np.empty(n), np.empty(n)
     while True:
         while error > tol and subproblem_iterations < max_iter and iterations < total_iter \
                 and np.sqrt(2.0 * merit) > inner_tol:
             iterations += 1
             subproblem_iterations += 1
             reference = recent.max()
-            accepted = False
-            for attempt in range(2):            # Newton's direction, then steepest descent
-                if attempt == 0:
-                    direction, ok = newton_direction_2d(W, w_arrays, rho, lower, upper, box, cone_n,
-                                                        cone_t, cone_mu, unilateral, sigma, y, phi,
-                                                        regularisations, places, backward_error)
-                    if not ok:
-                        continue
-                    slope = 2.0 * merit
-                else:
-                    rows, J = jacobian_rows_2d(W, rho, lower, upper, box, cone_n, cone_t, cone_mu,
-                                               unilateral, sigma, y)
-                    gradient = phi.copy()
-                    gradient[rows] = 0.0
-                    for a in range(rows.size):
-                        weight = phi[rows[a]]
-                        for j in range(n):
-                            gradient[j] += J[a, j] * weight
-                    direction = -gradient
-                    slope = 0.0
-                    for j in range(n):
-                        slope += gradient[j] * gradient[j]
-                    gradient_steps += 1
-                if not slope > 0.0:
-                    continue
-                product_2d(W, *w_arrays, direction, no_offset, change)  # a trial's velocity: v + alpha W d
-                alpha = 1.0
-                for _ in range(max_halvings):
-                    for j in range(n):
-                        trial[j] = forces[j] + alpha * direction[j]
-                        trial_velocity[j] = velocity[j] + alpha * change[j]
-                    value = alart_curnier_2d(rho, lower, upper, cone_n, cone_t, cone_mu, unilateral,
-                                             sigma, center, trial, trial_velocity, trial_phi, trial_y)
-                    if value <= reference - armijo * alpha * slope:
-                        accepted = True
-                        break
-                    alpha *= 0.5
-                if accepted:
-                    break
+            direction, ok = newton_direction_2d(W, w_arrays, rho, lower, upper, box, cone_n, cone_t,
+                                                cone_mu, unilateral, sigma, y, phi, regularisations,
+                                                places, backward_error)
+            accepted = ok and backtracked_2d(W, w_arrays, rho, lower, upper, cone_n, cone_t, cone_mu,
+                                             unilateral, sigma, center, forces, velocity, direction,
+                                             2.0 * merit, reference, armijo, max_halvings, trial,
+                                             trial_velocity, trial_phi, trial_y, change)
+            if not accepted:                    # steepest descent
+                direction, slope = steepest_descent_2d(W, rho, lower, upper, box, cone_n, cone_t,
+                                                       cone_mu, unilateral, sigma, y, phi)
+                gradient_steps += 1
+                accepted = backtracked_2d(W, w_arrays, rho, lower, upper, cone_n, cone_t, cone_mu,
+                                          unilateral, sigma, center, forces, velocity, direction,
+                                          slope, reference, armijo, max_halvings, trial,
+                                          trial_velocity, trial_phi, trial_y, change)
             if not accepted:
                 code = FAILED_CODE
                 break
