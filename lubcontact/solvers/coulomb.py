@@ -241,7 +241,7 @@ def solve_native_coulomb(problem: ConicProblem, method: str, *, tol: float = 1e-
         start = checks.as_array("warm_start", warm_start, shape=(problem.n_rows,)) / force
     kwargs = dict(options, tol=checks.positive_scalar("tol", tol))
     if max_iter is not None:
-        kwargs["max_iter"] = max_iter
+        kwargs["max_iter"] = checks.integer("max_iter", max_iter, minimum=1)
     iterations, settled = 0, False
     for outer in range(1, checks.integer("max_outer", max_outer, minimum=1) + 1):  # noqa: B007
         clock = time.perf_counter()

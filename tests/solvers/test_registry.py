@@ -262,6 +262,18 @@ def test_the_fixed_point_takes_a_whole_number_of_outer_iterations(settling_step,
     assert 1 <= solve_coulomb(problem, method, tol=1e-6, max_outer=3.0).outer_iterations <= 3
 
 
+@pytest.mark.parametrize("method", ["apgd-jacobi", "newton-ac", "nsgs"])
+def test_the_iteration_cap_of_exact_coulomb_is_a_positive_integer(settling_step, method):
+    """``max_iter`` of solve_coulomb is refused before anything is solved when it is not an
+    integer >= 1, by the fixed point on s and by a method that solves exact Coulomb itself
+    (``newton-ac``, ``nsgs``), whose solve took 0, -1 and 2.5 as given."""
+    problem, _ = settling_step
+    for bad in (2.5, 0, -1):
+        with pytest.raises(ValueError, match="max_iter"):
+            solve_coulomb(problem, method, tol=1e-6, max_iter=bad)
+    assert solve_coulomb(problem, method, tol=1e-6, max_iter=5.0).iterations >= 1
+
+
 OPEN_TRIOS = {   # gaps (floor, pair, top), velocities, masses: every contact stays open
     "a": ([0.01469577229359832, 0.0334092122436204, 0.02034169783681011],
           [[1.1845819264950987, -0.01413158109420849], [1.2084563349160844, -0.43371072315125064],
