@@ -14,7 +14,9 @@ from numpy.typing import ArrayLike
 def _show(value: ArrayLike) -> str:
     arr = np.asarray(value)
     if arr.size <= 6:
-        return np.array2string(arr, precision=6) if arr.ndim else repr(float(arr))
+        if not arr.ndim:
+            return repr(int(arr)) if arr.dtype.kind in "iub" else repr(float(arr))
+        return np.array2string(arr, precision=6)
     return f"array of shape {arr.shape}"
 
 

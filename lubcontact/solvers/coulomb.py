@@ -55,7 +55,7 @@ from ..problem.conic import ConicProblem
 from ..problem.metrics import coulomb_shift
 from .compiled_apgd import joint_applies, joint_coulomb_apgd
 from .registry import FIRST_ORDER, accepting_solver, checked, solve, solver_info
-from .result import CONVERGED, FAILED, MAX_ITER, CoulombResult
+from .result import CONVERGED, DIVERGED, FAILED, MAX_ITER, CoulombResult, MethodOutput
 
 JOINT_MAX_ITER = 20_000
 """The fixed point's joint phase's iteration cap where ``max_iter`` is not given."""
@@ -123,6 +123,8 @@ def solve_coulomb(problem: ConicProblem, method: str = "clarabel", *, tol: float
         normalised once: outer iterations change only the shift of the prepared
         problem (``W`` is not rebuilt).
     """
+    if max_iter is not None:                # before any path: the joint phase takes it as is
+        max_iter = checks.integer("max_iter", max_iter, minimum=1)
     if solver_info(method).native_coulomb and problem.cones.has_friction:
         if joint and has_joint_phase(method):
             options["joint"] = joint
@@ -221,8 +223,9 @@ def solve_native_coulomb(problem: ConicProblem, method: str, *, tol: float = 1e-
     -------
     CoulombResult
         ``converged`` only when the method converged, the check passed and no
-        contact was left to flip; ``setup_time`` (normalising included) and ``solve_time``
-        summed over the method's calls.
+        contact was left to flip; ``diverged`` with zero forces where the forces are not
+        finite or their ``s*`` is not (forces so large that their velocities overflow);
+        ``setup_time`` (normalising included) and ``solve_time`` summed over the method's calls.
     """
     info = solver_info(method)
     branches = _Branches(problem, warm_start, threshold=max(1e3 * tol, 1e-7))
@@ -259,8 +262,15 @@ def solve_native_coulomb(problem: ConicProblem, method: str, *, tol: float = 1e-
         # it built (W r + b, one product; g(v(r)) takes two through H), 3 % of a 35-contact solve
         prepared = branches.on(scaled)
         dense = prepared.__dict__.get("dense_delassus")
-        gradient = None if dense is None else dense @ out.forces + prepared.offset
-        shift = branches.restrict(coulomb_shift(prepared, out.forces, gradient) * length)
+        with np.errstate(over="ignore", invalid="ignore"):
+            gradient = None if dense is None else dense @ out.forces + prepared.offset
+            found = branches.restrict(coulomb_shift(prepared, out.forces, gradient) * length)
+        if not np.isfinite(found).all():     # forces too large for their velocities: as
+            out = MethodOutput(np.zeros_like(out.forces), DIVERGED, out.iterations,  # non-finite
+                               out.setup_time, out.solve_time, out.residual_history, out.info)
+            settled = True
+            break
+        shift = found
         start = out.forces
         if native_union or not branches.update(branches.on(unshifted).with_shift(shift), out.forces * force,
                                                length, force):

@@ -237,8 +237,8 @@ def solve(problem: ConicProblem, method: str = "clarabel", *, tol: float = 1e-9,
     info = accepting_solver(method, problem)
     if not tol > 0:
         raise ValueError(f"tol: must be > 0, got {tol}")
-    if max_iter is not None and not (float(max_iter) == int(max_iter) and int(max_iter) > 0):
-        raise ValueError(f"max_iter: must be a positive integer, got {max_iter}")
+    if max_iter is not None:
+        max_iter = checks.integer("max_iter", max_iter, minimum=1)
     start = time.perf_counter()
     scaled = problem.normalized() if normalized is None else normalized
     checks.require(scaled.scaling is not None and scaled.n_rows == problem.n_rows, "normalized",
@@ -253,7 +253,7 @@ def solve(problem: ConicProblem, method: str = "clarabel", *, tol: float = 1e-9,
             raise ValueError("warm_start: non-finite value")
     kwargs = dict(tol=tol, warm_start=warm_start, **options)
     if max_iter is not None:
-        kwargs["max_iter"] = int(max_iter)
+        kwargs["max_iter"] = max_iter
     called = time.perf_counter()
     if problem.n_rows == 0:                  # no contact: nothing to solve, for every method
         out = MethodOutput(np.zeros(0), CONVERGED, 0)

@@ -11,6 +11,7 @@ from lubcontact.problem.metrics import velocity_error
 from lubcontact.scenes.packing import deposit_pile
 from lubcontact.solvers import (
     CONVERGED,
+    DIVERGED,
     FIRST_ORDER,
     INTERIOR_POINT,
     KINDS,
@@ -27,6 +28,7 @@ from lubcontact.solvers import (
     solver_info,
     unregister,
 )
+from lubcontact.solvers.registry import ALL_CONES
 
 
 def test_every_method_has_a_kind_and_the_kinds_partition_the_registry():
@@ -262,16 +264,53 @@ def test_the_fixed_point_takes_a_whole_number_of_outer_iterations(settling_step,
     assert 1 <= solve_coulomb(problem, method, tol=1e-6, max_outer=3.0).outer_iterations <= 3
 
 
-@pytest.mark.parametrize("method", ["apgd-jacobi", "newton-ac", "nsgs"])
-def test_the_iteration_cap_of_exact_coulomb_is_a_positive_integer(settling_step, method):
-    """``max_iter`` of solve_coulomb is refused before anything is solved when it is not an
-    integer >= 1, by the fixed point on s and by a method that solves exact Coulomb itself
-    (``newton-ac``, ``nsgs``), whose solve took 0, -1 and 2.5 as given."""
+def test_the_iteration_cap_of_exact_coulomb_is_refused_before_anything_is_solved(settling_step):
+    """``max_iter`` of solve_coulomb is an integer >= 1, checked before any solve: by the fixed
+    point on s with its joint phase (which took 2.5 and -1 as given and failed inside its
+    compiled loop), and for a method that solves exact Coulomb itself, which is never called
+    (its check came after the solve, through solve()); an integral float is taken as an int."""
     problem, _ = settling_step
-    for bad in (2.5, 0, -1):
-        with pytest.raises(ValueError, match="max_iter"):
-            solve_coulomb(problem, method, tol=1e-6, max_iter=bad)
-    assert solve_coulomb(problem, method, tol=1e-6, max_iter=5.0).iterations >= 1
+    calls = []
+
+    @register("test-native-cap", cones=ALL_CONES, native_coulomb=True)
+    def _native(problem, *, tol, max_iter=None, warm_start=None):
+        calls.append(max_iter)
+        return MethodOutput(np.zeros(problem.n_rows), CONVERGED, 1)
+
+    try:
+        for bad in (2.5, 0, -1):
+            for method, options in (("test-native-cap", {}), ("apgd-jacobi", {"joint": 5}),
+                                    ("apgd-jacobi", {})):
+                with pytest.raises(ValueError, match=f"max_iter: must be an integer >= 1, got {bad}"):
+                    solve_coulomb(problem, method, tol=1e-6, max_iter=bad, **options)
+        assert calls == []
+        solve_coulomb(problem, "test-native-cap", tol=1e-6, max_iter=5.0)
+        assert calls == [5] and type(calls[0]) is int
+    finally:
+        unregister("test-native-cap")
+    result = solve_coulomb(problem, "nsgs", tol=1e-6, max_iter=5.0)
+    assert type(result.iterations) is int and result.iterations <= 5 * result.outer_iterations
+
+
+def test_a_native_method_whose_forces_overflow_their_velocities_is_diverged(settling_step):
+    """Finite forces whose shift s* = mu |u_T| overflows (1e300 on every row) end ``diverged``
+    with zero forces, as non-finite forces do; before, solve_coulomb raised from inside, on the
+    shift's own check."""
+    problem, _ = settling_step
+
+    @register("test-native-huge", cones=ALL_CONES, native_coulomb=True)
+    def _huge(problem, *, tol, max_iter=None, warm_start=None):
+        return MethodOutput(np.full(problem.n_rows, 1e300), CONVERGED, 3)
+
+    try:
+        with np.errstate(over="raise", invalid="raise"):
+            result = solve_coulomb(problem, "test-native-huge", tol=1e-6)
+    finally:
+        unregister("test-native-huge")
+    assert result.status == DIVERGED and not result.success
+    assert np.array_equal(result.forces, np.zeros(problem.n_rows))
+    assert np.array_equal(result.shift, np.zeros(problem.n_contacts))
+
 
 
 OPEN_TRIOS = {   # gaps (floor, pair, top), velocities, masses: every contact stays open
