@@ -1502,16 +1502,17 @@ def steepest_descent_2d(W, rho, lower, upper, box, cone_n, cone_t, cone_mu, unil
 @numba.njit(cache=True, inline="always")
 def backtracked_2d(W, w_arrays, rho, lower, upper, cone_n, cone_t, cone_mu, unilateral, sigma,
                    center, forces, velocity, direction, slope, reference, armijo, max_halvings,
-                   trial, trial_velocity, trial_phi, trial_y, change):
+                   trial, trial_velocity, trial_phi, trial_y, change, zeros):
     """:func:`newton_phase_2d`'s line search along ``direction`` (decrease rate ``slope`` of the
     merit): from the full step, halved until the merit is at most ``reference - armijo alpha
     slope`` (the non-monotone Armijo bound), at most ``max_halvings`` trials. Whether a trial
     passed; the last one's forces, velocity ``v + alpha W d``, ``phi`` and ``y`` in ``trial``,
-    ``trial_velocity``, ``trial_phi`` and ``trial_y`` (``change`` holds ``W d``)."""
+    ``trial_velocity``, ``trial_phi`` and ``trial_y`` (``change`` holds ``W d``; ``zeros``, n
+    zeros, the product's offset)."""
     if not slope > 0.0:
         return False
     n = forces.size
-    product_2d(W, *w_arrays, direction, np.zeros(n), change)      # a trial's velocity: v + alpha W d
+    product_2d(W, *w_arrays, direction, zeros, change)      # a trial's velocity: v + alpha W d
     alpha = 1.0
     for _ in range(max_halvings):
         for j in range(n):
@@ -1576,7 +1577,7 @@ def newton_phase_2d(W, w_arrays, q, rho, lower, upper, box, cone_n, cone_t, cone
     subproblems = 1
     code = MAX_ITER_CODE
     trial, trial_phi, trial_y = np.empty(n), np.empty(n), np.empty(n)
-    change, trial_velocity = np.empty(n), np.empty(n)
+    change, trial_velocity, zeros = np.empty(n), np.empty(n), np.zeros(n)
     while True:
         while error > tol and subproblem_iterations < max_iter and iterations < total_iter \
                 and np.sqrt(2.0 * merit) > inner_tol:
@@ -1589,7 +1590,7 @@ def newton_phase_2d(W, w_arrays, q, rho, lower, upper, box, cone_n, cone_t, cone
             accepted = ok and backtracked_2d(W, w_arrays, rho, lower, upper, cone_n, cone_t, cone_mu,
                                              unilateral, sigma, center, forces, velocity, direction,
                                              2.0 * merit, reference, armijo, max_halvings, trial,
-                                             trial_velocity, trial_phi, trial_y, change)
+                                             trial_velocity, trial_phi, trial_y, change, zeros)
             if not accepted:                    # steepest descent
                 direction, slope = steepest_descent_2d(W, rho, lower, upper, box, cone_n, cone_t,
                                                        cone_mu, unilateral, sigma, y, phi)
@@ -1597,7 +1598,7 @@ def newton_phase_2d(W, w_arrays, q, rho, lower, upper, box, cone_n, cone_t, cone
                 accepted = backtracked_2d(W, w_arrays, rho, lower, upper, cone_n, cone_t, cone_mu,
                                           unilateral, sigma, center, forces, velocity, direction,
                                           slope, reference, armijo, max_halvings, trial,
-                                          trial_velocity, trial_phi, trial_y, change)
+                                          trial_velocity, trial_phi, trial_y, change, zeros)
             if not accepted:
                 code = FAILED_CODE
                 break
