@@ -1159,7 +1159,7 @@ def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = 1
                 status = CONVERGED if finish.error <= tol else \
                     INACCURATE if rescue.status == CONVERGED else MAX_ITER
             if status == CONVERGED or rescue.status in (CONVERGED, DIVERGED, FAILED):
-                break                            # (diverged: zero forces, from solve's check)
+                break                            # (diverged: zero forces, from the registry's check)
             origin = rescue.forces               # the next round goes on from the fallback's own
         if status == CONVERGED or kept and best_error <= FALLBACK_GAP * tol:
             break

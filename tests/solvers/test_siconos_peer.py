@@ -247,7 +247,7 @@ def test_the_fixed_point_runs_a_native_coulomb_peer_once_from_any_shift(register
     assert coulomb_error(problem, result.forces) <= 1e-8
     # s* as the fixed point takes it (W r + b on the normalised problem) and as coulomb_shift
     # gives it (from the problem's own units): the same to round-off of the largest shift
-    # (contacts at rest have |u_T| of 1e-20 to 1e-14, 2.7e-4 the largest)
+    # (contacts at rest have shifts mu |u_T| of 1e-20 to 1e-14, 2.7e-4 the largest)
     expected = coulomb_shift(problem.with_shift(np.zeros(problem.n_contacts)), result.forces)
     np.testing.assert_allclose(result.shift, expected, rtol=1e-12, atol=1e-13 * np.abs(expected).max())
 
