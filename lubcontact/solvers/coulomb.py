@@ -254,7 +254,7 @@ def solve_native_coulomb(problem: ConicProblem, method: str, *, tol: float = 1e-
         iterations += out.iterations
         shift = np.zeros(problem.cones.count)
         if out.status == FAILED or not np.isfinite(out.forces).all():
-            settled = True
+            prepared, settled = branches.on(scaled), True
             break
         if native_union and not branches.convex:     # each contact's piece from its force's sign
             branches.pulled = problem.cones.pulled(out.forces)
@@ -276,7 +276,8 @@ def solve_native_coulomb(problem: ConicProblem, method: str, *, tol: float = 1e-
                                                length, force):
             settled = True
             break
-    result = checked(out, branches.on(scaled).with_shift(shift / length), method, shift, 0.0, 0.0)
+    # checked on the pieces the forces were solved on (not those of a last flip: max_outer)
+    result = checked(out, prepared.with_shift(shift / length), method, shift, 0.0, 0.0)
     status = result.status if settled else MAX_ITER
     return CoulombResult(**{**vars(result), "status": status, "iterations": iterations,
                             "setup_time": setup_time, "solve_time": solve_time},

@@ -292,6 +292,33 @@ def test_the_iteration_cap_of_exact_coulomb_is_refused_before_anything_is_solved
     assert type(result.iterations) is int and result.iterations <= 5 * result.outer_iterations
 
 
+def test_a_native_method_out_of_outer_iterations_is_checked_on_the_pieces_it_solved():
+    """A native method that takes only the two pieces of UNION contacts (COULOMB and NONPOS), cut
+    at one outer iteration after which a contact flips piece: the answer is ``max_iter``, and its
+    residual is that of the pieces its forces were solved on (all pushed, from no warm start), not
+    the flipped ones' (1.6 before)."""
+    from lubcontact.bench.hard import load_cases
+    from lubcontact.solvers.newton import newton_alart_curnier
+
+    problem = load_cases()["gamma_states_gluey_coulomb"].problem
+
+    @register("test-native-pieces", cones={ConeKind.NONNEG, ConeKind.FREE, ConeKind.COULOMB,
+                                           ConeKind.NONPOS}, native_coulomb=True)
+    def _pieces(problem, *, tol, max_iter=None, warm_start=None):
+        return newton_alart_curnier(problem, tol=tol, warm_start=warm_start)
+
+    try:
+        cut = solve_coulomb(problem, "test-native-pieces", tol=1e-8, max_outer=1)
+    finally:
+        unregister("test-native-pieces")
+    assert cut.status == "max_iter" and cut.branch_flips == [1]
+    pushed = problem.with_cones(problem.cones.with_branches(np.zeros(problem.n_contacts, dtype=bool)))
+    scaled = pushed.with_shift(cut.shift).normalized()
+    forces = cut.forces / scaled.scaling.force
+    residual = scaled.cones.natural_residual(forces, scaled.constraint_values(scaled.velocity(forces)))
+    assert cut.residual == pytest.approx(residual, rel=1e-9, abs=1e-12) and cut.residual < 1e-6
+
+
 def test_a_native_method_whose_forces_overflow_their_velocities_is_diverged(settling_step):
     """Finite forces whose shift s* = mu |u_T| overflows (1e300 on every row) end ``diverged``
     with zero forces, as non-finite forces do; before, solve_coulomb raised from inside, on the
