@@ -181,6 +181,7 @@ def main(argv: list[str] | None = None) -> int:
         check_methods("--method", names(args.method))
     except ValueError as exc:
         parser.error(f"argument {exc}")
+    from .flow_steps import widened_flow
     from .small_steps import LAWS, settled, step_settings
 
     if args.law not in LAWS:
@@ -205,7 +206,7 @@ def main(argv: list[str] | None = None) -> int:
             settings = step_settings(args.method, tol, args.law == "exact")
         else:                       # a widened flow, with its own settings but --method and --tol
             try:
-                sim = _widened(layer, n_grains, args.cache)
+                sim = widened_flow(layer, n_grains, args.cache)[1]
             except ValueError as exc:
                 parser.error(f"argument {exc}")
             own = sim.settings
@@ -220,9 +221,3 @@ def main(argv: list[str] | None = None) -> int:
     print(format_table(rows, COLUMNS, floats=".4g"))
     return 0
 
-
-def _widened(layer: pathlib.Path, n_grains: int, cache: pathlib.Path) -> Simulation:
-    """``bench flow --layer``'s widened flow (:func:`~lubcontact.bench.flow_steps.widened_flow`)."""
-    from .flow_steps import widened_flow
-
-    return widened_flow(layer, n_grains, cache)[1]

@@ -15,6 +15,7 @@ from lubcontact.solvers import (
     FIRST_ORDER,
     INTERIOR_POINT,
     KINDS,
+    MAX_ITER,
     NEWTON,
     QP,
     CoulombResult,
@@ -311,7 +312,7 @@ def test_a_native_method_out_of_outer_iterations_is_checked_on_the_pieces_it_sol
         cut = solve_coulomb(problem, "test-native-pieces", tol=1e-8, max_outer=1)
     finally:
         unregister("test-native-pieces")
-    assert cut.status == "max_iter" and cut.branch_flips == [1]
+    assert cut.status == MAX_ITER and cut.branch_flips == [1]
     pushed = problem.with_cones(problem.cones.with_branches(np.zeros(problem.n_contacts, dtype=bool)))
     scaled = pushed.with_shift(cut.shift).normalized()
     forces = cut.forces / scaled.scaling.force
