@@ -82,8 +82,8 @@ class Factorisations:
     the carried orders' solves were ten times less accurate and Newton took 392 iterations instead
     of 154.
 
-    Where ``carry`` is set a block is also ordered afresh by an approximate minimum degree
-    (:func:`~lubcontact.solvers.ordering.approximate_minimum_degree`) and factorised by
+    Where ``carry`` is set a block is also ordered afresh by an approximate minimum degree, each
+    contact's two rows together (:meth:`_fresh_order`), and factorised by
     :class:`StaticLU` in that order, as carried blocks are: SuperLU's own minimum degree was
     7 of its 19 ms on the 20 000-row blocks of a 12 000-grain gluey step, and SuperLU gives no
     order without factorising (12-15 ms instead, 5 % fewer factor entries:
@@ -126,8 +126,7 @@ class Factorisations:
         order = self._carried_order(matrix, rows)
         carried = order is not None
         if not carried and self.carry:
-            pattern = kernels().symmetrised_pattern(*csr_arrays(matrix)[:2])
-            order = ordering().approximate_minimum_degree(*pattern)
+            order = self._fresh_order(matrix, rows)
         if order is None:                   # SuperLU's own order, pivoting
             factors = spla.splu(matrix, **SPARSE_LU)
             self.ordered_rows, self.positions = rows, factors.perm_c
@@ -159,6 +158,19 @@ class Factorisations:
             self.kept[0] = (matrix, factors, order)
             solved = _ordered_solve(factors, order, rhs)
         return solved
+
+    def _fresh_order(self, matrix: sp.spmatrix, rows: np.ndarray) -> np.ndarray:
+        """An approximate minimum degree order of ``matrix`` (a 2D block by rows; ``rows``: the
+        rows of the system it holds, sorted), each contact's two rows eliminated together where
+        both are in it (``partner``; :func:`~lubcontact.solvers.ordering.grouped_minimum_degree`):
+        on captured 10 000-grain gluey steps a fresh order took 0.83 of the time of one found
+        row by row, with 0.99-1.02 times its factor entries, and the steps 0.93-0.98 of theirs
+        (docs/records/benchmarks.md, "the minimum-degree order by contacts")."""
+        compiled = kernels()
+        indptr, indices = csr_arrays(matrix)[:2]
+        group, weights = compiled.contact_groups(rows, self.partner)
+        return ordering().grouped_minimum_degree(
+            *compiled.grouped_pattern(indptr, indices, group, weights.size), group, weights)
 
     def _carried_order(self, matrix: sp.spmatrix, rows: np.ndarray) -> np.ndarray | None:
         """The last ordered block's elimination order for ``matrix`` (a permutation of its

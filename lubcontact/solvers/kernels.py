@@ -1177,34 +1177,70 @@ def symmetrised_pattern(indptr, indices):
     column ``k`` holds the rows ``i < k`` with an entry at ``(i, k)`` or ``(k, i)``, once each
     (what :func:`~lubcontact.solvers.ordering.approximate_minimum_degree` reads)."""
     n = indptr.size - 1
-    pointers = np.zeros(n + 1, dtype=np.int64)
-    for j in range(n):                                  # entry (r, j) goes to column max(r, j)
+    return grouped_pattern(indptr, indices, np.arange(n), n)
+
+
+@numba.njit(cache=True)
+def grouped_pattern(indptr, indices, group, n_groups):
+    """The part above the diagonal of the pattern of ``A + A^T``'s groups of rows, ``A`` square in
+    compressed arrays, ``group`` each row's group (``0 .. n_groups - 1``): column ``h`` holds the
+    groups ``g < h`` with an entry of ``A + A^T`` in a row of one and a column of the other,
+    once each (what :func:`~lubcontact.solvers.ordering.grouped_minimum_degree` reads;
+    :func:`symmetrised_pattern`: a group a row)."""
+    n = indptr.size - 1
+    pointers = np.zeros(n_groups + 1, dtype=np.int64)
+    for j in range(n):                                  # entry (r, j) goes to column max(g_r, g_j)
+        g = group[j]
         for e in range(indptr[j], indptr[j + 1]):
-            r = np.int64(indices[e])                    # (numba makes uint64 op int64 a float)
-            if r != j:
-                pointers[max(r, j) + 1] += 1
-    for k in range(n):
+            h = group[np.int64(indices[e])]             # (numba makes uint64 op int64 a float)
+            if h != g:
+                pointers[max(h, g) + 1] += 1
+    for k in range(n_groups):
         pointers[k + 1] += pointers[k]
-    rows = np.empty(pointers[n], dtype=np.int64)
+    rows = np.empty(pointers[n_groups], dtype=np.int64)
     filled = pointers[:-1].copy()
     for j in range(n):
+        g = group[j]
         for e in range(indptr[j], indptr[j + 1]):
-            r = np.int64(indices[e])
-            if r != j:
-                column = max(r, j)
-                rows[filled[column]] = min(r, j)
+            h = group[np.int64(indices[e])]
+            if h != g:
+                column = max(h, g)
+                rows[filled[column]] = min(h, g)
                 filled[column] += 1
-    mark = np.full(n, -1, dtype=np.int64)
+    mark = np.full(n_groups, -1, dtype=np.int64)
     count = 0
-    for k in range(n):                                  # each row once: compacted in place
+    for k in range(n_groups):                           # each group once: compacted in place
         start, pointers[k] = pointers[k], count
         for e in range(start, filled[k]):
             if mark[rows[e]] != k:
                 mark[rows[e]] = k
                 rows[count] = rows[e]
                 count += 1
-    pointers[n] = count
+    pointers[n_groups] = count
     return pointers, rows[:count]
+
+
+@numba.njit(cache=True)
+def contact_groups(rows, partner):
+    """The rows of a block (``rows``: rows of the system, sorted) grouped by contact: a row and
+    its contact's other row (``partner``: per row of the system, -1 for none; a row beyond its
+    size has none) in one group where both are in the block, every other row a group of its
+    own. Returns ``(group, weights)``: each row's group (m,), numbered in the order of their
+    first rows, and the rows in each group (int32)."""
+    m = rows.size
+    group = np.empty(m, dtype=np.int64)
+    weights = np.zeros(m, dtype=np.int32)
+    count = 0
+    for a in range(m):
+        other = np.int64(partner[rows[a]]) if rows[a] < partner.size else -1
+        b = np.searchsorted(rows, other) if 0 <= other < rows[a] else m
+        if b < m and rows[b] == other:                  # its contact's other row came first
+            group[a] = group[b]
+        else:
+            group[a] = count
+            count += 1
+        weights[group[a]] += 1
+    return group, weights[:count].copy()
 
 
 @numba.njit(cache=True)
