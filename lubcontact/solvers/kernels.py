@@ -1192,7 +1192,7 @@ def grouped_pattern(indptr, indices, group, n_groups):
     for j in range(n):                                  # entry (r, j) goes to column max(g_r, g_j)
         g = group[j]
         for e in range(indptr[j], indptr[j + 1]):
-            h = group[np.int64(indices[e])]             # (numba makes uint64 op int64 a float)
+            h = group[indices[e]]
             if h != g:
                 pointers[max(h, g) + 1] += 1
     for k in range(n_groups):
@@ -1202,7 +1202,7 @@ def grouped_pattern(indptr, indices, group, n_groups):
     for j in range(n):
         g = group[j]
         for e in range(indptr[j], indptr[j + 1]):
-            h = group[np.int64(indices[e])]
+            h = group[indices[e]]
             if h != g:
                 column = max(h, g)
                 rows[filled[column]] = min(h, g)

@@ -131,16 +131,31 @@ def grouped_minimum_degree(pointers: np.ndarray, rows: np.ndarray, group: np.nda
     -------
     ndarray of int64, shape (n,)
         The rows in elimination order, each group's in increasing row.
+
+    Raises
+    ------
+    ValueError
+        Where the groups do not match the pattern and the weights: a weight below 1, weights
+        not one a column of the pattern, or rows counted in ``group`` other than ``weights``
+        says (numba does not check the bounds of what they index).
     """
+    counted = np.zeros(weights.size, dtype=np.int64)
+    for i in range(group.size):
+        if not 0 <= group[i] < weights.size:
+            raise ValueError("grouped_minimum_degree: a group beyond the weights")
+        counted[group[i]] += 1
+    if weights.size != pointers.size - 1:
+        raise ValueError("grouped_minimum_degree: not a weight for each column of the pattern")
+    for g in range(weights.size):
+        if weights[g] < 1 or counted[g] != weights[g]:
+            raise ValueError("grouped_minimum_degree: a weight below 1 or other than its rows")
     pivots, first_member, next_member, absorber = _pivots(pointers, rows, weights)
     groups = _rows_of(_assembly_postorder(pivots, absorber), first_member, next_member)
-    place = np.empty(weights.size + 1, dtype=np.int64)      # each group's first place
-    place[0] = 0
-    for t in range(groups.size):
-        place[t + 1] = place[t] + weights[groups[t]]
-    start = np.empty(weights.size, dtype=np.int64)
-    for t in range(groups.size):
-        start[groups[t]] = place[t]
+    start = np.empty(weights.size, dtype=np.int64)          # each group's first place
+    place = 0
+    for g in groups:
+        start[g] = place
+        place += weights[g]
     order = np.empty(group.size, dtype=np.int64)
     for i in range(group.size):                 # in increasing row: each group's rows in order
         order[start[group[i]]] = i
@@ -201,9 +216,10 @@ def _pivots(pointers: np.ndarray, rows: np.ndarray, weights: np.ndarray
     -------
     tuple of ndarray of int32
         ``(pivots, first_member, next_member, absorber)``: the pivots (supervariables, each
-        named by one of its rows); the rows each stands for, linked from ``first_member[p]``
-        through ``next_member`` (-1 ends the chain), its own row first; per pivot, the pivot
-        whose element absorbed its element (-1: none, a root of the assembly tree).
+        named by one of the pattern's rows, which are groups where ``weights`` are not all 1);
+        the pattern's rows each stands for, linked from ``first_member[p]`` through
+        ``next_member`` (-1 ends the chain), its own row first; per pivot, the pivot whose
+        element absorbed its element (-1: none, a root of the assembly tree).
     """
     if 4 * rows.size + 4 * pointers.size + 16 >= 2**30:
         raise ValueError("approximate_minimum_degree: more than 2^30 entries in the lists "

@@ -276,3 +276,38 @@ def test_a_fresh_2d_block_is_ordered_by_contacts():
     expected = ordering.grouped_minimum_degree(
         *kernels.grouped_pattern(block.indptr, block.indices, group, weights.size), group, weights)
     assert np.array_equal(kept_factors.kept[0][2], expected)
+
+
+def test_weighted_degrees_may_exceed_the_pattern_s_rows():
+    """Six groups of three rows, all next to each other: every degree is 15, above the six rows
+    of the pattern; the elimination (plain Python, whose indexing is checked) still orders them,
+    as one supervariable, every row once."""
+    upper = kernels.symmetrised_pattern(*csr_arrays_of(np.ones((6, 6))))
+    pivots, first_member, next_member, _ = _pivots.py_func(*upper, np.full(6, 3, dtype=np.int32))
+    assert is_permutation(_rows_of(pivots, first_member, next_member), 6)
+
+
+@pytest.mark.parametrize("case", ["swapped", "zero", "beyond", "short"])
+def test_groups_that_do_not_match_their_weights_raise(case):
+    """``grouped_minimum_degree`` refuses groups whose weights are not their rows' counts
+    (``[2, 0, 2, 1, 0]`` given ``[2, 2, 1]``), a weight of 0, a group beyond the weights and
+    weights fewer than the pattern's columns, where it would write past its arrays."""
+    upper = kernels.symmetrised_pattern(*csr_arrays_of(sp.identity(3)))
+    group, weights = np.array([2, 0, 2, 1, 0]), np.array([2, 1, 2], dtype=np.int32)
+    group, weights = {"swapped": (group, np.array([2, 2, 1], dtype=np.int32)),
+                      "zero": (np.array([0, 0, 1, 1, 1]), np.array([2, 3, 0], dtype=np.int32)),
+                      "beyond": (np.array([0, 1, 2, 3, 0]), weights),
+                      "short": (group, weights)}[case]
+    if case == "short":
+        upper = kernels.symmetrised_pattern(*csr_arrays_of(sp.identity(4)))
+    with pytest.raises(ValueError, match="grouped_minimum_degree"):
+        ordering.grouped_minimum_degree(*upper, group, weights)
+    if case == "swapped":                         # the matching weights order every row
+        matching = np.array([2, 1, 2], dtype=np.int32)
+        assert is_permutation(ordering.grouped_minimum_degree(*upper, group, matching), 5)
+
+
+def csr_arrays_of(matrix) -> tuple[np.ndarray, np.ndarray]:
+    """The compressed pattern of ``matrix``: ``(indptr, indices)``."""
+    matrix = sp.csr_matrix(matrix)
+    return matrix.indptr, matrix.indices
