@@ -211,8 +211,9 @@ class StaticLU:
         pivot is below ``1e-14`` times its largest entry (SuperLU then factorises it, pivoting)."""
         indptr, indices, data = csr_arrays(matrix)      # unsigned: no wrap-around checks
         compiled = kernels()
-        pattern = tuple(positions(array) for array in compiled.static_pattern(indptr, indices))
-        lower, upper, failed = compiled.static_lu(indptr, indices, data, *pattern)
+        *arrays, paired = compiled.static_pattern(indptr, indices)
+        pattern = tuple(positions(array) for array in arrays)
+        lower, upper, failed = compiled.static_lu(indptr, indices, data, *pattern, paired)
         return None if failed >= 0 else cls(matrix, norm, pattern, lower, upper)
 
     def solve(self, rhs: np.ndarray) -> np.ndarray:
