@@ -1350,7 +1350,9 @@ def static_lu(indptr, indices, data, lower_ptr, lower_idx, upper_ptr, upper_idx,
     column ``j`` of ``U`` by the triangular solve with the columns of ``L`` before it, in
     increasing order; the two columns of a pair, ``paired``, in one pass over their rows: on the
     blocks of 10 000-grain gluey steps ordered by contacts, 0.85 of the time with one pass a
-    column, docs/records/benchmarks.md, "the static LU by pairs of columns"). Returns
+    column, docs/records/benchmarks.md, "the static LU by pairs of columns"; ``paired`` is
+    trusted as :func:`static_pattern` gives it: a pair's rows below its second column the same,
+    in the same order). Returns
     ``(L_values, U_values, failed)``: ``failed`` is the first column whose pivot is below
     ``1e-14`` times ``A``'s largest entry in magnitude, or -1."""
     n = indptr.size - 1
@@ -1370,7 +1372,7 @@ def static_lu(indptr, indices, data, lower_ptr, lower_idx, upper_ptr, upper_idx,
             if paired[k] and e + 1 < last:              # k + 1 is next: its rows are k's
                 first, second = lower_ptr[k], lower_ptr[k + 1]
                 value = work[k]
-                following = work[k + 1] - lower_val[first + 1] * value
+                following = work[k + 1] - lower_val[first + 1] * value if value != 0.0 else work[k + 1]
                 upper_val[e], upper_val[e + 1] = value, following
                 work[k], work[k + 1] = 0.0, 0.0
                 if value != 0.0 or following != 0.0:
