@@ -154,21 +154,27 @@ class Sweeps:
         row's velocity from the velocities ``F r`` (a row of ``F^T`` holds the degrees of
         freedom of one contact's two bodies, where a row of ``W`` holds every contact sharing
         a body with it: about 4x the entries on a developed flow), else from the rows of ``W``.
+        Sweeps over some rows compute ``F r`` only where those rows read it.
+    diagonal : ndarray, shape (n,), optional
+        ``W``'s diagonal, where the caller has it (a sparse ``W``'s costs a pass over its
+        entries); taken from ``W`` otherwise.
     """
 
     def __init__(self, W: np.ndarray | sp.csr_matrix, q: np.ndarray, lower: np.ndarray,
                  upper: np.ndarray, cone_n: np.ndarray, cone_t: np.ndarray, mu: np.ndarray,
                  unilateral: np.ndarray, factor: sp.csr_matrix | None = None,
-                 factor_transpose: sp.csr_matrix | None = None):
+                 factor_transpose: sp.csr_matrix | None = None,
+                 diagonal: np.ndarray | None = None):
         self.W, self.q, self.lower, self.upper = W, q, lower, upper
         self.cone_n, self.cone_t = cone_n.astype(np.int64), cone_t.astype(np.int64)
         self.mu, self.unilateral = mu.astype(float), unilateral
-        self.diagonal = W.diagonal()
+        self.diagonal = W.diagonal() if diagonal is None else diagonal
         self.contact = np.full(q.size, -1, dtype=np.int64)      # each row's contact, or -1
         self.contact[self.cone_n] = self.contact[self.cone_t] = np.arange(cone_n.size)
         self.blocks = contact_blocks(W, self.diagonal, self.cone_n, self.cone_t)
         self.box_rows = np.flatnonzero((self.contact < 0) & (lower < upper))
         self.factor = factor
+        self.factor_rows = None if factor is None else csr_arrays(factor)
         read = W if factor is None else factor_transpose
         self.rows = dense_csr_arrays(read) if isinstance(read, np.ndarray) else csr_arrays(read)
 
@@ -176,7 +182,7 @@ class Sweeps:
                  ) -> np.ndarray:
         """The forces (shape (n,)) after ``sweeps`` sweeps from ``forces`` over ``rows`` (sorted;
         None: every row)."""
-        from .kernels import gauss_seidel_2d
+        from .kernels import factor_rows_state, gauss_seidel_2d
 
         if rows is None:
             cones, box_rows = slice(None), self.box_rows
@@ -187,7 +193,14 @@ class Sweeps:
         cone_n, cone_t = self.cone_n[cones], self.cone_t[cones]
         swept = np.array(forces, dtype=float)
         # F r from the forces at each call: the updates inside carry no drift over the sweeps
-        state = swept if self.factor is None else self.factor @ swept
+        if self.factor is None:
+            state = swept
+        elif rows is None:
+            state = self.factor @ swept
+        else:                  # only where the swept rows read it (np.empty: the rest unread)
+            state = np.empty(self.factor.shape[0])
+            factor_rows_state(*self.factor_rows, *self.rows[:2], swept,
+                              np.concatenate((box_rows, cone_n, cone_t)), state)
         gauss_seidel_2d(*self.rows, self.q, self.lower, self.upper, box_rows,
                         self.diagonal[box_rows], cone_n, cone_t, self.mu[cones],
                         self.unilateral[cones], self.blocks[cones], swept, state,

@@ -60,6 +60,27 @@ def add_columns(indptr, indices, values, change, rows, out):
             out[indices[k]] += values[k] * moved
 
 
+@numba.njit(cache=True)
+def factor_rows_state(indptr, indices, values, t_indptr, t_indices, x, rows, out):
+    """``out[d] = (F x)[d]`` at the degrees of freedom ``d`` that the rows ``rows`` of ``F^T``
+    hold, ``F`` by its rows (``indptr``, ``indices``, ``values``) and ``F^T`` by its rows'
+    pattern (``t_indptr``, ``t_indices``); the other entries of ``out`` are left as they are.
+    Each such ``d`` once, summed in ``F``'s row order (a product's bits): the velocities that
+    local Gauss-Seidel sweeps over ``rows`` read and update
+    (:class:`~lubcontact.solvers.gauss_seidel.Sweeps`), without a product with all of ``F``."""
+    done = np.zeros(out.size, dtype=np.bool_)
+    for i in rows:
+        for e in range(t_indptr[i], t_indptr[i + 1]):
+            d = t_indices[e]
+            if done[d]:
+                continue
+            done[d] = True
+            total = 0.0
+            for k in range(indptr[d], indptr[d + 1]):
+                total += values[k] * x[indices[k]]
+            out[d] = total
+
+
 @numba.njit(cache=True, inline="always")
 def apply_operator(indptr, indices, values, t_indptr, t_indices, t_values, scratch, x, out):
     """``out = W x``: from the rows of ``W`` (``t_indptr`` empty), or as ``F^T (F x)`` with the

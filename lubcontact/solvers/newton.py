@@ -470,6 +470,8 @@ class AlartCurnier:
     ----------
     rho : ndarray, shape (n_rows,)
         Per-row step ``1 / W_nn`` of the row's contact.
+    diagonal : ndarray, shape (n_rows,)
+        ``W``'s diagonal (also the local sweeps', :attr:`local_sweeps`).
     cone_n, cone_t, cone_mu : ndarray
         Normal rows (nf,), tangential rows (nf, tangent_dim) and friction
         coefficients (nf,) of the frictional contacts (COULOMB, then UNION).
@@ -547,7 +549,8 @@ class AlartCurnier:
         self.box = np.ones(self.n_rows, dtype=bool)
         self.box[self.cone_n[self.unilateral]] = False
         self.box[self.cone_t.ravel()] = False
-        diagonal = self.W.diagonal()[:nc]
+        self.diagonal = self.W.diagonal()      # (a sparse W's: a pass over its entries)
+        diagonal = self.diagonal[:nc]
         largest = diagonal.max(initial=0.0)
         floor = 1e-12 * (largest if largest > 0 else 1.0)
         rho_contact = 1.0 / np.maximum(diagonal, floor)
@@ -667,7 +670,8 @@ class AlartCurnier:
         read the velocities through ``W``'s factor where the problem gives it)."""
         factor, transpose = self.delassus_factors
         return Sweeps(self.W, self.q, self.lower, self.upper, self.cone_n, self.tangent_rows,
-                      self.cone_mu, self.unilateral, factor=factor, factor_transpose=transpose)
+                      self.cone_mu, self.unilateral, factor=factor, factor_transpose=transpose,
+                      diagonal=self.diagonal)
 
     def swept(self, forces: np.ndarray, velocity: np.ndarray | None = None
               ) -> tuple[np.ndarray, np.ndarray, float] | None:

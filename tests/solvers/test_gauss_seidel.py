@@ -14,8 +14,9 @@ from lubcontact.problem.local import LocalProblem
 from lubcontact.problem.metrics import scaled_coulomb_error, scaled_velocity_error, velocity_error
 from lubcontact.problem.step import StepProblem
 from lubcontact.solvers import CONVERGED, MAX_ITER, solve, solve_coulomb, solver_info
+from lubcontact.solvers.compiled_apgd import csr_arrays
 from lubcontact.solvers.gauss_seidel import Sweeps
-from lubcontact.solvers.kernels import coulomb_residual_2d, local_coulomb_2d
+from lubcontact.solvers.kernels import coulomb_residual_2d, factor_rows_state, local_coulomb_2d
 
 #: the reference cases a Gauss-Seidel method reaches to 1e-8 within its default 20 000 sweeps
 #: (the jammed 200-grain piles need more: pgd needs 1.2 million iterations on one)
@@ -124,6 +125,23 @@ def test_sweeps_through_the_factor_are_the_sweeps_through_w(gluey_step):
         first, second = through_factor(start, 10, rows), through_w(start, 10, rows)
         assert np.abs(first - start).max() > 1e-3 * np.abs(start).max()     # they moved
         assert np.abs(first - second).max() <= 1e-11 * np.abs(first).max()
+
+
+def test_sweeps_over_some_rows_read_f_r_where_those_rows_hold_it(gluey_step):
+    """Sweeps over some rows through the factor compute ``F r`` only at the degrees of freedom
+    those rows of ``F^T`` hold (:func:`~lubcontact.solvers.kernels.factor_rows_state`): there
+    it is the product's to the bit, elsewhere untouched; and sweeps over every row given as
+    rows take the forces of sweeps over all (``None``, the whole product) to the bit."""
+    through_factor, _, start = gluey_step
+    factor, transpose = through_factor.factor, through_factor.rows
+    rows = np.arange(0, start.size, 7)
+    state = np.full(factor.shape[0], np.nan)
+    factor_rows_state(*csr_arrays(factor), *transpose[:2], start, rows, state)
+    held = np.unique(np.concatenate([transpose[1][transpose[0][i]:transpose[0][i + 1]] for i in rows]))
+    assert 0 < held.size < state.size
+    assert np.array_equal(state[held], (factor @ start)[held])
+    assert np.isnan(np.delete(state, held)).all()
+    assert np.array_equal(through_factor(start, 10, np.arange(start.size)), through_factor(start, 10, None))
 
 
 def test_sweeps_over_some_rows_solve_their_contacts_laws_and_leave_the_others(gluey_step):
