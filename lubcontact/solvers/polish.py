@@ -58,6 +58,21 @@ OPEN, HELD, STICK, SLIDE = 0, 1, 2, 3
 #: in the force conditions (of ``max(max |lam|, 1)``)
 ROUNDING = 1e-12
 
+PROXIMAL_WEIGHT = 1e-8
+"""``delta`` of the active-set solve (:func:`_solve_on`), relative to the largest diagonal entry
+of ``G``. The refinement converges where ``G``'s eigenvalues are well above ``delta``. Along the
+null space of ``G`` (contacts whose rows are dependent), a step moves the forces by the
+residual's component there divided by ``delta``. That component is zero at the exact solution
+and the interior point's inaccuracy at its forces. These moves change no velocity, so the
+refinement takes them, but they can change the contacts' states.
+
+At 1e-12 a component of 1.8e-12 moved the normal forces of two pairs of sticking contacts from
+3e-3 to 7e-3 down to -0.3. This was on a 10 000-grain gluey step's reference (42 125 rows;
+the pairs' block of ``G`` had two null directions). The pairs then cycled between sticking and
+open, and the polish gave up, keeping Clarabel's residual of 1.3e-5. From 1e-9 to 1e-7 the
+polish there is accepted at 1.8e-12 (docs/records/benchmarks.md, "a reference to trust at
+10 000 grains")."""
+
 
 @dataclass
 class _Layout:
@@ -199,11 +214,11 @@ def _solve_on(problem: ConicProblem, layout: _Layout, forces: np.ndarray, state:
               direction: np.ndarray, refinements: int = 4) -> np.ndarray:
     """Forces of the active set that make every active condition hold (module docstring).
 
-    ``G = (L P)^T (L P)`` plus ``delta = 1e-12 max diag G`` is factorised once
-    (LDL^T, qdldl), and ``y <- y - (G + delta I)^-1 P^T g(P y)`` is repeated
-    (proximal-point refinement: ``delta`` leaves no trace, and components of
-    ``y`` in the null space of ``G``, which do not change velocities, keep
-    their values from ``forces``).
+    ``G = (L P)^T (L P)`` plus ``delta =`` :data:`PROXIMAL_WEIGHT` ``max diag G`` is
+    factorised once (LDL^T, qdldl), and ``y <- y - (G + delta I)^-1 P^T g(P y)`` is repeated
+    (proximal-point refinement: ``delta`` leaves no trace where ``G``'s eigenvalues are well
+    above it, and components of ``y`` in and near the null space of ``G``, which do not change
+    velocities, or barely, keep their values from ``forces``).
     """
     import qdldl
 
@@ -211,7 +226,7 @@ def _solve_on(problem: ConicProblem, layout: _Layout, forces: np.ndarray, state:
     if basis.shape[1] == 0:
         return np.zeros_like(forces)
     gram = sp.triu(_active_gram(problem, basis), format="csc")
-    delta = 1e-12 * max(float(gram.diagonal().max()), 1e-300)
+    delta = PROXIMAL_WEIGHT * max(float(gram.diagonal().max()), 1e-300)
     solver = qdldl.Solver(sp.csc_matrix(gram + delta * sp.identity(gram.shape[0], format="csc")),
                           upper=True)
     residual = basis.T @ problem.gradient(basis @ coordinates)

@@ -123,3 +123,35 @@ def test_scs_solves_problems_without_inequality_rows(hard_cases, name):
     reference = solve(problem, "clarabel", tol=1e-10)
     assert result.status == "converged"
     assert scaled_velocity_error(problem, result.velocities, reference.velocities) <= 1e-8
+
+
+def test_the_polish_keeps_dependent_contacts_forces_along_their_null_space():
+    """A 17-row local problem cut from a 10 000-grain gluey step's reference (the contacts one
+    step from two pairs of sticking contacts whose rows are dependent in ``W``'s pattern, the
+    other contacts' forces folded into ``q``), with Clarabel's forces there. The active set's
+    ``G`` has two null directions, along which the forces' residual holds the interior point's
+    inaccuracy (1.8e-12). At a proximal weight of 1e-12 the solve moved the pairs' normal forces
+    by that over the weight, to -0.3. The pairs then cycled between sticking and open, and the
+    polish gave up. Now it is accepted, the residual falls (1.6e-11 to 1.8e-12) and the pairs
+    stick with the interior point's positive forces."""
+    from pathlib import Path
+
+    import scipy.sparse as sp
+
+    from lubcontact.problem.cones import Cones
+    from lubcontact.problem.local import LocalProblem
+    from lubcontact.solvers.polish import polish
+
+    path = Path(__file__).parents[1] / "solvers" / "data" / "dependent-contacts-block.npz"
+    with np.load(path) as data:
+        n = data["q"].size
+        delassus = sp.csr_matrix((data["W_data"], data["W_indices"], data["W_indptr"]), shape=(n, n))
+        cones = Cones(kinds=data["kinds"], mu=data["mu"], tangential=data["tangential"], tangent_dim=1)
+        problem = LocalProblem(delassus=delassus, free_velocity=data["q"], cones=cones)
+        forces = data["forces"]
+    before = problem.natural_residual(forces)
+    polished, accepted = polish(problem, forces)
+    assert accepted
+    assert problem.natural_residual(polished) <= 0.2 * before
+    sticking = forces[: cones.count] > 1e-3 * np.abs(forces).max()
+    assert sticking.sum() == 4 and np.all(polished[: cones.count][sticking] > 0)
