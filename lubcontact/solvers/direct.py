@@ -37,6 +37,7 @@ from ..problem.cones import ConeKind
 from ..problem.conic import ConicProblem
 from ..problem.global_form import convexified
 from .polish import polish as polish_active_set
+from .polish import polished_status
 from .registry import CONVEX_CONES, FIRST_ORDER, INTERIOR_POINT, QP, register
 from .result import CONVERGED, FAILED, INACCURATE, MAX_ITER, MethodOutput
 
@@ -146,8 +147,9 @@ def clarabel_direct(problem: ConicProblem, *, tol: float = 1e-10, max_iter: int 
     """Clarabel on :func:`conic_form` (``warm_start`` is ignored: interior point).
 
     The solution is polished on its active set (:mod:`lubcontact.solvers.polish`,
-    as the cvxpy ``clarabel`` does) unless ``polish=False``; the polishing time
-    is part of ``solve_time`` and also in ``info["polish_time"]``.
+    as the cvxpy ``clarabel`` does, with the same status rule:
+    :func:`~lubcontact.solvers.polish.polished_status`) unless ``polish=False``; the polishing
+    time is part of ``solve_time`` and also in ``info["polish_time"]``.
     """
     import clarabel
 
@@ -175,6 +177,7 @@ def clarabel_direct(problem: ConicProblem, *, tol: float = 1e-10, max_iter: int 
     polished = False
     if polish and status != FAILED:
         forces, polished = polish_active_set(problem, forces)
+        status = polished_status(status, problem, forces, polished, tol)
     polish_time = time.perf_counter() - done
     return MethodOutput(forces=forces, status=status, iterations=int(solution.iterations),
                         setup_time=built - start, solve_time=done - built + polish_time,

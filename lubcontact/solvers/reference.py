@@ -25,7 +25,9 @@ solutions are then polished on their active set
 (:mod:`lubcontact.solvers.polish`: frictionless, frictional, mixed and 3D
 problems, 3D sliding directions by Newton's method; a result whose active set
 does not settle is left as it is) to reach velocities accurate to about 1e-12.
-``info["polished"]`` says whether it was.
+``info["polished"]`` says whether it was. An ``inaccurate`` interior point whose polish is
+accepted is ``converged`` where the polished residual meets ``tol``
+(:func:`~lubcontact.solvers.polish.polished_status`).
 """
 from __future__ import annotations
 
@@ -39,6 +41,7 @@ from ..problem import symbolic
 from ..problem.cones import ConeKind
 from ..problem.step import StepProblem
 from .polish import polish as polish_active_set
+from .polish import polished_status
 from .registry import INTERIOR_POINT, register
 from .result import CONVERGED, FAILED, INACCURATE, MAX_ITER, MethodOutput
 
@@ -79,6 +82,7 @@ def _solve_symbolic(step: StepProblem, form: str, tol: float, max_iter: int,
     if polish:
         forces, polished = polish_active_set(step, forces)
         velocities = step.velocity(forces) if polished else velocities
+        status = polished_status(status, step, forces, polished, tol)
     return MethodOutput(forces=forces, status=status, iterations=int(stats.num_iters or 0),
                         setup_time=built - start + canonicalise,
                         solve_time=float(stats.solve_time or 0.0) + time.perf_counter() - polish_start,

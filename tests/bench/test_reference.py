@@ -134,13 +134,48 @@ def test_the_polish_keeps_dependent_contacts_forces_along_their_null_space():
     by that over the weight, to -0.3. The pairs then cycled between sticking and open, and the
     polish gave up. Now it is accepted, the residual falls (1.6e-11 to 1.8e-12) and the pairs
     stick with the interior point's positive forces."""
+    from lubcontact.solvers.polish import polish
+
+    problem, forces = _dependent_contacts_block()
+    cones = problem.cones
+    before = problem.natural_residual(forces)
+    polished, accepted = polish(problem, forces)
+    assert accepted
+    assert problem.natural_residual(polished) <= 0.2 * before
+    sticking = forces[: cones.count] > 1e-3 * np.abs(forces).max()
+    assert sticking.sum() == 4 and np.all(polished[: cones.count][sticking] > 0)
+
+
+def test_an_inaccurate_interior_point_whose_polish_is_accepted_is_converged_where_it_meets_tol():
+    """polished_status: Clarabel's ``AlmostSolved`` (``inaccurate``) answer whose polish is
+    accepted is ``converged`` where the polished natural residual per row meets the solve's
+    tol, and stays ``inaccurate`` where it does not; a polish not accepted, and any other status,
+    change nothing. (On a 10 000-grain gluey step's reference Clarabel's fixed point on s stopped
+    after four outer iterations on an ``inaccurate`` inner solve whose polished residual was
+    1.7e-12 per row.)"""
+    from lubcontact.solvers.polish import polish, polished_status
+    from lubcontact.solvers.result import residual_per_row
+
+    problem, forces = _dependent_contacts_block()
+    polished, accepted = polish(problem, forces)
+    assert accepted
+    per_row = residual_per_row(problem.natural_residual(polished), polished.size)
+    assert polished_status("inaccurate", problem, polished, True, 10 * per_row) == "converged"
+    assert polished_status("inaccurate", problem, polished, True, per_row / 10) == "inaccurate"
+    assert polished_status("inaccurate", problem, forces, False, 1.0) == "inaccurate"
+    for status in ("converged", "max_iter", "failed"):
+        assert polished_status(status, problem, polished, True, 1.0) == status
+
+
+def _dependent_contacts_block():
+    """The stored 17-row block of a 10 000-grain gluey step's reference and Clarabel's forces
+    there (tests/solvers/data/README.md, ``dependent-contacts-block.npz``)."""
     from pathlib import Path
 
     import scipy.sparse as sp
 
     from lubcontact.problem.cones import Cones
     from lubcontact.problem.local import LocalProblem
-    from lubcontact.solvers.polish import polish
 
     path = Path(__file__).parents[1] / "solvers" / "data" / "dependent-contacts-block.npz"
     with np.load(path) as data:
@@ -149,9 +184,4 @@ def test_the_polish_keeps_dependent_contacts_forces_along_their_null_space():
         cones = Cones(kinds=data["kinds"], mu=data["mu"], tangential=data["tangential"], tangent_dim=1)
         problem = LocalProblem(delassus=delassus, free_velocity=data["q"], cones=cones)
         forces = data["forces"]
-    before = problem.natural_residual(forces)
-    polished, accepted = polish(problem, forces)
-    assert accepted
-    assert problem.natural_residual(polished) <= 0.2 * before
-    sticking = forces[: cones.count] > 1e-3 * np.abs(forces).max()
-    assert sticking.sum() == 4 and np.all(polished[: cones.count][sticking] > 0)
+    return problem, forces
