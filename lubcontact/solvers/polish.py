@@ -52,30 +52,34 @@ import scipy.sparse.linalg as spla
 
 from ..problem.cones import ConeKind, Cones
 from ..problem.conic import ConicProblem
-from .result import CONVERGED, INACCURATE, residual_per_row
+from .result import CONVERGED, INACCURATE, MAX_ITER, residual_per_row
 
 OPEN, HELD, STICK, SLIDE = 0, 1, 2, 3
 #: relative size of the rounding allowed in the velocity conditions (per row, ``1 + |b|``) and
 #: in the force conditions (of ``max(max |lam|, 1)``)
 ROUNDING = 1e-12
 
-PROXIMAL_WEIGHT = 1e-6
+PROXIMAL_WEIGHTS = (1e-12, 1e-6)
 """``delta`` of the active-set solve (:func:`_solve_on`), relative to the largest diagonal entry
-of ``G``. The refinement converges where ``G``'s eigenvalues are well above ``delta``. Along the
-null space of ``G`` (contacts whose rows are dependent), a step moves the forces by the
-residual's component there divided by ``delta``. That component is zero at the exact solution
-and the interior point's inaccuracy at its forces. These moves change no velocity, or barely
-(near the null space), so the refinement takes them, but they can change the contacts' states.
+of ``G``: the rounds of :func:`polish` run at the first weight, and again at the second where
+the first's answer is not accepted. The refinement converges where ``G``'s eigenvalues are well
+above ``delta``. Along the null space of ``G`` (contacts whose rows are dependent), a step moves
+the forces by the residual's component there divided by ``delta``. That component is zero at
+the exact solution and the interior point's inaccuracy at its forces. These moves change no
+velocity, so the refinement takes them, but they can change the contacts' states.
 
-At 1e-12 a component of 1.8e-12 moved the normal forces of two pairs of sticking contacts from
-3e-3 to 7e-3 down to -0.3. This was on a 10 000-grain gluey step's reference (42 125 rows;
-the pairs' block of ``G`` had two null directions). The pairs then cycled between sticking and
-open, and the polish gave up, keeping Clarabel's residual of 1.3e-5.
+At 1e-12 alone, a component of 1.8e-12 moved the normal forces of two pairs of sticking
+contacts from 3e-3 to 7e-3 down to -0.3. This was on a 10 000-grain gluey step's reference
+(42 125 rows; the pairs' block of ``G`` had two null directions). The pairs then cycled between
+sticking and open, and the polish gave up, keeping Clarabel's residual of 1.3e-5. On the last
+convex problems of the references of six such steps (three beds), the polish was accepted on
+none at 1e-12, on two at 1e-8 and on all six at 1e-6, with residuals of 1.8e-14 to 5.9e-10.
 
-On the last convex problems of the references of six such steps (three beds), the polish was
-accepted on none at 1e-12, on two at 1e-8, on five of five at 1e-7 and on all six from 1e-6
-to 1e-5. At 1e-6 the residuals came to 1.8e-14 to 5.9e-10, against 6.8e-6 to 9.2e-5 for the
-interior point (docs/records/benchmarks.md, "a reference to trust at 10 000 grains")."""
+At 1e-6 alone, a badly conditioned problem loses its polish: on ``mass_ratio_1e6_sandwich``
+(``W``'s eigenvalues 0.25 and 1e6, the small one 5e-7 of the diagonal, below the weight) each
+refinement removes a fifth of the error along it, and rounding in the stiff direction stops the
+refinement after one step. Hence 1e-12 first (docs/records/benchmarks.md, "a reference to trust
+at 10 000 grains")."""
 
 
 @dataclass
@@ -111,6 +115,9 @@ def polish(problem: ConicProblem, forces: np.ndarray, threshold: float = 1e-7,
            max_rounds: int = 8) -> tuple[np.ndarray, bool]:
     """Refine ``forces`` of a convex normalised problem on their active set.
 
+    The rounds (module docstring) run at each proximal weight of :data:`PROXIMAL_WEIGHTS` in
+    turn, from ``forces`` each time, until one's answer is accepted.
+
     Parameters
     ----------
     problem : ConicProblem
@@ -120,7 +127,7 @@ def polish(problem: ConicProblem, forces: np.ndarray, threshold: float = 1e-7,
     threshold : float
         Relative force level (of ``max |lam|``) below which a contact counts as open.
     max_rounds : int
-        Active-set solves allowed (module docstring). Polishing also gives up
+        Active-set solves allowed at each weight (module docstring). Polishing also gives up
         as soon as a round changes the state of as many contacts as the round
         before (the set is not settling: e.g. on a hyperstatic frictional
         1000-grain pile, whose sticking forces are not unique, the changes
@@ -137,42 +144,71 @@ def polish(problem: ConicProblem, forces: np.ndarray, threshold: float = 1e-7,
     if forces.size == 0 or not cones.is_convex or not np.all(np.isfinite(forces)):
         return forces, False
     layout = _Layout.of(cones)
-    state, direction = _initial_states(problem, layout, forces, threshold)
     before = problem.natural_residual(forces)
+    for weight in PROXIMAL_WEIGHTS:
+        polished = _rounds(problem, layout, forces, threshold, max_rounds, weight, before)
+        if polished is not None:
+            return polished, True
+    return forces, False
+
+
+def _rounds(problem: ConicProblem, layout: _Layout, forces: np.ndarray, threshold: float,
+            max_rounds: int, weight: float, before: float) -> np.ndarray | None:
+    """The rounds of :func:`polish` at one proximal ``weight`` (:data:`PROXIMAL_WEIGHTS`): the
+    polished forces, or None where they are not accepted (``before``: the natural residual of
+    ``forces``, which an accepted answer must lower)."""
+    state, direction = _initial_states(problem, layout, forces, threshold)
     previous_changes = state.size + 1
     for _ in range(max_rounds):
-        candidate = _solve_on(problem, layout, forces, state, direction)
+        candidate = _solve_on(problem, layout, forces, state, direction, weight)
         if layout.t_rows.shape[1] > 1 and np.any(state == SLIDE):
             candidate, direction = _slide_newton(problem, layout, candidate, state, direction)
         try:
             new_state, direction, changed = _corrected(problem, layout, candidate, state, direction)
         except _Misaligned:
-            return forces, False
+            return None
         if not changed:
-            accepted = problem.natural_residual(candidate) < before
-            return (candidate, True) if accepted else (forces, False)
+            return candidate if problem.natural_residual(candidate) < before else None
         changes = int(np.count_nonzero(new_state != state))
         if changes >= previous_changes:              # the active set is not settling: give up
-            return forces, False
+            return None
         state, previous_changes = new_state, changes
-    return forces, False
+    return None
 
 
 def polished_status(status: str, problem: ConicProblem, forces: np.ndarray, accepted: bool,
                     tol: float) -> str:
-    """An interior point's status after :func:`polish` of its ``forces`` (``accepted``: whether the
-    polish was): ``inaccurate`` becomes ``converged`` where the polish was accepted and the
-    polished forces' natural residual per row (:func:`~lubcontact.solvers.result.residual_per_row`)
-    is at most ``tol``, the interior point's own tolerance; any other status stays.
+    """An interior point's status after :func:`polish`: ``converged`` where it stopped short of
+    ``tol`` but the polish of its answer was accepted and meets ``tol``; else ``status``.
 
-    ``inaccurate`` is an interior point that stopped short of ``tol`` (Clarabel's
-    ``AlmostSolved``). An accepted polish has found the active set on which every force lies in
-    its cone and every open contact's velocity in the dual cone. Its residual, measured
-    independently, then says whether the answer meets ``tol``. On a 10 000-grain gluey step's
+    Parameters
+    ----------
+    status : str
+        The interior point's own status. ``inaccurate`` (Clarabel's ``AlmostSolved``) and
+        ``max_iter`` (out of iterations) are the ones that can change.
+    problem : ConicProblem
+        The normalised problem that was polished.
+    forces : ndarray, shape (n_rows,)
+        The forces :func:`polish` returned.
+    accepted : bool
+        Whether the polish was accepted.
+    tol : float
+        The interior point's tolerance, which the polished forces' natural residual per row
+        (its rms over the rows, :func:`~lubcontact.solvers.result.residual_per_row`) must meet.
+
+    Returns
+    -------
+    str
+        ``converged`` or ``status``.
+
+    An accepted polish has found the active set on which every force lies in its cone and every
+    open contact's velocity in the dual cone; its residual, measured independently of the
+    interior point, then says whether the answer meets ``tol``. On a 10 000-grain gluey step's
     reference, Clarabel's fixed point on s stopped after four outer iterations because an inner
     solve ended ``inaccurate``, though its polished answer's residual was 1.7e-12 per row
-    (docs/records/benchmarks.md, "a reference to trust at 10 000 grains")."""
-    if status == INACCURATE and accepted and \
+    (docs/records/benchmarks.md, "a reference to trust at 10 000 grains").
+    """
+    if status in (INACCURATE, MAX_ITER) and accepted and \
             residual_per_row(problem.natural_residual(forces), forces.size) <= tol:
         return CONVERGED
     return status
@@ -235,10 +271,10 @@ def _active_basis(problem: ConicProblem, layout: _Layout, forces: np.ndarray, st
 
 
 def _solve_on(problem: ConicProblem, layout: _Layout, forces: np.ndarray, state: np.ndarray,
-              direction: np.ndarray, refinements: int = 4) -> np.ndarray:
+              direction: np.ndarray, weight: float, refinements: int = 4) -> np.ndarray:
     """Forces of the active set that make every active condition hold (module docstring).
 
-    ``G = (L P)^T (L P)`` plus ``delta =`` :data:`PROXIMAL_WEIGHT` ``max diag G`` is
+    ``G = (L P)^T (L P)`` plus ``delta = weight max diag G`` (:data:`PROXIMAL_WEIGHTS`) is
     factorised once (LDL^T, qdldl), and ``y <- y - (G + delta I)^-1 P^T g(P y)`` is repeated
     (proximal-point refinement: ``delta`` leaves no trace where ``G``'s eigenvalues are well
     above it, and components of ``y`` in and near the null space of ``G``, which do not change
@@ -250,7 +286,7 @@ def _solve_on(problem: ConicProblem, layout: _Layout, forces: np.ndarray, state:
     if basis.shape[1] == 0:
         return np.zeros_like(forces)
     gram = sp.triu(_active_gram(problem, basis), format="csc")
-    delta = PROXIMAL_WEIGHT * max(float(gram.diagonal().max()), 1e-300)
+    delta = weight * max(float(gram.diagonal().max()), 1e-300)
     solver = qdldl.Solver(sp.csc_matrix(gram + delta * sp.identity(gram.shape[0], format="csc")),
                           upper=True)
     residual = basis.T @ problem.gradient(basis @ coordinates)

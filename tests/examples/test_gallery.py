@@ -66,7 +66,11 @@ def test_hard_case_statuses_are_honest(tmp_path):
     assert checks["cond"] == pytest.approx(4e6, rel=1e-3)
     assert checks["pgd_status"] == "max_iter" and checks["pgd_error"] > 1e-3
     assert checks["worst_converged_error"] < 1e-9
-    assert {"max_iter", "inaccurate"} <= set(checks["tight_statuses"])
+    assert "max_iter" in checks["tight_statuses"]
+    # Clarabel cut at 4 iterations says so (raw), and its polished answer meets tol
+    assert checks["tight_interior_points"] == [("converged", "MaxIterations"),
+                                               ("converged", "optimal_inaccurate"),
+                                               ("converged", "user_limit")]
 
 
 def test_flow_animation_writes_a_gif(tmp_path):
