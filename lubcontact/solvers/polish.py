@@ -77,7 +77,7 @@ none at 1e-12, on two at 1e-8 and on all six at 1e-6, with residuals of 1.8e-14 
 
 At 1e-6 alone, a badly conditioned problem loses its polish: on ``mass_ratio_1e6_sandwich``
 (``W``'s eigenvalues 0.25 and 1e6, the small one 5e-7 of the diagonal, below the weight) each
-refinement removes a fifth of the error along it, and rounding in the stiff direction stops the
+refinement removes a third of the error along it, and rounding in the stiff direction stops the
 refinement after one step. Hence 1e-12 first (docs/records/benchmarks.md, "a reference to trust
 at 10 000 grains")."""
 
