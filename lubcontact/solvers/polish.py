@@ -20,7 +20,8 @@ The forces on the active set are ``lam = P y`` (``P`` maps the free force
 components of the active contacts to the rows), and the optimality
 condition on that set is ``P^T g(P y) = 0``, i.e. (``W = L^T L``)
 ``(L P)^T (L P) y = -P^T b``: a sparse symmetric system, solved by one
-LDL^T factorisation and a few refinement steps (:func:`_solve_on`). The
+LDL^T factorisation (per proximal weight tried) and a few refinement steps
+(:func:`_solve_on`). The
 velocities are unique even where ``L P`` is rank-deficient (redundant
 contacts); the forces are then the solution closest to the input's.
 
@@ -144,20 +145,23 @@ def polish(problem: ConicProblem, forces: np.ndarray, threshold: float = 1e-7,
     if forces.size == 0 or not cones.is_convex or not np.all(np.isfinite(forces)):
         return forces, False
     layout = _Layout.of(cones)
+    start = _initial_states(problem, layout, forces, threshold)
     before = problem.natural_residual(forces)
     for weight in PROXIMAL_WEIGHTS:
-        polished = _rounds(problem, layout, forces, threshold, max_rounds, weight, before)
+        polished = _rounds(problem, layout, forces, start, max_rounds, weight, before)
         if polished is not None:
             return polished, True
     return forces, False
 
 
-def _rounds(problem: ConicProblem, layout: _Layout, forces: np.ndarray, threshold: float,
-            max_rounds: int, weight: float, before: float) -> np.ndarray | None:
-    """The rounds of :func:`polish` at one proximal ``weight`` (:data:`PROXIMAL_WEIGHTS`): the
+def _rounds(problem: ConicProblem, layout: _Layout, forces: np.ndarray,
+            start: tuple[np.ndarray, np.ndarray], max_rounds: int, weight: float,
+            before: float) -> np.ndarray | None:
+    """The rounds of :func:`polish` at one proximal ``weight`` (:data:`PROXIMAL_WEIGHTS`) from
+    the states and sliding directions ``start`` read from ``forces`` (not modified): the
     polished forces, or None where they are not accepted (``before``: the natural residual of
     ``forces``, which an accepted answer must lower)."""
-    state, direction = _initial_states(problem, layout, forces, threshold)
+    state, direction = start
     previous_changes = state.size + 1
     for _ in range(max_rounds):
         candidate = _solve_on(problem, layout, forces, state, direction, weight)

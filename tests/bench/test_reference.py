@@ -142,6 +142,7 @@ def test_a_badly_conditioned_problem_is_polished_to_rounding(hard_cases, method,
     scale = max(float(np.abs(problem.free_velocity).max()), 1.0)
     assert np.abs(result.velocities - exact).max() <= 1e-11 * scale
 
+
 def test_the_polish_keeps_dependent_contacts_forces_along_their_null_space():
     """A 17-row local problem cut from a 10 000-grain gluey step's reference (the contacts one
     step from two pairs of sticking contacts whose rows are dependent in ``W``'s pattern, the
