@@ -144,6 +144,14 @@ class Cones:
         counts = np.bincount(self.kinds, minlength=len(ConeKind))
         return frozenset(_KINDS[k] for k in np.flatnonzero(counts).tolist())
 
+    def same_as(self, other: Cones) -> bool:
+        """Whether ``other`` holds the same force sets: the same kinds, coefficients, tangential
+        rows and tangent dimension, bit for bit (what the cached properties are derived from)."""
+        return self.tangent_dim == other.tangent_dim and all(
+            mine.dtype == theirs.dtype and mine.shape == theirs.shape and mine.tobytes() == theirs.tobytes()
+            for mine, theirs in ((self.kinds, other.kinds), (self.mu, other.mu),
+                                 (self.tangential, other.tangential)))
+
     def mask(self, kind: ConeKind) -> np.ndarray:
         """The contacts of ``kind``, shape (nc,) of bool.
 

@@ -194,3 +194,17 @@ def test_union_natural_residual_is_measured_on_the_piece_of_the_force():
     pulled = np.array([-1.0, 0.0])                     # pulled piece: lam_t = 0, any slip
     assert cones.natural_residual(pulled, np.array([0.0, 2.0])) < 1e-12
     assert cones.natural_residual(pulled, np.array([1.0, 0.0])) == pytest.approx(1.0)
+
+
+def test_same_as_compares_every_field_bit_for_bit():
+    def cones(kinds=(ConeKind.COULOMB, ConeKind.NONNEG), mu=(0.3, 0.0), tangential=(0,), dim=1):
+        return Cones(kinds=np.array(kinds, dtype=np.int8), mu=np.array(mu),
+                     tangential=np.array(tangential, dtype=int), tangent_dim=dim)
+
+    base = cones()
+    assert base.same_as(cones()) and cones().same_as(base)
+    assert not base.same_as(cones(kinds=(ConeKind.COULOMB, ConeKind.NONPOS)))
+    assert not base.same_as(cones(mu=(0.3, 1e-300)))
+    assert not base.same_as(cones(tangential=(1,)))
+    assert not base.same_as(cones(dim=2))
+    assert not base.same_as(cones(kinds=(ConeKind.COULOMB,), mu=(0.3,)))      # fewer contacts

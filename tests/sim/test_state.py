@@ -80,3 +80,27 @@ def test_a_failed_verification_warns_and_is_recorded():
         sim.step()
     step, report = sim.trajectory.verifications[-1]
     assert step == 15 and not report.passed and report.worst
+
+
+def test_a_step_whose_cones_are_unchanged_reuses_the_last_step_s_and_moves_as_before(monkeypatch):
+    """``Simulation._step_cones``: on a pile at rest the step's cones are the last step's object
+    (what a solve derives from them is not built again), a new object where the contacts
+    change; the trajectory is the same to the bit as with a new object every step."""
+    def run(reuse):
+        if not reuse:
+            monkeypatch.setattr(Simulation, "_step_cones", lambda self, cones: cones)
+        sim = Simulation(scenes.settling_pile(10, seed=1), Coulomb(0.3), 0.02, solver="newton-ac",
+                         tol=1e-8, keep_trajectory=False)
+        reports = [sim.step() for _ in range(60)]
+        monkeypatch.undo()
+        return sim, [report.problem.cones for report in reports]
+
+    sim, cones = run(reuse=True)
+    reused = [now is before for before, now in zip(cones, cones[1:])]
+    changed = [not now.same_as(before) for before, now in zip(cones, cones[1:])]
+    assert sum(reused) >= 30 and any(changed)
+    assert all(was_reused != was_changed for was_reused, was_changed in zip(reused, changed))
+    fresh, fresh_cones = run(reuse=False)
+    assert not any(now is before for before, now in zip(fresh_cones, fresh_cones[1:]))
+    a, b = sim.scene.grains, fresh.scene.grains
+    assert np.array_equal(a.positions, b.positions) and np.array_equal(a.velocities, b.velocities)
