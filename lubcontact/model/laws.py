@@ -68,7 +68,11 @@ class Law:
     has_friction = False
 
     def cones(self, contacts: Contacts, gamma: np.ndarray) -> Cones:
-        """Force sets for the contacts given their current gamma."""
+        """Force sets for the contacts given their current gamma.
+
+        The arrays of the returned :class:`~lubcontact.problem.cones.Cones` are new ones, never
+        written afterwards: a :class:`~lubcontact.sim.simulation.Simulation` keeps the last
+        step's cones, and what it derived from them, where the next step's hold the same sets."""
         return Cones.frictionless(np.full(contacts.count, ConeKind.NONNEG), contacts.dim - 1)
 
     def gamma_min(self, contacts: Contacts) -> np.ndarray:

@@ -122,7 +122,7 @@ class Cones:
         return cls(kinds=kinds, mu=np.zeros(len(kinds)), tangential=np.zeros(0, dtype=int),
                    tangent_dim=tangent_dim)
 
-    @cached_property                 # (read many times a solve; the arrays are never replaced)
+    @cached_property     # (read many times a solve; the arrays are never replaced nor written)
     def count(self) -> int:
         return self.kinds.shape[0]
 
@@ -145,8 +145,11 @@ class Cones:
         return frozenset(_KINDS[k] for k in np.flatnonzero(counts).tolist())
 
     def same_as(self, other: Cones) -> bool:
-        """Whether ``other`` holds the same force sets: the same kinds, coefficients, tangential
-        rows and tangent dimension, bit for bit (what the cached properties are derived from)."""
+        """Whether ``other`` holds the same force sets, bit for bit.
+
+        The same kinds, coefficients, tangential rows (of the same dtype and shape) and tangent
+        dimension: what the cached properties are derived from. Conservative: ``-0.0`` and
+        ``0.0`` differ, as do the same rows in integers of another width."""
         return self.tangent_dim == other.tangent_dim and all(
             mine.dtype == theirs.dtype and mine.shape == theirs.shape and mine.tobytes() == theirs.tobytes()
             for mine, theirs in ((self.kinds, other.kinds), (self.mu, other.mu),

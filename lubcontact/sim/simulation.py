@@ -216,10 +216,15 @@ class Simulation:
         """``cones``, or the last step's object where it holds the same force sets
         (:meth:`Cones.same_as`: a pile at rest, a small system between contact changes), so that
         what a solve derives from them (the projection's index arrays, the kinds present) is
-        reused, not built again: 0.87-0.90 of an exact-Coulomb solve's time on settling piles of
-        4 to 20 grains (docs/records/benchmarks.md, "small solves: the step's cones reused")."""
-        if self._cones is not None and cones.same_as(self._cones):
-            return self._cones
+        reused, not built again: 0.88-0.93 of an exact-Coulomb solve's time on settling piles of
+        4 to 20 grains, 0.97-0.98 at 40 (docs/records/benchmarks.md, "small solves: the step's
+        cones reused"). Not where the two share an array (a law that wrote into the last
+        step's: the derived properties would be stale)."""
+        last = self._cones
+        if last is not None and cones.same_as(last) and not any(
+                np.may_share_memory(mine, theirs) for mine, theirs in
+                ((cones.kinds, last.kinds), (cones.mu, last.mu), (cones.tangential, last.tangential))):
+            return last
         self._cones = cones
         return cones
 

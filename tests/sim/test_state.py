@@ -4,6 +4,7 @@ import pytest
 
 from lubcontact import (
     Coulomb,
+    GlueyCoulomb,
     GlueyLubrication,
     Grains,
     Inelastic,
@@ -13,6 +14,7 @@ from lubcontact import (
     SolverWarning,
     scenes,
 )
+from lubcontact.problem.cones import ConeKind, Cones
 
 
 def _simulation():
@@ -83,24 +85,55 @@ def test_a_failed_verification_warns_and_is_recorded():
 
 
 def test_a_step_whose_cones_are_unchanged_reuses_the_last_step_s_and_moves_as_before(monkeypatch):
-    """``Simulation._step_cones``: on a pile at rest the step's cones are the last step's object
-    (what a solve derives from them is not built again), a new object where the contacts
-    change; the trajectory is the same to the bit as with a new object every step."""
+    """``Simulation._step_cones``: on a settling gluey + frictional pile the step's cones are
+    the last step's object where they hold the same sets (what a solve derives from them is not
+    built again), a new object where they do not, some of those with as many contacts (glue
+    states that changed: a test of the sets, not of their count); the trajectory is the same to
+    the bit as with a new object every step."""
     def run(reuse):
         if not reuse:
             monkeypatch.setattr(Simulation, "_step_cones", lambda self, cones: cones)
-        sim = Simulation(scenes.settling_pile(10, seed=1), Coulomb(0.3), 0.02, solver="newton-ac",
-                         tol=1e-8, keep_trajectory=False)
-        reports = [sim.step() for _ in range(60)]
+        sim = Simulation(scenes.settling_pile(10, seed=1), GlueyCoulomb(0.3, gamma_min=-0.05), 0.02,
+                         solver="newton-ac", tol=1e-8, keep_trajectory=False)
+        reports = [sim.step() for _ in range(80)]
         monkeypatch.undo()
         return sim, [report.problem.cones for report in reports]
 
     sim, cones = run(reuse=True)
-    reused = [now is before for before, now in zip(cones, cones[1:])]
-    changed = [not now.same_as(before) for before, now in zip(cones, cones[1:])]
-    assert sum(reused) >= 30 and any(changed)
-    assert all(was_reused != was_changed for was_reused, was_changed in zip(reused, changed))
+    pairs = list(zip(cones, cones[1:]))
+    reused = [now is before for before, now in pairs]
+    changed = [not now.same_as(before) for before, now in pairs]
+    assert sum(reused) >= 40 and all(was_reused != was_changed
+                                     for was_reused, was_changed in zip(reused, changed))
+    assert any(now.count == before.count and not now.same_as(before) for before, now in pairs)
     fresh, fresh_cones = run(reuse=False)
     assert not any(now is before for before, now in zip(fresh_cones, fresh_cones[1:]))
     a, b = sim.scene.grains, fresh.scene.grains
     assert np.array_equal(a.positions, b.positions) and np.array_equal(a.velocities, b.velocities)
+
+
+def test_a_law_that_writes_into_its_last_arrays_gets_new_cones():
+    """A law that refills one coefficient array in place each step (against ``Law.cones``'s
+    rule) is not handed the last step's cones, whose derived projection would hold the earlier
+    coefficients: each step's cones with contacts are new, and the projection reads this
+    step's."""
+    class Refilled(Coulomb):
+        def __init__(self):
+            super().__init__(0.3)
+            self.buffer = np.zeros(0)
+            self.steps = 0
+
+        def cones(self, contacts, gamma):
+            if self.buffer.size != contacts.count:
+                self.buffer = np.zeros(contacts.count)
+            self.steps += 1
+            self.buffer[:] = 0.05 if self.steps % 2 else 0.8
+            return Cones(kinds=np.full(contacts.count, ConeKind.COULOMB, dtype=np.int8),
+                         mu=self.buffer, tangential=np.arange(contacts.count), tangent_dim=1)
+
+    sim = Simulation(scenes.settling_pile(6, seed=1), Refilled(), 0.02, solver="newton-ac",
+                     tol=1e-8, keep_trajectory=False)
+    cones = [sim.step().problem.cones for _ in range(20)]
+    assert not any(now is before for before, now in zip(cones, cones[1:]) if now.count)
+    last = cones[-1]
+    assert last.count and np.array_equal(last.projector.friction_mu, last.mu)
