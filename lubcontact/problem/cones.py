@@ -152,8 +152,12 @@ class Cones:
         ``0.0`` differ, as do the same rows in integers of another width."""
         return self.tangent_dim == other.tangent_dim and all(
             mine.dtype == theirs.dtype and mine.shape == theirs.shape and mine.tobytes() == theirs.tobytes()
-            for mine, theirs in ((self.kinds, other.kinds), (self.mu, other.mu),
-                                 (self.tangential, other.tangential)))
+            for mine, theirs in zip(self.arrays, other.arrays))
+
+    @property
+    def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(kinds, mu, tangential)``: the arrays the force sets are given by."""
+        return self.kinds, self.mu, self.tangential
 
     def mask(self, kind: ConeKind) -> np.ndarray:
         """The contacts of ``kind``, shape (nc,) of bool.

@@ -222,8 +222,7 @@ class Simulation:
         step's: the derived properties would be stale)."""
         last = self._cones
         if last is not None and cones.same_as(last) and not any(
-                np.may_share_memory(mine, theirs) for mine, theirs in
-                ((cones.kinds, last.kinds), (cones.mu, last.mu), (cones.tangential, last.tangential))):
+                np.may_share_memory(mine, theirs) for mine, theirs in zip(cones.arrays, last.arrays)):
             return last
         self._cones = cones
         return cones
