@@ -170,19 +170,6 @@ developed flows (exact Coulomb, tol 1e-6), 1e-3 against 3e-3 against 1e-2: gluey
 creeping 300-grain bed 234, 222, and with 1e-2 a stall. Not on smaller problems, where the warm
 starts of small piles near rest took 3-14 % more iterations with either
 (docs/records/benchmarks.md, "a firmer first weight on flows")."""
-WARM_FLOW_SCALE = 0.5
-"""The fraction of the warm start (the previous step's forces) from which the first strategy
-starts on a gluey flow's step of more than :data:`COMPILED_LIMIT` rows (``AlartCurnier.flow_step``
-with UNION contacts, the sparse lane; the later
-strategies start from the whole warm start), where that lowers the FCLIB error of the start
-(:func:`_scaled_warm_start`). On
-developed gluey 10 000-grain flows the previous step's forces had an FCLIB error 2.5
-to 7 times that of zero forces, and from them the first strategy took 40-120 Newton iterations
-on one step in ten (one step in 180 went on to Gauss-Seidel) where it took 13-24 from zero
-forces; from zero the usual step took 14-16 against 11. Newton iterations summed over 60
-captured consecutive steps of each of three beds (exact Coulomb, tol 1e-8; the warm starts of
-a run at 1e-8), fraction 1 against 0.7, 0.5 and 0.3: 3 446, 1 126, 1 087, 1 021; 982, 965, 908,
-1 217; 1 016, 915, 957, 993 (docs/records/benchmarks.md, "half the warm start on flows")."""
 WARM_DENSE_WEIGHT = 1e-4
 """The first starting weight, in place of ``STRATEGIES[0]``, from a warm start on a 2D problem of
 at most ``DENSE_LIMIT`` rows (a small system's step, near the previous one's
@@ -1131,12 +1118,11 @@ def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = 1
     setup_time = time.perf_counter() - start
     joint_start = _JointStart(problem, function, unshifted, tol, joint) \
         if joint > 0 and problem.cones.is_convex and joint_applies(problem.cones) else None
-    joined = None
     if joint_start is not None and not function.dense:
         joined = joint_start(forces)
         forces = forces if joined is None else joined
     phase = _strategies(function, unshifted, forces, tol, max_iter,
-                        rescue=joint_start if function.dense else None, previous=joined is None)
+                        rescue=joint_start if function.dense else None)
     joint_iterations, joined_start = (0, False) if joint_start is None else \
         (joint_start.iterations, joint_start.taken)
     forces, iterations, history = phase.forces, phase.iterations + joint_iterations, phase.history
@@ -1225,14 +1211,12 @@ def fallback_chain(cones: Cones, fallback: str | None) -> tuple[str, ...]:
 
 
 def _strategies(function: AlartCurnier, unshifted: ConicProblem, forces: np.ndarray,
-                tol: float, max_iter: int, rescue: _JointStart | None = None,
-                previous: bool = True) -> _Phase:
+                tol: float, max_iter: int, rescue: _JointStart | None = None) -> _Phase:
     """:func:`_proximal_newton` with each ``sigma`` of :data:`STRATEGIES` in turn, each from
     ``forces`` (a strategy's stalled iterate is a worse start than the warm start, measured),
     the first also from zero forces when ``forces`` is not zero (from a warm start on a flow's
-    step, ``AlartCurnier.flow_step``, the first is :data:`WARM_FLOW_WEIGHT` instead, from
-    :func:`_scaled_warm_start` where ``forces`` are the ``previous`` step's, not the joint
-    phase's; on a small 2D problem :data:`WARM_DENSE_WEIGHT`, which ``STRATEGIES[0]`` then
+    step, ``AlartCurnier.flow_step``, the first from ``forces`` is :data:`WARM_FLOW_WEIGHT`
+    instead, on a small 2D problem :data:`WARM_DENSE_WEIGHT`, which ``STRATEGIES[0]`` then
     replaces among the later ones; from zero it stays ``STRATEGIES[0]``), until one converges,
     ``max_iter`` Newton iterations are spent or (off the compiled lane) the best error is within
     :data:`STRATEGY_GAP` of ``tol``; the best phase is returned (the plain try's, if best, as
@@ -1254,8 +1238,7 @@ def _strategies(function: AlartCurnier, unshifted: ConicProblem, forces: np.ndar
     warm = bool(forces.any())
     plain_try = PLAIN_TRY > 0 and max_iter > 2 * PLAIN_TRY and warm and function.small \
         and function.planar and not function.cone_n.size and not function.singular_at(forces)
-    scaled = _scaled_warm_start(function, unshifted, forces) if previous else None
-    starts = ([(0.0, forces, True)] if plain_try else []) + _starts(function, forces, first_start=scaled)
+    starts = ([(0.0, forces, True)] if plain_try else []) + _starts(function, forces)
     rescue_at = len(starts) - len(STRATEGIES) + 1       # before the other weights
     label = "warm" if warm else "cold"
     index = 0
@@ -1267,7 +1250,7 @@ def _strategies(function: AlartCurnier, unshifted: ConicProblem, forces: np.ndar
                                  finish=sigma > 0 or is_plain_try)
         if is_plain_try and phase.status != CONVERGED:
             phase.status = STALLED                  # its cap, not the solve's max_iter
-        tried.append((sigma, label if start.any() else "cold"))
+        tried.append((sigma, label if start is forces else "cold"))
         iterations += phase.iterations
         gradient_steps += phase.gradient_steps
         proximal_steps += phase.proximal_steps
@@ -1287,30 +1270,17 @@ def _strategies(function: AlartCurnier, unshifted: ConicProblem, forces: np.ndar
                   proximal_steps=proximal_steps, strategies=tried)
 
 
-def _scaled_warm_start(function: AlartCurnier, unshifted: ConicProblem, forces: np.ndarray
-                       ) -> np.ndarray | None:
-    """:data:`WARM_FLOW_SCALE` times ``forces`` (the previous step's) on a gluey flow's step
-    (``AlartCurnier.flow_step`` with UNION contacts) of more than ``COMPILED_LIMIT`` rows where
-    their FCLIB error is below that of ``forces``; else None."""
-    if not (function.flow_step and not function.convex and not function.compiled and forces.any()):
-        return None
-    scaled = WARM_FLOW_SCALE * forces
-    return scaled if function.coulomb_error(unshifted, scaled) < function.coulomb_error(unshifted, forces) \
-        else None
-
-
-def _starts(function: AlartCurnier, forces: np.ndarray, cold: bool = True,
-            first_start: np.ndarray | None = None) -> list[tuple[float, np.ndarray, bool]]:
+def _starts(function: AlartCurnier, forces: np.ndarray, cold: bool = True
+            ) -> list[tuple[float, np.ndarray, bool]]:
     """The strategies of :func:`_strategies` from ``forces``, in turn: ``(sigma, start, False)``
-    (the plain try aside); without the first weight from zero forces unless ``cold``; the first
-    from ``first_start`` where given (:func:`_scaled_warm_start`)."""
+    (the plain try aside); without the first weight from zero forces unless ``cold``."""
     warm = bool(forces.any())
     first = STRATEGIES[0]
     if warm and function.flow_step:
         first = WARM_FLOW_WEIGHT
     elif warm and function.planar and function.small:
         first = WARM_DENSE_WEIGHT
-    return [(first, forces if first_start is None else first_start, False)] \
+    return [(first, forces, False)] \
         + ([(STRATEGIES[0], np.zeros_like(forces), False)] if warm and cold else []) \
         + [(STRATEGIES[0] if sigma == first else sigma, forces, False) for sigma in STRATEGIES[1:]]
 

@@ -184,48 +184,6 @@ def test_a_creeping_bed_converges_by_the_proximal_loop_without_fallback():
     assert scaled_coulomb_error(problem, result.forces) <= 1e-6
 
 
-def test_a_gluey_flow_step_starts_from_half_the_warm_start_where_that_is_the_better_start(monkeypatch):
-    """On a gluey flow's step of the sparse lane the first strategy starts from
-    ``WARM_FLOW_SCALE`` times the previous step's forces where their FCLIB error is the lower
-    (the stored 2 000-grain gluey step: 1.0e-2 against 1.75e-2), and converges from there. It
-    starts from the whole warm start on the creeping dry bed (convex cones; half is the worse
-    start there, 8.9e-3 against 7.5e-3) and from the joint phase's forces (not a warm start)."""
-    starts = []
-    proximal = newton._proximal_newton
-
-    def spied(function, unshifted, forces, *args, **kwargs):
-        starts.append(forces)
-        return proximal(function, unshifted, forces, *args, **kwargs)
-
-    monkeypatch.setattr(newton, "_proximal_newton", spied)
-    settings = SolveSettings(method="newton-ac", tol=1e-6, exact_coulomb=True, options={"fallback": None})
-    errors = []
-    for name, fraction in (("gluey-2000-step.npz", newton.WARM_FLOW_SCALE), ("creeping-bed-step.npz", 1.0)):
-        with np.load(Path(__file__).parent / "data" / name) as data:
-            problem = StepProblem.from_arrays(data)
-            warm_start, warm_shift = data["warm_start"], data["warm_shift"]
-        starts.clear()
-        result = settings.solve(problem, warm_start, warm_shift)
-        assert result.status == CONVERGED and scaled_coulomb_error(problem, result.forces) <= 1e-6
-        scaled = problem.with_shift(np.zeros(problem.n_contacts)).normalized()
-        whole = warm_start / scaled.scaling.force
-        np.testing.assert_array_equal(starts[0], fraction * whole)
-        function = AlartCurnier(scaled)
-        errors.append((function.coulomb_error(scaled, whole), function.coulomb_error(scaled, 0.5 * whole)))
-    (gluey_whole, gluey_half), (creeping_whole, creeping_half) = errors
-    assert newton.WARM_FLOW_SCALE == 0.5
-    assert (gluey_half, gluey_whole) == pytest.approx((1.01e-2, 1.75e-2), rel=0.01)
-    assert (creeping_half, creeping_whole) == pytest.approx((8.85e-3, 7.48e-3), rel=0.01)
-    with np.load(Path(__file__).parent / "data" / "gluey-2000-step.npz") as data:
-        problem = StepProblem.from_arrays(data)
-        warm_start = data["warm_start"]
-    scaled = problem.with_shift(np.zeros(problem.n_contacts)).normalized()
-    forces = warm_start / scaled.scaling.force
-    starts.clear()
-    newton._strategies(AlartCurnier(scaled), scaled, forces, 1e-6, 3, previous=False)
-    np.testing.assert_array_equal(starts[0], forces)
-
-
 def test_a_creeping_bed_from_a_capped_joint_phase_converges_in_fewer_newton_iterations():
     """The joint phase ends at its iteration cap on the creeping bed's step, nearer Coulomb's law
     than the warm start: Newton starts from it (75 iterations against 188 from the warm start;
@@ -272,7 +230,6 @@ def test_on_a_gluey_flow_step_the_re_centred_weight_follows_the_error(monkeypatc
     14 at the first weight throughout (``UNION_RECENTRE_FOLLOWS`` off), to the same tol; without
     the line search's corrected full steps (``CORRECTED_SWEEPS`` 0), which take fewer
     iterations still (the test of corrected full steps below)."""
-    monkeypatch.setattr(newton, "WARM_FLOW_SCALE", 1.0)    # the path from the whole warm start
     problem, warm_start, warm_shift = _recentred_gluey_step()
     assert not problem.cones.is_convex
     settings = SolveSettings(method="newton-ac", tol=1e-6, exact_coulomb=True,
@@ -308,7 +265,6 @@ def test_local_sweeps_take_a_flow_step_to_tol_in_fewer_newton_iterations(monkeyp
     reaches tol in 6 Newton iterations against 13 without them (``LOCAL_SWEEPS`` 0), or on a
     problem under ``LOCAL_MIN_ROWS`` rows (none are swept there). The line search's corrected
     full steps (``CORRECTED_SWEEPS``, which sweep too) are left out here: the next tests."""
-    monkeypatch.setattr(newton, "WARM_FLOW_SCALE", 1.0)    # the path from the whole warm start
     with np.load(Path(__file__).parent / "data" / "gluey-2000-step.npz") as data:
         problem = StepProblem.from_arrays(data)
         warm_start, warm_shift = data["warm_start"], data["warm_shift"]
@@ -341,7 +297,6 @@ def test_a_full_step_corrected_on_the_rows_where_it_fails_is_taken(monkeypatch):
     is below the full step's bound, it is the full step but on the swept rows (and their
     contacts' other rows), whose residual held at least ``CORRECTED_SHARE`` of the full step's;
     without the correction the same search cuts the step."""
-    monkeypatch.setattr(newton, "WARM_FLOW_SCALE", 1.0)    # the path from the whole warm start
     from lubcontact.solvers import kernels
 
     problem, warm_start, warm_shift = _recentred_gluey_step()
@@ -389,7 +344,6 @@ def test_corrected_full_steps_take_a_flow_step_to_tol_in_fewer_newton_iterations
     """On the 2 000-grain gluey step the corrected full steps take 8 Newton iterations to tol,
     against 10 (tol 1e-6) and 11 (1e-7) without them (``CORRECTED_SWEEPS`` 0), to an FCLIB
     error below tol either way."""
-    monkeypatch.setattr(newton, "WARM_FLOW_SCALE", 1.0)    # the path from the whole warm start
     problem, warm_start, warm_shift = _recentred_gluey_step()
     settings = SolveSettings(method="newton-ac", tol=tol, exact_coulomb=True,
                              options={"fallback": None})
@@ -449,7 +403,6 @@ def test_a_phase_started_where_the_last_ended_takes_its_velocity_and_error(monke
     gluey flow's step every phase but the first is handed them (eight re-centred ones of one
     iteration, then a subproblem of at most UNION_INNER_CAP iterations, a gluey step's), and the
     step takes the same 10 Newton iterations."""
-    monkeypatch.setattr(newton, "WARM_FLOW_SCALE", 1.0)    # the path from the whole warm start
     with np.load(Path(__file__).parents[1] / "flow" / "data" / "gluey-flow-step.npz") as data:
         problem = StepProblem.from_arrays(data)
         warm_start, warm_shift = data["warm_start"], data["warm_shift"]
@@ -1259,7 +1212,6 @@ def test_the_lane_carries_out_a_flow_steps_rules_without_choosing_them(monkeypat
     its inner cap), so both take the same Newton iterations and strategies and reach tol. When
     the compiled lane ended at DENSE_LIMIT rows, a rule of a flow's step was a rule of the sparse
     lane, and the compiled lane above 300 rows ended a flow step at max_iter (one in 180)."""
-    monkeypatch.setattr(newton, "WARM_FLOW_SCALE", 1.0)    # the path from the whole warm start
     with np.load(Path(__file__).parents[1] / "flow" / "data" / "gluey-flow-step.npz") as data:
         problem = StepProblem.from_arrays(data)
         guess = data["warm_start"]
@@ -1323,7 +1275,6 @@ def test_newton_finishes_an_early_gauss_seidel_round_on_a_gluey_step(monkeypatch
     kept at the first weight (``UNION_RECENTRE_FOLLOWS`` off), as when the step was stored: with
     it following the error the strategies stall at another iterate, from which the rounds run to
     the cap (the step converges either way)."""
-    monkeypatch.setattr(newton, "WARM_FLOW_SCALE", 1.0)    # the path from the whole warm start
     monkeypatch.setattr(newton, "UNION_RECENTRE_FOLLOWS", False)
     with np.load(Path(__file__).parent / "data" / "gluey-250-step.npz") as data:
         problem = StepProblem.from_arrays(data)
