@@ -222,7 +222,11 @@ and 1.1 s) took 80-1 100 ms, the second strategy converging on most of them in 2
 flows' 100 steps took 0.57 (gluey, 90 grains), 0.71 (dry, 90), 0.76 (gluey, 120), 0.94 and 1.0
 (gluey and dry, 150) of the time; on one step every strategy stalled before Gauss-Seidel
 (2.2 times the time) (docs/records/benchmarks.md, "the compiled lane to 700 rows, and every
-strategy before the fallbacks there")."""
+strategy before the fallbacks there"). Nor, for the first weight from zero forces, on a gluey
+flow's step (UNION contacts): of 180 captured 10 000-grain gluey steps solved at tol 1e-6, 1e-7
+and 1e-8, the first strategy stalled within the gap on two steps (three solves), where
+Gauss-Seidel's rounds took 1.7-3.8 s and the first weight from zero forces converged in
+0.7-1.35 s (docs/records/benchmarks.md, "zero forces before the fallbacks on gluey flows")."""
 SIGMA_MIN = 1e-10
 """Floor of the proximal weight, in units of the median diagonal of ``W``."""
 SIGMA_MAX = 1e10
@@ -1219,7 +1223,8 @@ def _strategies(function: AlartCurnier, unshifted: ConicProblem, forces: np.ndar
     instead, on a small 2D problem :data:`WARM_DENSE_WEIGHT`, which ``STRATEGIES[0]`` then
     replaces among the later ones; from zero it stays ``STRATEGIES[0]``), until one converges,
     ``max_iter`` Newton iterations are spent or (off the compiled lane) the best error is within
-    :data:`STRATEGY_GAP` of ``tol``; the best phase is returned (the plain try's, if best, as
+    :data:`STRATEGY_GAP` of ``tol`` (on a gluey flow's step, once the first weight from zero
+    forces has been tried); the best phase is returned (the plain try's, if best, as
     stalled where it stopped short of ``tol``; its error counts in the test against
     :data:`STRATEGY_GAP`).
 
@@ -1239,6 +1244,7 @@ def _strategies(function: AlartCurnier, unshifted: ConicProblem, forces: np.ndar
     plain_try = PLAIN_TRY > 0 and max_iter > 2 * PLAIN_TRY and warm and function.small \
         and function.planar and not function.cone_n.size and not function.singular_at(forces)
     starts = ([(0.0, forces, True)] if plain_try else []) + _starts(function, forces)
+    gluey_flow = function.flow_step and not function.convex     # zero forces before the fallbacks
     rescue_at = len(starts) - len(STRATEGIES) + 1       # before the other weights
     label = "warm" if warm else "cold"
     index = 0
@@ -1258,7 +1264,8 @@ def _strategies(function: AlartCurnier, unshifted: ConicProblem, forces: np.ndar
         if best is None or phase.error < best.error:
             best = phase
         if phase.status == CONVERGED or iterations >= max_iter or not function.compiled \
-                and not is_plain_try and best.error <= STRATEGY_GAP * tol:
+                and not is_plain_try and best.error <= STRATEGY_GAP * tol \
+                and not (gluey_flow and index < len(starts) and not starts[index][1].any()):
             break
         if rescue is not None and index == rescue_at:
             joined = rescue(forces)
