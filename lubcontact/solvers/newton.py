@@ -223,10 +223,13 @@ flows' 100 steps took 0.57 (gluey, 90 grains), 0.71 (dry, 90), 0.76 (gluey, 120)
 (gluey and dry, 150) of the time; on one step every strategy stalled before Gauss-Seidel
 (2.2 times the time) (docs/records/benchmarks.md, "the compiled lane to 700 rows, and every
 strategy before the fallbacks there"). Nor, for the first weight from zero forces, on a gluey
-flow's step (UNION contacts): of 180 captured 10 000-grain gluey steps solved at tol 1e-6, 1e-7
-and 1e-8, the first strategy stalled within the gap on two steps (three solves), where
-Gauss-Seidel's rounds took 1.7-3.8 s and the first weight from zero forces converged in
-0.7-1.35 s (docs/records/benchmarks.md, "zero forces before the fallbacks on gluey flows")."""
+flow's step from a warm start (``AlartCurnier.gluey_flow``): of 180 captured 10 000-grain gluey
+steps solved at tol 1e-6, 1e-7 and 1e-8, the first strategy stalled within the gap on two steps
+(three solves); the solves that went on to Gauss-Seidel's rounds took 1.72-3.77 s, those where
+the first weight from zero forces followed (and converged) 0.74-1.35 s. Where that weight stalls
+too, the fallbacks follow it: on the tests' 250-grain gluey step 293 Newton iterations instead of
+202 before the same Gauss-Seidel rounds (docs/records/benchmarks.md, "zero forces before the
+fallbacks on gluey flows")."""
 SIGMA_MIN = 1e-10
 """Floor of the proximal weight, in units of the median diagonal of ``W``."""
 SIGMA_MAX = 1e10
@@ -493,10 +496,12 @@ class AlartCurnier:
     small, flow_step, convex : bool
         A small system's problem (at most ``DENSE_OPERATOR_LIMIT`` rows, in 2D ``DENSE_LIMIT``:
         :data:`PLAIN_TRY`, :data:`WARM_DENSE_WEIGHT`, no :meth:`hyperstatic` test); a 2D one that
-        is not small (a flow's step: :data:`WARM_FLOW_WEIGHT`, :data:`RECENTRE_WINDOW`, and with
-        UNION contacts :data:`UNION_SIGMA_DECREASE`, :data:`UNION_INNER_CAP` and
-        :data:`UNION_RECENTRE_FOLLOWS`); one without
-        UNION contacts (``Cones.is_convex``).
+        is not small (a flow's step: :data:`WARM_FLOW_WEIGHT`, :data:`RECENTRE_WINDOW`); one
+        without UNION contacts (``Cones.is_convex``).
+    gluey_flow : bool
+        A flow's step with UNION contacts (a gluey flow's): :data:`UNION_SIGMA_DECREASE`,
+        :data:`UNION_INNER_CAP`, :data:`UNION_RECENTRE_FOLLOWS`, and the first weight from zero
+        forces before the fallbacks (:data:`STRATEGY_GAP`).
     w_arrays : tuple of ndarray
         ``W``'s CSR arrays with unsigned indices (:func:`~.compiled_apgd.csr_arrays`), for the
         kernels of the sparse lane (``compiled_rows``): numba checks every signed index for
@@ -578,6 +583,7 @@ class AlartCurnier:
         self.sweeps_kept = 0            # local sweeps whose forces were taken (swept)
         self.corrections_kept = 0       # full Newton steps taken corrected (corrected)
         self.convex = cones.is_convex
+        self.gluey_flow = self.flow_step and not self.convex
         self.factor_arrays = self.reduced_blocks = None
         self.delassus_factors = None, None
         if self.compiled_rows:
@@ -1244,7 +1250,6 @@ def _strategies(function: AlartCurnier, unshifted: ConicProblem, forces: np.ndar
     plain_try = PLAIN_TRY > 0 and max_iter > 2 * PLAIN_TRY and warm and function.small \
         and function.planar and not function.cone_n.size and not function.singular_at(forces)
     starts = ([(0.0, forces, True)] if plain_try else []) + _starts(function, forces)
-    gluey_flow = function.flow_step and not function.convex     # zero forces before the fallbacks
     rescue_at = len(starts) - len(STRATEGIES) + 1       # before the other weights
     label = "warm" if warm else "cold"
     index = 0
@@ -1265,7 +1270,7 @@ def _strategies(function: AlartCurnier, unshifted: ConicProblem, forces: np.ndar
             best = phase
         if phase.status == CONVERGED or iterations >= max_iter or not function.compiled \
                 and not is_plain_try and best.error <= STRATEGY_GAP * tol \
-                and not (gluey_flow and index < len(starts) and not starts[index][1].any()):
+                and not (function.gluey_flow and warm and index < len(starts) and not starts[index][1].any()):
             break
         if rescue is not None and index == rescue_at:
             joined = rescue(forces)
@@ -1355,7 +1360,7 @@ def _proximal_newton(function: AlartCurnier, unshifted: ConicProblem, forces: np
     round-off); the polish to :data:`JOINT_FINISH` ``tol`` does not (that is its target).
     """
     scale = sigma * function.typical
-    gluey = function.flow_step and not function.convex      # a gluey flow's step
+    gluey = function.gluey_flow
     decrease = UNION_SIGMA_DECREASE if gluey else SIGMA_DECREASE
     cap = UNION_INNER_CAP if gluey else INNER_CAP
     error, velocity = function.coulomb_error(unshifted, forces), None

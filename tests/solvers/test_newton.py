@@ -1232,9 +1232,7 @@ def test_the_lane_carries_out_a_flow_steps_rules_without_choosing_them(monkeypat
 def test_on_the_compiled_lane_every_strategy_comes_before_the_fallbacks(monkeypatch):
     """A gluey flow's step (328 rows, tests/solvers/data/README.md) whose first strategy stalls
     within STRATEGY_GAP of tol: on the compiled lane the next strategy converges, without
-    Gauss-Seidel (whose rounds took 20 000 sweeps and 1.1 s on it, 30 times the time); on the
-    sparse lane the first weight from zero forces comes before the fallbacks on a gluey flow's
-    step (not the later strategies), and converges there too."""
+    Gauss-Seidel (whose rounds took 20 000 sweeps and 1.1 s on it, 30 times the time)."""
     with np.load(Path(__file__).parent / "data" / "gluey-90-step.npz") as data:
         problem = StepProblem.from_arrays(data)
         guess, shift = data["warm_start"], data["warm_shift"]
@@ -1243,7 +1241,19 @@ def test_on_the_compiled_lane_every_strategy_comes_before_the_fallbacks(monkeypa
     assert result.status == CONVERGED and "fallbacks" not in result.info
     assert result.info["strategies"] == [(newton.WARM_FLOW_WEIGHT, "warm"), (1e-3, "cold")]
     assert scaled_coulomb_error(problem, result.forces) <= 1e-6
+
+
+def test_on_a_gluey_flow_step_zero_forces_come_before_the_fallbacks(monkeypatch):
+    """On the sparse lane a strategy stalled within STRATEGY_GAP of tol sends a step to the
+    fallbacks, but on a gluey flow's step from a warm start the first weight from zero forces
+    comes first: on the stored 90-grain gluey step (the compiled lane switched off) the first
+    strategy stalls within the gap and the one from zero forces converges. Where every strategy
+    stalls within the gap (phases faked), a gluey step from a warm start tries those two; a cold
+    one (no warm start) and a dry flow's step (the creeping bed) the first alone."""
     monkeypatch.setattr(newton, "COMPILED_LIMIT", 0)
+    with np.load(Path(__file__).parent / "data" / "gluey-90-step.npz") as data:
+        gluey = StepProblem.from_arrays(data)
+        guess, shift = data["warm_start"], data["warm_shift"]
     phases, proximal = [], newton._proximal_newton
 
     def spied(*args, **kwargs):
@@ -1251,11 +1261,27 @@ def test_on_the_compiled_lane_every_strategy_comes_before_the_fallbacks(monkeypa
         return phases[-1]
 
     monkeypatch.setattr(newton, "_proximal_newton", spied)
-    sparse = solve_coulomb(problem, "newton-ac", tol=1e-6, warm_start=guess, shift=shift, fallback=None)
-    assert not AlartCurnier(problem.normalized()).compiled
+    result = solve_coulomb(gluey, "newton-ac", tol=1e-6, warm_start=guess, shift=shift, fallback=None)
+    assert AlartCurnier(gluey.normalized()).gluey_flow and not AlartCurnier(gluey.normalized()).compiled
     assert phases[0].status == newton.STALLED and 1e-6 < phases[0].error <= STRATEGY_GAP * 1e-6
-    assert sparse.info["strategies"] == [(newton.WARM_FLOW_WEIGHT, "warm"), (1e-3, "cold")]
-    assert sparse.status == CONVERGED and scaled_coulomb_error(problem, sparse.forces) <= 1e-6
+    assert result.info["strategies"] == [(newton.WARM_FLOW_WEIGHT, "warm"), (1e-3, "cold")]
+    assert result.status == CONVERGED and scaled_coulomb_error(gluey, result.forces) <= 1e-6
+
+    def stalled(function, unshifted, forces, tol, *args, **kwargs):
+        return newton._Phase(forces=forces, status=newton.STALLED, iterations=1, error=2.0 * tol,
+                             history=np.array([2.0 * tol]), gradient_steps=0)
+
+    monkeypatch.setattr(newton, "_proximal_newton", stalled)
+    with np.load(Path(__file__).parent / "data" / "creeping-bed-step.npz") as data:
+        dry = StepProblem.from_arrays(data)
+        dry_guess, dry_shift = data["warm_start"], data["warm_shift"]
+    assert AlartCurnier(dry.normalized()).flow_step and not AlartCurnier(dry.normalized()).gluey_flow
+    tried = {name: solve_coulomb(problem, "newton-ac", tol=1e-6, warm_start=start, shift=offset,
+                                 fallback=None).info["strategies"]
+             for name, problem, start, offset in (("warm", gluey, guess, shift), ("cold", gluey, None, None),
+                                                  ("dry", dry, dry_guess, dry_shift))}
+    assert tried == {"warm": [(newton.WARM_FLOW_WEIGHT, "warm"), (1e-3, "cold")], "cold": [(1e-3, "cold")],
+                     "dry": [(newton.WARM_FLOW_WEIGHT, "warm")]}
 
 
 def test_on_the_compiled_lane_the_joint_phase_rescues_stalled_strategies():
@@ -1278,7 +1304,8 @@ def test_on_the_compiled_lane_the_joint_phase_rescues_stalled_strategies():
 
 def test_newton_finishes_an_early_gauss_seidel_round_on_a_gluey_step(monkeypatch):
     """A gluey flow's step (931 rows, tests/solvers/data/README.md) whose first strategy stalls
-    within STRATEGY_GAP of tol (the sparse lane: on to the fallbacks): FALLBACK_POLISH_ITERATIONS
+    within STRATEGY_GAP of tol, and the one from zero forces after it (the sparse lane: on to the
+    fallbacks): FALLBACK_POLISH_ITERATIONS
     Newton iterations finish Gauss-Seidel's fourth round (8 000 sweeps in all), where ten
     finished none and the rounds spent the whole cap (20 000 sweeps). The re-centred weight
     kept at the first weight (``UNION_RECENTRE_FOLLOWS`` off), as when the step was stored: with
@@ -1291,6 +1318,7 @@ def test_newton_finishes_an_early_gauss_seidel_round_on_a_gluey_step(monkeypatch
     assert not AlartCurnier(problem.normalized()).compiled
     result = solve_coulomb(problem, "newton-ac", tol=1e-6, warm_start=guess, shift=shift)
     assert result.status == CONVERGED and result.info["fallbacks"] == ["nsgs"]
+    assert result.info["strategies"] == [(newton.WARM_FLOW_WEIGHT, "warm"), (1e-3, "cold")]
     assert result.info["fallback_iterations"] == sum(newton.fallback_rounds("nsgs")[:4]) == 8000
     assert scaled_coulomb_error(problem, result.forces) <= 1e-6
 
