@@ -1229,8 +1229,8 @@ def _strategies(function: AlartCurnier, unshifted: ConicProblem, forces: np.ndar
     instead, on a small 2D problem :data:`WARM_DENSE_WEIGHT`, which ``STRATEGIES[0]`` then
     replaces among the later ones; from zero it stays ``STRATEGIES[0]``), until one converges,
     ``max_iter`` Newton iterations are spent or (off the compiled lane) the best error is within
-    :data:`STRATEGY_GAP` of ``tol`` (on a gluey flow's step, once the first weight from zero
-    forces has been tried); the best phase is returned (the plain try's, if best, as
+    :data:`STRATEGY_GAP` of ``tol`` (on a gluey flow's step from a warm start, once the first
+    weight from zero forces has been tried); the best phase is returned (the plain try's, if best, as
     stalled where it stopped short of ``tol``; its error counts in the test against
     :data:`STRATEGY_GAP`).
 
