@@ -1268,9 +1268,10 @@ def _strategies(function: AlartCurnier, unshifted: ConicProblem, forces: np.ndar
         history.extend(phase.history if not history else phase.history[1:])
         if best is None or phase.error < best.error:
             best = phase
-        if phase.status == CONVERGED or iterations >= max_iter or not function.compiled \
-                and not is_plain_try and best.error <= STRATEGY_GAP * tol \
-                and not (function.gluey_flow and warm and index < len(starts) and not starts[index][1].any()):
+        zero_forces_next = warm and index < len(starts) and not starts[index][1].any()
+        near_tol = not function.compiled and not is_plain_try and best.error <= STRATEGY_GAP * tol \
+            and not (function.gluey_flow and zero_forces_next)
+        if phase.status == CONVERGED or iterations >= max_iter or near_tol:
             break
         if rescue is not None and index == rescue_at:
             joined = rescue(forces)
@@ -1360,9 +1361,8 @@ def _proximal_newton(function: AlartCurnier, unshifted: ConicProblem, forces: np
     round-off); the polish to :data:`JOINT_FINISH` ``tol`` does not (that is its target).
     """
     scale = sigma * function.typical
-    gluey = function.gluey_flow
-    decrease = UNION_SIGMA_DECREASE if gluey else SIGMA_DECREASE
-    cap = UNION_INNER_CAP if gluey else INNER_CAP
+    decrease = UNION_SIGMA_DECREASE if function.gluey_flow else SIGMA_DECREASE
+    cap = UNION_INNER_CAP if function.gluey_flow else INNER_CAP
     error, velocity = function.coulomb_error(unshifted, forces), None
     history, best = [error], (error, forces)
     iterations = gradient_steps = proximal_steps = 0
@@ -1389,7 +1389,7 @@ def _proximal_newton(function: AlartCurnier, unshifted: ConicProblem, forces: np
                 if error <= tol:
                     break
         centre_error = error
-        if recentring and gluey and UNION_RECENTRE_FOLLOWS:
+        if recentring and function.gluey_flow and UNION_RECENTRE_FOLLOWS:
             scale = _at_most_error(scale, error, function)
         function.set_proximal(scale, forces)
         known = dict(velocity=velocity, error=error)      # at forces: no product afresh

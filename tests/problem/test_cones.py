@@ -212,5 +212,5 @@ def test_same_as_compares_every_field_bit_for_bit():
     wide = Cones(kinds=base.kinds, mu=base.mu, tangential=np.array([0], dtype=np.int32), tangent_dim=1)
     assert not base.same_as(wide)                                  # rows of another width
     boxes = [Cones(kinds=np.array([ConeKind.NONNEG], dtype=np.int8), mu=np.zeros(1), tangential=rows,
-                   tangent_dim=1) for rows in (np.array([]), np.zeros(0, dtype=int))]
-    assert not boxes[0].same_as(boxes[1]) and boxes[1].same_as(boxes[1])
+                   tangent_dim=1) for rows in (np.array([]), np.zeros(0, dtype=int), np.zeros(0, dtype=int))]
+    assert not boxes[0].same_as(boxes[1]) and boxes[1].same_as(boxes[2])      # no rows: the dtype tells
