@@ -367,6 +367,17 @@ iterations against 10 %; at 10^5 grains 100 rows left one step of six 1 067 iter
 300-grain bed (1 334 rows) ends ``max_iter`` with it
 (docs/records/benchmarks.md, "a full Newton step corrected on the rows where it fails")."""
 
+CYCLING_MERIT = 0.9
+"""A full Newton step that the non-monotone line search accepts (:data:`LINE_SEARCH_MEMORY`) but
+whose merit ``psi`` is above this fraction of the current one is corrected as a failed full step
+is (:data:`CORRECTED_ROWS`, where :attr:`AlartCurnier.sweeps_apply`), and the corrected point
+taken where its merit is below the full step's. Traced on a 10 000-grain gluey step of 151
+Newton iterations, a few sliding contacts' tangential forces jumped between ``mu lam_n`` and
+``-mu lam_n`` at every full step (their sliding velocity reversed by the jump), the merit staying
+at 9.96e-4 while the proximal weight rose from 0.2 to 2e9 (eight rows held 99 % of ``phi``'s
+square); sweeps over those rows find them sticking, and the step took 36 iterations
+(docs/records/benchmarks.md, "full steps that cycle, corrected")."""
+
 POLISH_ITERATIONS = 10
 """Proximal Newton iterations of the finish from the joint phase's forces (:data:`JOINT_FINISH`)."""
 FALLBACK_POLISH_ITERATIONS = 30
@@ -1555,7 +1566,8 @@ def _newton_phase(function: AlartCurnier, unshifted: ConicProblem, forces: np.nd
         newton = function.newton_direction(y, phi)
         step = None
         if newton is not None:
-            step = _line_search(function, forces, velocity, newton, 2.0 * merit, max(recent))
+            step = _line_search(function, forces, velocity, newton, 2.0 * merit, max(recent),
+                                merit=merit)
         if step is None:                   # J^T phi, J's inactive rows being the identity's
             J, active, _ = function.jacobian(y)
             gradient = np.where(active, 0.0, phi) + J.T @ phi[active]
@@ -1606,7 +1618,7 @@ def _compiled_phase(function: AlartCurnier, forces: np.ndarray, tol: float, max_
 
 
 def _line_search(function: AlartCurnier, forces: np.ndarray, velocity: np.ndarray,
-                 direction: np.ndarray, slope: float, reference: float
+                 direction: np.ndarray, slope: float, reference: float, merit: float | None = None
                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
     """Backtrack from the full step until ``psi`` falls below the non-monotone Armijo bound;
     the accepted forces with their ``phi``, ``y`` and velocity (:meth:`AlartCurnier.residual`'s),
@@ -1626,7 +1638,9 @@ def _line_search(function: AlartCurnier, forces: np.ndarray, velocity: np.ndarra
     its size. A trial whose residual is not finite (a direction far too long) is rejected like
     any other that fails the bound. On a flow's step (:attr:`AlartCurnier.sweeps_apply`) a full
     step that fails the bound is first corrected on the few rows where it fails and taken so where
-    that passes the bound (:data:`CORRECTED_ROWS`, :meth:`AlartCurnier.corrected`).
+    that passes the bound (:data:`CORRECTED_ROWS`, :meth:`AlartCurnier.corrected`); so is a full
+    step that passes the bound with a ``psi`` above :data:`CYCLING_MERIT` times ``merit`` (``psi``
+    at ``forces``, given for a Newton direction), taken corrected where that lowers its ``psi``.
     """
     if not slope > 0:
         return None
@@ -1637,15 +1651,18 @@ def _line_search(function: AlartCurnier, forces: np.ndarray, velocity: np.ndarra
         for _ in range(MAX_HALVINGS):
             trial = forces + alpha * direction
             phi, y, trial_velocity = function.residual(trial, velocity + alpha * change)
-            merit = 0.5 * float(phi @ phi)
+            psi = 0.5 * float(phi @ phi)
             bound = reference - ARMIJO * alpha * slope
-            if np.isfinite(merit) and merit <= bound:
-                return trial, phi, y, trial_velocity
-            if correct:                             # the full step, failing on a few rows?
+            accepted = bool(np.isfinite(psi) and psi <= bound)
+            cycling = accepted and merit is not None and psi > CYCLING_MERIT * merit
+            if correct and (cycling or not accepted):   # the full step, failing on a few rows?
                 correct = False
-                corrected = function.corrected(trial, phi, trial_velocity) if np.isfinite(merit) else None
-                if corrected is not None and 0.5 * float(corrected[1] @ corrected[1]) <= bound:
+                corrected = function.corrected(trial, phi, trial_velocity) if np.isfinite(psi) else None
+                if corrected is not None and \
+                        0.5 * float(corrected[1] @ corrected[1]) <= (psi if accepted else bound):
                     function.corrections_kept += 1
                     return corrected
+            if accepted:
+                return trial, phi, y, trial_velocity
             alpha *= 0.5
     return None
