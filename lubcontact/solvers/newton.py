@@ -368,15 +368,17 @@ iterations against 10 %; at 10^5 grains 100 rows left one step of six 1 067 iter
 (docs/records/benchmarks.md, "a full Newton step corrected on the rows where it fails")."""
 
 CYCLING_MERIT = 0.9
-"""A full Newton step that the non-monotone line search accepts (:data:`LINE_SEARCH_MEMORY`) but
-whose merit ``psi`` is above this fraction of the current one is corrected as a failed full step
-is (:data:`CORRECTED_ROWS`, where :attr:`AlartCurnier.sweeps_apply`), and the corrected point
-taken where its merit is below the full step's. Traced on a 10 000-grain gluey step of 151
-Newton iterations, a few sliding contacts' tangential forces jumped between ``mu lam_n`` and
-``-mu lam_n`` at every full step (their sliding velocity reversed by the jump), the merit staying
-at 9.96e-4 while the proximal weight rose from 0.2 to 2e9 (eight rows held 99 % of ``phi``'s
-square); sweeps over those rows find them sticking, and the step took 36 iterations
-(docs/records/benchmarks.md, "full steps that cycle, corrected")."""
+"""A full Newton step that the non-monotone line search accepts (:data:`LINE_SEARCH_MEMORY`)
+with a merit ``psi`` above this fraction of the current one is corrected as a failed full step
+is (:data:`CORRECTED_ROWS`: where :attr:`AlartCurnier.sweeps_apply`, and not with
+``CORRECTED_SWEEPS`` 0), and the corrected point taken where its merit is below the full step's
+(``info["corrected_steps"]`` counts both kinds of correction). Traced on a 10 000-grain gluey
+step of 151 Newton iterations at tol 1e-8, a few sliding contacts' tangential forces jumped
+between ``mu lam_n`` and ``-mu lam_n`` at every full step (their sliding velocity reversed by the
+jump), the merit staying at 9.96e-4 while the proximal weight rose from 0.02 to 2e9 of the median
+diagonal of ``W`` (eight rows held 99 % of ``phi``'s square); sweeps over those rows find them
+sticking, and the step took 36 iterations (31 against 150 at tol 1e-6;
+docs/records/benchmarks.md, "full steps that cycle, corrected")."""
 
 POLISH_ITERATIONS = 10
 """Proximal Newton iterations of the finish from the joint phase's forces (:data:`JOINT_FINISH`)."""
@@ -592,7 +594,7 @@ class AlartCurnier:
                 projector.planar_tangent, self.cone_n
         self.factorisations = Factorisations(carry=self.planar, partner=partner)
         self.sweeps_kept = 0            # local sweeps whose forces were taken (swept)
-        self.corrections_kept = 0       # full Newton steps taken corrected (corrected)
+        self.corrections_kept = 0       # full Newton steps taken corrected (_line_search)
         self.convex = cones.is_convex
         self.gluey_flow = self.flow_step and not self.convex
         self.factor_arrays = self.reduced_blocks = None
@@ -1620,27 +1622,45 @@ def _compiled_phase(function: AlartCurnier, forces: np.ndarray, tol: float, max_
 def _line_search(function: AlartCurnier, forces: np.ndarray, velocity: np.ndarray,
                  direction: np.ndarray, slope: float, reference: float, merit: float | None = None
                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
-    """Backtrack from the full step until ``psi`` falls below the non-monotone Armijo bound;
-    the accepted forces with their ``phi``, ``y`` and velocity (:meth:`AlartCurnier.residual`'s),
-    or None.
+    """Backtrack from the full step until ``psi`` falls below the non-monotone Armijo bound.
 
-    ``velocity`` is ``W r + q`` at ``forces``; ``slope`` is the decrease rate of ``psi`` along
-    ``direction`` at ``forces`` (``2 psi`` for the Newton direction, ``|J^T phi|^2`` for
-    steepest descent). A trial's velocity is ``velocity + alpha W d``: one product with ``W``
-    per direction, not one per trial (on developed 2000-grain flows the search took five to six
-    trials per Newton iteration). On the 2D sparse lane (``compiled_rows``) the next iteration
-    goes on from the accepted trial's velocity, not from a product afresh: on 20 captured
-    10 000-grain gluey steps the velocities so carried through a solve stayed within 1.3e-15 of
-    ``W r + q`` (relative to its largest entry), the same iterations in 0.95 of the time
-    (docs/records/benchmarks.md). Elsewhere a product with ``W`` costs little beside a Newton
-    iteration and :func:`_newton_phase` takes ``W r`` afresh: on a small infeasible problem
-    whose forces grew to 1e14 (``glued_infeasible``) the carried velocity drifted by 5.6e-5 of
-    its size. A trial whose residual is not finite (a direction far too long) is rejected like
-    any other that fails the bound. On a flow's step (:attr:`AlartCurnier.sweeps_apply`) a full
-    step that fails the bound is first corrected on the few rows where it fails and taken so where
-    that passes the bound (:data:`CORRECTED_ROWS`, :meth:`AlartCurnier.corrected`); so is a full
-    step that passes the bound with a ``psi`` above :data:`CYCLING_MERIT` times ``merit`` (``psi``
-    at ``forces``, given for a Newton direction), taken corrected where that lowers its ``psi``.
+    A trial's velocity is ``velocity + alpha W d``: one product with ``W`` per direction, not one
+    per trial (on developed 2000-grain flows the search took five to six trials per Newton
+    iteration). On the 2D sparse lane (``compiled_rows``) the next iteration goes on from the
+    accepted trial's velocity, not from a product afresh: on 20 captured 10 000-grain gluey steps
+    the velocities so carried through a solve stayed within 1.3e-15 of ``W r + q`` (relative to
+    its largest entry), the same iterations in 0.95 of the time (docs/records/benchmarks.md).
+    Elsewhere a product with ``W`` costs little beside a Newton iteration and
+    :func:`_newton_phase` takes ``W r`` afresh: on a small infeasible problem whose forces grew
+    to 1e14 (``glued_infeasible``) the carried velocity drifted by 5.6e-5 of its size. A trial
+    whose residual is not finite (a direction far too long) is rejected like any other that
+    fails the bound. On a flow's step (:attr:`AlartCurnier.sweeps_apply`) a full step that fails
+    the bound is first corrected on the few rows where it fails and taken so where that passes
+    the bound (:data:`CORRECTED_ROWS`, :meth:`AlartCurnier.corrected`); so is a full step that
+    passes the bound with a ``psi`` above :data:`CYCLING_MERIT` times ``merit``, taken corrected
+    where that lowers its ``psi``.
+
+    Parameters
+    ----------
+    function : AlartCurnier
+        The Alart-Curnier function, at its current proximal weight and centre.
+    forces, velocity : ndarray, shape (n_rows,)
+        The current forces and their velocity ``W r + q``.
+    direction : ndarray, shape (n_rows,)
+        The search direction ``d``.
+    slope : float
+        The decrease rate of ``psi`` along ``direction`` at ``forces`` (``2 psi`` for the Newton
+        direction, ``|J^T phi|^2`` for steepest descent); none (``<= 0``): no step.
+    reference : float
+        The largest of the last :data:`LINE_SEARCH_MEMORY` merits, the bound's reference.
+    merit : float, optional
+        ``psi`` at ``forces``, given for a Newton direction: the cycling full steps' test.
+
+    Returns
+    -------
+    tuple of ndarray or None
+        The accepted forces with their ``phi``, ``y`` and velocity
+        (:meth:`AlartCurnier.residual`'s), or None where no trial passed the bound.
     """
     if not slope > 0:
         return None
@@ -1655,13 +1675,14 @@ def _line_search(function: AlartCurnier, forces: np.ndarray, velocity: np.ndarra
             bound = reference - ARMIJO * alpha * slope
             accepted = bool(np.isfinite(psi) and psi <= bound)
             cycling = accepted and merit is not None and psi > CYCLING_MERIT * merit
-            if correct and (cycling or not accepted):   # the full step, failing on a few rows?
+            if correct and (cycling or not accepted):   # the full step: failing, or barely lower
                 correct = False
                 corrected = function.corrected(trial, phi, trial_velocity) if np.isfinite(psi) else None
-                if corrected is not None and \
-                        0.5 * float(corrected[1] @ corrected[1]) <= (psi if accepted else bound):
-                    function.corrections_kept += 1
-                    return corrected
+                if corrected is not None:
+                    corrected_psi = 0.5 * float(corrected[1] @ corrected[1])
+                    if (corrected_psi < psi) if accepted else (corrected_psi <= bound):
+                        function.corrections_kept += 1
+                        return corrected
             if accepted:
                 return trial, phi, y, trial_velocity
             alpha *= 0.5
