@@ -6,6 +6,14 @@ from lubcontact.bench import flow_steps, small_steps
 from lubcontact.model.laws import Coulomb
 from lubcontact.scenes.small import settling_pile
 from lubcontact.sim.simulation import Simulation
+from lubcontact.solvers import siconos_peer
+
+
+@pytest.fixture(autouse=True)
+def _no_peer_left_registered():
+    """bench small registers the Siconos peer when installed: leave the registry as it was."""
+    yield
+    siconos_peer.unregister_siconos()
 
 
 def _positions(sim: Simulation) -> np.ndarray:
@@ -39,7 +47,23 @@ def test_bench_small_prints_a_row_per_size_law_and_method(capsys, tmp_path):
                                                   ("frictionless", "nsgs"),
                                                   ("exact", "apgd-as"), ("exact", "nsgs")]
     assert all(row[-1] == "converged" and float(row[4]) > 0 for row in rows)
+    # the method's own solve (its iterations) is a part of the whole solve
+    assert all(0 < float(row[5]) < float(row[4]) for row in rows)
     assert out.exists()
+
+
+def test_bench_small_times_siconos_own_solve_beside_the_worker_process(capsys):
+    """With Siconos installed, its 2D Gauss-Seidel is a method of bench small: converged, and its
+    ``method_us`` (Siconos' own solve, timed in its worker) a small part of ``solve_us``, which
+    holds the worker's process; skipped where the peer is absent (CI)."""
+    status = siconos_peer.siconos_status()
+    if not status.available:
+        pytest.skip(f"Siconos absent: {status.reason}")
+    assert small_steps.main(["--sizes", "3", "--laws", "exact", "--methods", "siconos-nsgs",
+                             "--steps", "3", "--settle", "10"]) == 0
+    row = capsys.readouterr().out.splitlines()[-1].split()
+    assert row[2] == "siconos-nsgs" and row[-1] == "converged"
+    assert 0 < 10 * float(row[5]) < float(row[4])
 
 
 @pytest.mark.parametrize("flag, value", [("--laws", "sticky"), ("--methods", "newton"),
