@@ -16,20 +16,26 @@ Laws (``--laws``): ``frictionless`` (gluey lubrication, gamma_min = -1: a QP),
 Per row: contacts (mean per step), the median microseconds of the solve
 (``settings.solve``: normalising, set-up, iterations, finish, the result's
 checks), of the method's own solve within it (``method_us``: the result's
-``solve_time``, its iterations without the set-up and the checks around them)
-and of the whole step (contacts, assembly, solve, update), the steps per
-second of the run, the median iterations per solve and the statuses.
+``solve_time``; for a method that times its iterations apart from its set-up,
+those alone, else the whole call of the method; on a step without contacts the
+registry's empty answer) and of the whole step (contacts, assembly, solve,
+update), the steps per second of the run, the median iterations per solve and
+the statuses.
 
 The field's reference library is one of the methods where it is installed: the
 Siconos peer's methods (``siconos-nsgs``, ...; docs/guide/siconos-peer.md) are
 registered, and their ``method_us`` is Siconos' own solve, timed in its worker
-(``solve_us`` then holds the worker's process and the problem's transfer).
+(``solve_us`` then holds the worker's process and the problem's transfer). They
+solve exact Coulomb on the frictional laws (a method that solves it natively
+has no relaxation) and take no gluey contacts: a method that cannot solve a
+law's problems is skipped there, with a line on standard error saying why.
 """
 from __future__ import annotations
 
 import argparse
 import json
 import pathlib
+import sys
 import time
 from typing import Any
 
@@ -39,8 +45,8 @@ from ..io.files import save_text
 from ..model.laws import Coulomb, GlueyLubrication, Law
 from ..scenes.small import settling_pile
 from ..sim.simulation import Simulation
-from ..solvers import SolveSettings
-from ..solvers.siconos_peer import register_siconos
+from ..solvers import SolveSettings, methods, solver_info
+from ..solvers.siconos_peer import is_peer_method, register_siconos, siconos_status
 from .options import check_methods, names
 from .tables import format_table
 
@@ -118,21 +124,29 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--tol", type=float, default=1e-8, help="solver tolerance (default: 1e-8)")
     parser.add_argument("--json", type=pathlib.Path, help="write the rows to this JSON file")
     args = parser.parse_args(argv)
-    register_siconos()                   # the field's reference library, when installed
-    try:
-        check_methods("--methods", args.methods)
-    except ValueError as exc:
-        parser.error(f"argument {exc}")
     if unknown := sorted(set(args.laws) - set(LAWS)):
         parser.error(f"argument --laws: unknown {', '.join(map(repr, unknown))}; known: {', '.join(LAWS)}")
     for option in ("sizes", "steps"):
         if min(np.atleast_1d(getattr(args, option))) < 1:
             parser.error(f"argument --{option}: must be >= 1")
+    register_siconos()                   # the field's reference library, when installed
+    if absent := [name for name in args.methods if is_peer_method(name) and name not in methods()]:
+        parser.error(f"argument --methods: {', '.join(map(repr, absent))} need Siconos, which is "
+                     f"absent here ({siconos_status().reason})")
+    try:
+        check_methods("--methods", args.methods)
+    except ValueError as exc:
+        parser.error(f"argument {exc}")
     rows = []
     for n_grains in args.sizes:
         for law in args.laws:
             sim = settled(n_grains, law, args.settle, args.tol)
+            problem = sim.next_problem()[2]
             for method in args.methods:
+                if reason := solver_info(method).rejection(problem):     # e.g. Siconos on FREE contacts
+                    print(f"lubcontact bench small: {method} skipped on the {law} law: {reason}",
+                          file=sys.stderr)
+                    continue
                 row = {"n_grains": n_grains, "law": law,
                        **time_steps(sim, method, args.steps, args.tol, law == "exact")}
                 rows.append(row)

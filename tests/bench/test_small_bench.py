@@ -11,7 +11,7 @@ from lubcontact.solvers import siconos_peer
 
 @pytest.fixture(autouse=True)
 def _no_peer_left_registered():
-    """bench small registers the Siconos peer when installed: leave the registry as it was."""
+    """bench small registers the Siconos peer when installed: unregister it after each test."""
     yield
     siconos_peer.unregister_siconos()
 
@@ -38,16 +38,16 @@ def test_a_timed_method_leaves_the_simulation_where_it_was(timed):
 
 def test_bench_small_prints_a_row_per_size_law_and_method(capsys, tmp_path):
     out = tmp_path / "rows.json"
-    assert small_steps.main(["--sizes", "3", "--laws", "frictionless,exact", "--methods",
-                             "apgd-as,nsgs", "--steps", "4", "--settle", "10",
+    assert small_steps.main(["--sizes", "4", "--laws", "frictionless,exact", "--methods",
+                             "apgd-as,nsgs", "--steps", "4", "--settle", "40",
                              "--json", str(out)]) == 0
     text = capsys.readouterr().out
     rows = [line.split() for line in text.splitlines()[-4:]]
     assert [(row[1], row[2]) for row in rows] == [("frictionless", "apgd-as"),
                                                   ("frictionless", "nsgs"),
                                                   ("exact", "apgd-as"), ("exact", "nsgs")]
-    assert all(row[-1] == "converged" and float(row[4]) > 0 for row in rows)
-    # the method's own solve (its iterations) is a part of the whole solve
+    # steps with contacts, solved: iterations, and the method's own solve a part of the whole
+    assert all(row[-1] == "converged" and float(row[3]) > 0 and float(row[-2]) > 0 for row in rows)
     assert all(0 < float(row[5]) < float(row[4]) for row in rows)
     assert out.exists()
 
@@ -59,11 +59,30 @@ def test_bench_small_times_siconos_own_solve_beside_the_worker_process(capsys):
     status = siconos_peer.siconos_status()
     if not status.available:
         pytest.skip(f"Siconos absent: {status.reason}")
-    assert small_steps.main(["--sizes", "3", "--laws", "exact", "--methods", "siconos-nsgs",
-                             "--steps", "3", "--settle", "10"]) == 0
-    row = capsys.readouterr().out.splitlines()[-1].split()
-    assert row[2] == "siconos-nsgs" and row[-1] == "converged"
+    assert small_steps.main(["--sizes", "4", "--laws", "frictionless,exact", "--methods",
+                             "siconos-nsgs", "--steps", "3", "--settle", "40"]) == 0
+    captured = capsys.readouterr()
+    row = captured.out.splitlines()[-1].split()
+    assert row[:3] == ["4", "exact", "siconos-nsgs"] and row[-1] == "converged"
+    assert float(row[3]) > 0 and float(row[-2]) > 0          # contacts, Siconos' sweeps
     assert 0 < 10 * float(row[5]) < float(row[4])
+    # Siconos takes no gluey (FREE) contacts: that law is skipped, saying so in one line
+    assert captured.err.strip() == ("lubcontact bench small: siconos-nsgs skipped on the "
+                                    "frictionless law: FREE contacts are not supported")
+
+
+def test_a_peer_method_without_siconos_is_a_one_line_error(monkeypatch, capsys, tmp_path):
+    """``--methods siconos-nsgs`` where Siconos is absent: one line naming the flag and why."""
+    siconos_peer.unregister_siconos()
+    monkeypatch.setenv(siconos_peer.PYTHON_ENV, str(tmp_path / "no-such-python"))
+    siconos_peer.clear_probe_cache()
+    try:
+        with pytest.raises(SystemExit):
+            small_steps.main(["--methods", "siconos-nsgs", "--sizes", "3"])
+    finally:
+        siconos_peer.clear_probe_cache()
+    last = capsys.readouterr().err.strip().splitlines()[-1]
+    assert "--methods" in last and "'siconos-nsgs' need Siconos" in last
 
 
 @pytest.mark.parametrize("flag, value", [("--laws", "sticky"), ("--methods", "newton"),
