@@ -25,10 +25,11 @@ the statuses.
 The field's reference library is one of the methods where it is installed: the
 Siconos peer's methods (``siconos-nsgs``, ...; docs/guide/siconos-peer.md) are
 registered, and their ``method_us`` is Siconos' own solve, timed in its worker
-(``solve_us`` then holds the worker's process and the problem's transfer). They
-solve exact Coulomb on the frictional laws (a method that solves it natively
-has no relaxation) and take no gluey contacts: a method that cannot solve a
-law's problems is skipped there, with a line on standard error saying why.
+(``solve_us`` then holds the worker's process and the problem's transfer).
+
+A method that cannot solve a law's problems (the peer's take no gluey contacts),
+or that solves exact Coulomb itself on the relaxation (``newton-ac``, the peer's:
+they have none), is skipped there, with a line on standard error saying why.
 """
 from __future__ import annotations
 
@@ -43,10 +44,12 @@ import numpy as np
 
 from ..io.files import save_text
 from ..model.laws import Coulomb, GlueyLubrication, Law
+from ..problem.step import StepProblem
 from ..scenes.small import settling_pile
 from ..sim.simulation import Simulation
 from ..solvers import SolveSettings, methods, solver_info
 from ..solvers.siconos_peer import is_peer_method, register_siconos, siconos_status
+from .flow_steps import has_no_relaxation
 from .options import check_methods, names
 from .tables import format_table
 
@@ -108,6 +111,18 @@ def time_steps(sim: Simulation, method: str, steps: int, tol: float, exact: bool
             "statuses": ",".join(sorted(statuses))}
 
 
+def skipped(method: str, law: str, problem: StepProblem) -> str | None:
+    """Why ``method`` is not timed on ``law`` (``problem``: one of the law's steps), or None: it
+    cannot solve the law's problems (the Siconos peer on gluey contacts), or, on the relaxation,
+    it solves exact Coulomb itself (:func:`~lubcontact.bench.flow_steps.has_no_relaxation`; its
+    row would repeat the exact law's)."""
+    if reason := solver_info(method).rejection(problem):
+        return reason
+    if law == "relaxation" and has_no_relaxation(method, problem):
+        return "it solves exact Coulomb itself, it has no relaxation"
+    return None
+
+
 def main(argv: list[str] | None = None) -> int:
     """``lubcontact bench small [--sizes ...] [--laws ...] [--methods ...]``."""
     parser = argparse.ArgumentParser(prog="lubcontact bench small", description=__doc__.split("\n")[0])
@@ -143,7 +158,7 @@ def main(argv: list[str] | None = None) -> int:
             sim = settled(n_grains, law, args.settle, args.tol)
             problem = sim.next_problem()[2]
             for method in args.methods:
-                if reason := solver_info(method).rejection(problem):     # e.g. Siconos on FREE contacts
+                if reason := skipped(method, law, problem):
                     print(f"lubcontact bench small: {method} skipped on the {law} law: {reason}",
                           file=sys.stderr)
                     continue

@@ -71,6 +71,18 @@ def test_bench_small_times_siconos_own_solve_beside_the_worker_process(capsys):
             "are not supported") in captured.err.splitlines()
 
 
+def test_a_native_coulomb_method_is_skipped_on_the_relaxation_saying_why(capsys):
+    """``newton-ac`` solves exact Coulomb itself: its relaxation row would repeat the exact one,
+    so bench small skips it with one line on standard error (as bench flow does)."""
+    assert small_steps.main(["--sizes", "4", "--laws", "relaxation,exact", "--methods",
+                             "newton-ac,apgd-jacobi", "--steps", "2", "--settle", "40"]) == 0
+    captured = capsys.readouterr()
+    rows = [line.split()[1:3] for line in captured.out.splitlines()[-3:]]
+    assert rows == [["relaxation", "apgd-jacobi"], ["exact", "newton-ac"], ["exact", "apgd-jacobi"]]
+    assert ("lubcontact bench small: newton-ac skipped on the relaxation law: it solves exact "
+            "Coulomb itself, it has no relaxation") in captured.err.splitlines()
+
+
 def test_a_peer_method_without_siconos_is_a_one_line_error(monkeypatch, capsys, tmp_path):
     """``--methods siconos-nsgs`` where Siconos is absent: one line naming the flag and why."""
     siconos_peer.unregister_siconos()
