@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import importlib
 import importlib.util
+import os
 import sys
 from pathlib import Path
 
@@ -25,6 +26,14 @@ COMMANDS = {
                "judge a solution file against a problem file (exit 0 pass, 1 fail)"),
 }
 
+
+BLAS_THREADS = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
+"""The environment variables of the BLAS libraries' thread counts. A command runs them on one
+thread, unless the environment sets them (:func:`main`, before numpy is imported): a dense
+product split over threads sums in another order, and over the demo's 150-step flow that
+rounding changed the flow rate by 3 % and the steady/transient verdict. One thread makes a
+command's numbers repeat whatever the machine's cores, and its benchmarks time one core, as the
+records do (the solvers' loops are compiled or sparse, on one thread either way)."""
 
 SOLVER_ENTRY_POINTS = "lubcontact.solvers"
 """Entry-point group of installed packages that register solvers (loaded by every command)."""
@@ -91,6 +100,8 @@ def _solver_modules(argv: list[str]) -> tuple[list[str], list[str]]:
 def main(argv: list[str] | None = None) -> int:
     """Dispatch ``lubcontact COMMAND ...``; returns the exit status."""
     argv = sys.argv[1:] if argv is None else list(argv)
+    for variable in BLAS_THREADS:                   # before numpy is imported (BLAS_THREADS)
+        os.environ.setdefault(variable, "1")
     if argv[:1] == ["--version"]:
         from . import __version__
 

@@ -1,11 +1,12 @@
 """The command line: a light --help, --version, outside solver modules; the lazy public face."""
+import os
 import subprocess
 import sys
 
 import pytest
 
 import lubcontact
-from lubcontact.cli import main
+from lubcontact.cli import BLAS_THREADS, main
 
 
 def test_help_imports_neither_cvxpy_nor_numba():
@@ -52,3 +53,18 @@ def test_help_has_no_markup(command, capsys):
     assert stop.value.code == 0
     out = capsys.readouterr().out
     assert out and "``" not in out and ":func:" not in out and ":class:" not in out
+
+
+def test_blas_runs_on_one_thread_unless_the_environment_says_otherwise():
+    """A command's numbers repeat whatever the machine's cores: BLAS on one thread by default
+    (set before numpy loads), an explicit setting kept. In a fresh interpreter, where numpy is
+    not yet imported, as for the ``lubcontact`` script."""
+    script = ("import os; from lubcontact.cli import BLAS_THREADS, main; main(['--help']); "
+              "print(','.join(os.environ[name] for name in BLAS_THREADS))")
+    clean = {k: v for k, v in os.environ.items() if k not in BLAS_THREADS}
+    out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                         check=True, env=clean).stdout
+    assert out.strip().splitlines()[-1] == "1,1,1"
+    out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                         check=True, env={**clean, "OPENBLAS_NUM_THREADS": "4"}).stdout
+    assert out.strip().splitlines()[-1] == "4,1,1"

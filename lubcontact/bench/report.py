@@ -22,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..cli import BLAS_THREADS
 from .figures import error_label, iterations_figure, performance_profile_figure, work_precision_figure
 from .problem_sets import ProblemSet
 from .runs import WARM, Measurement, ReferenceRow
@@ -49,8 +50,7 @@ def environment() -> dict:
                 platform=platform.platform(), cpu=_cpu_name(), cpus=os.cpu_count(),
                 usable_cpus=len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else None,
                 python=platform.python_version(), packages=versions, git=commit or "unknown",
-                threads={k: os.environ.get(k, "unset") for k in
-                         ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")})
+                threads={k: os.environ.get(k, "unset") for k in BLAS_THREADS})
 
 
 def _cpu_name() -> str:
