@@ -68,3 +68,31 @@ def test_blas_runs_on_one_thread_unless_the_environment_says_otherwise():
     out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
                          check=True, env={**clean, "OPENBLAS_NUM_THREADS": "4"}).stdout
     assert out.strip().splitlines()[-1] == "4,1,1"
+
+
+@pytest.mark.parametrize("argv, flag", [
+    (["bench", "solvers", "--sizes", "abc"], "--sizes"),
+    (["bench", "small", "--sizes", "4,x"], "--sizes"),
+    (["bench", "flow", "--sizes", "0"], "--sizes"),
+    (["check-hard", "--tol", "-1"], "--tol"),
+    (["bench", "small", "--tol", "0"], "--tol"),
+    (["verify", "p.npz", "s.npz", "--tol", "nan"], "--tol"),
+])
+def test_bad_numbers_are_one_line_errors_naming_the_flag(argv, flag, capsys):
+    """A bad size or tolerance stops the command with argparse's one line naming the flag (they
+    were tracebacks from deep inside: ``int('abc')``, ``tol: must be > 0``)."""
+    with pytest.raises(SystemExit) as stop:
+        main(argv)
+    assert stop.value.code == 2
+    last = capsys.readouterr().err.strip().splitlines()[-1]
+    assert flag in last and "Traceback" not in last
+
+
+def test_counts_take_spaces_commas_or_both():
+    """``--sizes 4 10 20``, ``--sizes 4,10,20`` and ``--sizes 4,10 20`` are the same sizes."""
+    from lubcontact.bench.options import counts
+
+    assert counts("--sizes", ["4", "10", "20"]) == counts("--sizes", ["4,10,20"]) \
+        == counts("--sizes", ["4,10", "20"]) == [4, 10, 20]
+    with pytest.raises(ValueError, match="--sizes: must be >= 1, got 0"):
+        counts("--sizes", ["4,0"])

@@ -51,7 +51,7 @@ from ..sim.trajectory import StepReport
 from ..solvers import SolveSettings
 from ..solvers.coulomb import has_joint_phase
 from .harness import reference_distrust, solve_reference, warm_up
-from .options import check_methods, names
+from .options import check_methods, counts, names, number
 from .statistics import scaling_exponents
 from .tables import format_table
 
@@ -337,15 +337,16 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="lubcontact bench flow",
                                      description="Exact-Coulomb step solves of developed inclined "
                                                  "flows, per size, model and method.")
-    parser.add_argument("--sizes", type=int, nargs="+", default=[1000],
-                        help="numbers of grains (default: 1000)")
+    parser.add_argument("--sizes", nargs="+", default=["1000"],
+                        help="numbers of grains, space or comma separated (default: 1000)")
     parser.add_argument("--models", type=names, default=["dry", "gluey"],
                         help="comma list of dry, gluey (default: dry,gluey)")
     parser.add_argument("--methods", type=names, default=["apgd-jacobi", "newton-ac"],
                         help="comma list of registered methods (default: apgd-jacobi,newton-ac)")
     parser.add_argument("--angle", type=float, default=25.0, help="incline angle, degrees (default: 25)")
     parser.add_argument("--steps", type=int, default=10, help="timed steps per method (default: 10)")
-    parser.add_argument("--tol", type=float, default=1e-6, help="solver tolerance (default: 1e-6)")
+    parser.add_argument("--tol", type=number(float, 0, above=True), default=1e-6,
+                        help="solver tolerance (default: 1e-6)")
     parser.add_argument("--settle-steps", type=int, default=1500,
                         help="steps that settle the bed before it is tilted (default: 1500)")
     parser.add_argument("--cache", type=pathlib.Path, default=pathlib.Path("out/bench-flow"),
@@ -379,17 +380,15 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     try:
         check_methods("--methods", args.methods)
+        args.sizes = counts("--sizes", args.sizes)
     except ValueError as exc:
         parser.error(f"argument {exc}")
-    for flag, value in (("--sizes", min(args.sizes)), ("--steps", args.steps),
-                        ("--settle-steps", args.settle_steps)):
+    for flag, value in (("--steps", args.steps), ("--settle-steps", args.settle_steps)):
         if value < 1:
             parser.error(f"argument {flag}: must be >= 1, got {value}")
     for flag, value in (("--joint", args.joint), ("--reference", args.reference)):
         if value < 0:
             parser.error(f"argument {flag}: must be >= 0, got {value}")
-    if not args.tol > 0:
-        parser.error(f"argument --tol: must be > 0, got {args.tol}")
     for model in args.models:
         if model not in ("dry", "gluey"):
             parser.error(f"argument --models: unknown model {model!r}; choose from dry, gluey")

@@ -71,7 +71,7 @@ from .friction_problems import (
     settling_step,
 )
 from .harness import TimedSolve, iterative, solve_reference, timed_solve, warm_up
-from .options import check_methods, data_folder, names, plain
+from .options import check_methods, data_folder, names, number, plain
 from .problem_sets import DATA_DIR_ENV, FRICTION, PILE_DT, PILE_STEPS
 from .tables import format_table
 
@@ -252,9 +252,9 @@ def parser() -> argparse.ArgumentParser:
                              f"(names: {', '.join(p.name for p in EXTERNAL)})")
     parser.add_argument("--methods", default=",".join(DEFAULT_METHODS),
                         help="methods around which the fixed point runs, comma separated")
-    parser.add_argument("--tol", type=float, default=1e-10,
+    parser.add_argument("--tol", type=number(float, 0, above=True), default=1e-10,
                         help="inner tolerance and fixed-point tolerance (external problems)")
-    parser.add_argument("--tol-fp", type=float, default=None,
+    parser.add_argument("--tol-fp", type=number(float, 0, above=True), default=None,
                         help="fixed-point tolerance of the external problems if not --tol")
     parser.add_argument("--max-outer", type=int, default=1000,
                         help="cap on the outer iterations of the fixed point")

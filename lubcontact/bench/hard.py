@@ -46,7 +46,7 @@ from ..solvers import (
     reference_method,
 )
 from .harness import timed_solve
-from .options import check_methods, names, plain
+from .options import check_methods, names, number, plain
 
 if TYPE_CHECKING:
     from .cases.hard import HardCase
@@ -249,7 +249,8 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="lubcontact check-hard", description=plain(__doc__.splitlines()[0]))
     parser.add_argument("--cases", help="comma-separated case names (default: all)")
     parser.add_argument("--solvers", help="comma-separated method names (default: all registered)")
-    parser.add_argument("--tol", type=float, default=1e-9, help="solver tolerance (default 1e-9)")
+    parser.add_argument("--tol", type=number(float, 0, above=True), default=1e-9,
+                        help="solver tolerance (default 1e-9)")
     parser.add_argument("--max-iter", type=int, default=None, help="iteration cap (method default)")
     parser.add_argument("--fixed-point", action="store_true",
                         help="frictional cases only, exact Coulomb by the fixed point on s from s = 0")

@@ -47,7 +47,7 @@ from ..problem.step import StepProblem
 from ..solvers import CONVERGED, INTERIOR_POINT, SolveSettings, solver_info
 from ..solvers import methods as registered
 from .harness import TimedSolve, iterative, reference_distrust, solve_reference, timed_solve, warm_up
-from .options import check_methods, names, plain
+from .options import check_methods, counts, names, number, plain
 from .pile_problems import PILES, PileCase, matched_forces, next_step_problem, pile_cases
 
 BASELINE = "clarabel-direct"
@@ -284,13 +284,14 @@ def solvers_main(argv: list[str] | None = None) -> int:
     """``lubcontact bench solvers``: see the module docstring."""
     parser = argparse.ArgumentParser(prog="lubcontact bench solvers", description=plain(__doc__),
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--sizes", default="100,1000,10000", help="grain counts, comma separated")
+    parser.add_argument("--sizes", nargs="+", default=["100", "1000", "10000"],
+                        help="grain counts, space or comma separated (default: 100 1000 10000)")
     parser.add_argument("--methods", default=None,
                         help="methods to compare, comma separated (default: every registered "
                              f"method but the symbolic references: {','.join(default_methods())})")
     parser.add_argument("--glued-fraction", type=float, default=0.3,
                         help="fraction of closed contacts glued in the 'glued' pile (0: skip it)")
-    parser.add_argument("--tol", type=float, default=1e-8,
+    parser.add_argument("--tol", type=number(float, 0, above=True), default=1e-8,
                         help="tolerance of the iterative (first-order) methods")
     parser.add_argument("--reference-tol", type=float, default=1e-10,
                         help="tolerance of the reference and of the interior-point and QP methods")
@@ -308,14 +309,15 @@ def solvers_main(argv: list[str] | None = None) -> int:
     parser.add_argument("--condition", action="store_true",
                         help="print cond(W_AA) on the reference's loaded rows (active_condition)")
     args = parser.parse_args(argv)
-    sizes = [int(s) for s in names(args.sizes)]
+    try:
+        sizes = counts("--sizes", args.sizes)
+    except ValueError as exc:
+        parser.error(f"argument {exc}")
     methods = default_methods() if args.methods is None else names(args.methods)
     try:
         check_methods("--methods", methods)
     except ValueError as exc:
         parser.error(str(exc))
-    if any(n < 1 for n in sizes):
-        parser.error(f"--sizes: must be positive, got {args.sizes}")
     if args.tiles < 1 or any(n % args.tiles for n in sizes):
         parser.error(f"--tiles: must be >= 1 and divide every size, got {args.tiles}")
     if not all(t > 0 and math.isfinite(t) for t in (args.tol, args.reference_tol)):

@@ -50,7 +50,7 @@ from ..sim.simulation import Simulation
 from ..solvers import SolveSettings, methods, solver_info
 from ..solvers.siconos_peer import is_peer_method, register_siconos, siconos_status
 from .flow_steps import has_no_relaxation
-from .options import check_methods, names
+from .options import check_methods, counts, names, number
 from .tables import format_table
 
 LAWS = ("frictionless", "relaxation", "exact")
@@ -126,8 +126,8 @@ def skipped(method: str, law: str, problem: StepProblem) -> str | None:
 def main(argv: list[str] | None = None) -> int:
     """``lubcontact bench small [--sizes ...] [--laws ...] [--methods ...]``."""
     parser = argparse.ArgumentParser(prog="lubcontact bench small", description=__doc__.split("\n")[0])
-    parser.add_argument("--sizes", type=int, nargs="+", default=[4, 10, 20, 40],
-                        help="grains per pile (default: 4 10 20 40)")
+    parser.add_argument("--sizes", nargs="+", default=["4", "10", "20", "40"],
+                        help="grains per pile, space or comma separated (default: 4 10 20 40)")
     parser.add_argument("--laws", type=names, default=list(LAWS),
                         help=f"comma-separated, of {', '.join(LAWS)} (default: all)")
     parser.add_argument("--methods", type=names, default=["apgd-jacobi", "apgd-as", "nsgs"],
@@ -136,14 +136,18 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--steps", type=int, default=300, help="timed steps per method (default: 300)")
     parser.add_argument("--settle", type=int, default=100,
                         help="steps before the timed ones (default: 100)")
-    parser.add_argument("--tol", type=float, default=1e-8, help="solver tolerance (default: 1e-8)")
+    parser.add_argument("--tol", type=number(float, 0, above=True), default=1e-8,
+                        help="solver tolerance (default: 1e-8)")
     parser.add_argument("--json", type=pathlib.Path, help="write the rows to this JSON file")
     args = parser.parse_args(argv)
     if unknown := sorted(set(args.laws) - set(LAWS)):
         parser.error(f"argument --laws: unknown {', '.join(map(repr, unknown))}; known: {', '.join(LAWS)}")
-    for option in ("sizes", "steps"):
-        if min(np.atleast_1d(getattr(args, option))) < 1:
-            parser.error(f"argument --{option}: must be >= 1")
+    if args.steps < 1:
+        parser.error("argument --steps: must be >= 1")
+    try:
+        args.sizes = counts("--sizes", args.sizes)
+    except ValueError as exc:
+        parser.error(f"argument {exc}")
     register_siconos()                   # the field's reference library, when installed
     if absent := [name for name in args.methods if is_peer_method(name) and name not in methods()]:
         parser.error(f"argument --methods: {', '.join(map(repr, absent))} need Siconos, which is "

@@ -41,7 +41,7 @@ from ..problem.step import StepProblem
 from ..sim.simulation import Simulation
 from ..solvers import SolveSettings
 from ..solvers.result import CoulombResult
-from .options import check_methods, names
+from .options import check_methods, counts, names, number
 from .tables import format_table
 
 SETTLE_STEPS = 100
@@ -163,12 +163,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--layer", type=pathlib.Path, action="append", default=[],
                         help="checkpoint.npz of a developed flow, widened to each of --sizes "
                              "(as bench flow --layer; repeatable)")
-    parser.add_argument("--sizes", type=int, nargs="+", default=[],
-                        help="grains of each widened --layer")
+    parser.add_argument("--sizes", nargs="+", default=[],
+                        help="grains of each widened --layer, space or comma separated")
     parser.add_argument("--cache", type=pathlib.Path, default=pathlib.Path("out/bench-flow"),
                         help="folder of the widened flows (default: out/bench-flow)")
     parser.add_argument("--method", default="newton-ac", help="solver (default: newton-ac)")
-    parser.add_argument("--tol", type=float, default=None,
+    parser.add_argument("--tol", type=number(float, 0, above=True), default=None,
                         help="solver tolerance (default: 1e-8 on piles, the flow's own on layers)")
     parser.add_argument("--steps", type=int, default=100,
                         help="steps per set, all kept in memory (default: 100; a 10^4-grain "
@@ -179,6 +179,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         switches = [parse_switch(text) for text in args.switch]
         check_methods("--method", names(args.method))
+        args.sizes = counts("--sizes", args.sizes) if args.sizes else []
     except ValueError as exc:
         parser.error(f"argument {exc}")
     from .flow_steps import widened_flow
@@ -190,8 +191,6 @@ def main(argv: list[str] | None = None) -> int:
                          ("--steps", [args.steps]), ("--rounds", [args.rounds])):
         if values and min(values) < 1:
             parser.error(f"argument {flag}: must be >= 1, got {min(values)}")
-    if args.tol is not None and not args.tol > 0:
-        parser.error(f"argument --tol: must be > 0, got {args.tol}")
     if bool(args.layer) != bool(args.sizes):
         parser.error("argument --sizes: give --layer and --sizes together")
     if not args.small and not args.layer:

@@ -27,6 +27,7 @@ from ..problem import LocalProblem, StepProblem
 from ..problem.conic import ConicProblem
 from ..solvers import methods
 from ..solvers.verify import VerificationReport, verify
+from .options import number
 
 FORCE_NAMES = ("r", "forces", "x")
 VELOCITY_NAMES = ("u", "v", "velocities")
@@ -94,7 +95,8 @@ def parser() -> argparse.ArgumentParser:
                     "Clarabel reference; exit status 0 on pass, 1 on fail, 2 on bad input.")
     cli.add_argument("problem", type=Path, help="problem file (.dat, .hdf5/.h5, or .npz step problem)")
     cli.add_argument("solution", type=Path, help="solution file (.npz, .h5/.hdf5, or text columns)")
-    cli.add_argument("--tol", type=float, default=1e-8, help="tolerance of the verdict "
+    cli.add_argument("--tol", type=number(float, 0, above=True), default=1e-8,
+                     help="tolerance of the verdict "
                      "(normalised units)")
     cli.add_argument("--reference", default="auto",
                      help="registered method computing the reference ('auto': Clarabel on the "

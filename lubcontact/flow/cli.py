@@ -37,6 +37,7 @@ from collections.abc import Callable
 from dataclasses import fields
 from typing import TYPE_CHECKING, Any, NoReturn
 
+from ..bench.options import number
 from . import interrupt
 from .config import (
     DEFINING_FIELDS,
@@ -109,28 +110,8 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 
-def _number(kind: type, low: float | None = None, *, above: bool = False,
-            high: float | None = None) -> Callable[[str], float]:
-    """An argparse type: ``kind`` (int or float) >= ``low`` (> with ``above``), < ``high``."""
-    def parse(text: str) -> float:
-        try:
-            value = kind(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(
-                f"expected {'an integer' if kind is int else 'a number'}, got {text!r}") from None
-        if kind is float and value != value:
-            raise argparse.ArgumentTypeError(f"expected a number, got {text!r}")
-        if low is not None and (value <= low if above else value < low):
-            raise argparse.ArgumentTypeError(f"must be {'>' if above else '>='} {low:g}, "
-                                             f"got {text}")
-        if high is not None and not value < high:
-            raise argparse.ArgumentTypeError(f"must be < {high:g}, got {text}")
-        return value
-    return parse
-
-
 def _angle(text: str) -> float:
-    value = _number(float)(text)
+    value = number(float)(text)
     if not -90 < value < 90:
         raise argparse.ArgumentTypeError(f"must be in (-90, 90) degrees, got {text}")
     return value
@@ -153,17 +134,17 @@ def _add_common(parser: argparse.ArgumentParser, resume: bool, steps: bool = Tru
     and reads its holds, not an averaging window).
     """
     add = parser.add_argument
-    add("--n", dest="n_grains", type=_number(int, 1), default=None, metavar="N",
+    add("--n", dest="n_grains", type=number(int, 1), default=None, metavar="N",
         help=f"number of free grains {_default('n_grains')}")
     add("--preset", choices=PRESET_NAMES, default=None,
         help="physical parameters: poster (SI units, r = 1 mm, water-like fluid) or "
              f"dimensionless (r = g' = rho_p = 1) {_default('preset')}")
     if steps:
-        add("--steps", type=_number(int, 1), default=None,
+        add("--steps", type=number(int, 1), default=None,
             help=(f"total steps of the run {_default('steps')}; with --resume: the new total "
                   "(default there: the checkpoint's)") if resume else
                  f"total steps of each run {_default('steps')}")
-    add("--dt", "--dt-fraction", dest="dt_fraction", type=_number(float, 0, above=True),
+    add("--dt", "--dt-fraction", dest="dt_fraction", type=number(float, 0, above=True),
         default=None, metavar="FRACTION",
         help=f"time step in units of {DT_UNIT}, d the mean grain diameter and g' the reduced "
              f"gravity g (1 - rho_f/rho_p) {_default('dt_fraction')}")
@@ -171,29 +152,29 @@ def _add_common(parser: argparse.ArgumentParser, resume: bool, steps: bool = Tru
         help="step solver, a registered method name (an unknown name lists them) "
              "(default: newton-ac with --fixed-point, apgd-jacobi without; clarabel when not "
              "registered)")
-    add("--tol", type=_number(float, 0, above=True), default=None,
+    add("--tol", type=number(float, 0, above=True), default=None,
         help=f"solver tolerance (normalised residual) {_default('tol')}")
     add("--fixed-point", action=argparse.BooleanOptionalAction, default=None,
         help="exact Coulomb friction by the fixed point on s; --no-fixed-point: the convex "
              "relaxation, one solve per step (default: the relaxation)")
-    add("--tol-fp", type=_number(float, 0, above=True), default=None,
+    add("--tol-fp", type=number(float, 0, above=True), default=None,
         help=f"tolerance of the fixed point on s {_default('tol_fp')}")
-    add("--max-outer", type=_number(int, 1), default=None,
+    add("--max-outer", type=number(int, 1), default=None,
         help=f"outer-iteration cap of the fixed point on s {_default('max_outer')}")
-    add("--joint", type=_number(int, 0), default=None,
+    add("--joint", type=number(int, 0), default=None,
         help="exact Coulomb: start each step with the joint phase, APGD updating the shift "
              f"every that many iterations, 0: never {_default('joint')}")
-    add("--mu", dest="friction", type=_number(float, 0), default=None,
+    add("--mu", dest="friction", type=number(float, 0), default=None,
         help="Coulomb friction coefficient" + ("; may change on --resume" if resume else "")
              + " (default: the preset's, 0.3)")
-    add("--checkpoint-every", type=_number(int, 1), default=None, metavar="STEPS",
+    add("--checkpoint-every", type=number(int, 1), default=None, metavar="STEPS",
         help=f"write checkpoint.npz every that many steps {_default('checkpoint_every')}")
-    add("--sample-every", type=_number(int, 1), default=None, metavar="STEPS",
+    add("--sample-every", type=number(int, 1), default=None, metavar="STEPS",
         help=f"record the time series every that many steps {_default('sample_every')}")
-    add("--cross-check-every", type=_number(int, 0), default=None, metavar="STEPS",
+    add("--cross-check-every", type=number(int, 0), default=None, metavar="STEPS",
         help="re-solve a step with Clarabel every that many steps, 0: never "
              f"{_default('cross_check_every')}")
-    add("--settle-steps", type=_number(int, 0), default=None, metavar="STEPS",
+    add("--settle-steps", type=number(int, 0), default=None, metavar="STEPS",
         help="sedimentation steps that settle the bed before it is tilted (inclined_flow "
              f"without --bed and without OUT/bed.npz) {_default('settle_steps')}")
     add("--settle-model", choices=MODEL_NAMES, default=None,
@@ -208,23 +189,23 @@ def _add_common(parser: argparse.ArgumentParser, resume: bool, steps: bool = Tru
                  "is settled; the contacts' glue states and the solver's warm start begin "
                  "afresh); in a sweep, {model} and {seed} in the path are each run's, a "
                  "literal brace is written twice (default: none, the bed at rest)")
-        add("--widen", type=_number(int, 1), default=None, metavar="COPIES",
+        add("--widen", type=number(int, 1), default=None, metavar="COPIES",
             help="with --start-from: that state's layer COPIES times side by side, the copies "
                  "parted by a velocity jitter of 1e-3 of the rms seeded by --seed; --n and "
                  f"--width are the wide layer's {_default('widen')}")
-        add("--average-from", type=_number(float, 0, high=1), default=None,
+        add("--average-from", type=number(float, 0, high=1), default=None,
             metavar="FRACTION",
             help="time averages (Q, fractions, profiles) over the steps after this fraction "
                  f"of each run; fixed once a run has started {_default('average_from')}")
-    add("--width", type=_number(float, 0, above=True), default=None, metavar="RADII",
+    add("--width", type=number(float, 0, above=True), default=None, metavar="RADII",
         help=f"period along x in mean grain radii {_default('width')}")
-    add("--seed", type=_number(int, 0), default=None,
+    add("--seed", type=number(int, 0), default=None,
         help="seed of the grain sizes, the bed and the initial jitter, and of the jitter that "
              f"parts the copies of --widen {_default('seed')}")
-    add("--viscosity", type=_number(float, 0, above=True), default=None, metavar="ETA",
+    add("--viscosity", type=number(float, 0, above=True), default=None, metavar="ETA",
         help="fluid viscosity eta (Pa s) of the poster preset: sets gamma_min (default: the "
              "preset's, 1e-3)")
-    add("--roughness", type=_number(float, 0, above=True), default=None, metavar="EPS",
+    add("--roughness", type=number(float, 0, above=True), default=None, metavar="EPS",
         help="asperity height eps (m) of the poster preset: sets gamma_min (default: the "
              "preset's, 1e-6)")
     add("--no-progress", dest="progress", action="store_false",
@@ -251,7 +232,7 @@ def run_parser() -> argparse.ArgumentParser:
     parser.add_argument("--angle", type=_angle, default=None, metavar="DEGREES",
                         help="incline angle of inclined_flow (not for sedimentation) "
                              + _default("angle"))
-    parser.add_argument("--frame-every", type=_number(int, 0), default=None, metavar="STEPS",
+    parser.add_argument("--frame-every", type=number(int, 0), default=None, metavar="STEPS",
                         help="write frames/frame_<step>.npz every that many steps, 0: none "
                              + _default("frame_every"))
     parser.add_argument("--out", type=pathlib.Path, default=pathlib.Path("out/run"),
@@ -323,11 +304,11 @@ def hysteresis_parser() -> argparse.ArgumentParser:
                         help="first angle of the ramp (default: 14)")
     parser.add_argument("--to", dest="stop", type=_angle, default=28.0, metavar="DEGREES",
                         help="turning angle of the ramp (default: 28)")
-    parser.add_argument("--step", type=_number(float, 0, above=True), default=1.0,
+    parser.add_argument("--step", type=number(float, 0, above=True), default=1.0,
                         metavar="DEGREES", help="degrees per stage (default: 1)")
-    parser.add_argument("--hold", type=_number(int, 1), default=200, metavar="STEPS",
+    parser.add_argument("--hold", type=number(int, 1), default=200, metavar="STEPS",
                         help="steps at each angle (default: 200)")
-    parser.add_argument("--flow-speed", type=_number(float, 0, above=True), default=FLOW_SPEED,
+    parser.add_argument("--flow-speed", type=number(float, 0, above=True), default=FLOW_SPEED,
                         metavar="SPEED",
                         help="a layer flows when its mean downhill velocity exceeds this, in "
                              f"units of sqrt(g' d) (default: {FLOW_SPEED:g})")
@@ -374,7 +355,7 @@ def _axis_values(args: argparse.Namespace, parser: argparse.ArgumentParser,
             continue
         if getattr(args, name, None) is not None:
             parser.error(f"argument {flag}: not with {FLAGS[name]}")
-        kind = _number(int, 0) if name == "seed" else _number(float, 0, above=True)
+        kind = number(int, 0) if name == "seed" else number(float, 0, above=True)
         try:
             items = [kind(item.strip()) for item in text.split(",") if item.strip()]
         except argparse.ArgumentTypeError as exc:
@@ -782,11 +763,11 @@ def window_parser() -> argparse.ArgumentParser:
                     "still going can be read.")
     parser.add_argument("runs", nargs="+", type=pathlib.Path, metavar="RUN",
                         help="run folders (holding checkpoint.npz) or checkpoint files")
-    parser.add_argument("--length", type=_number(int, 2), required=True, metavar="STEPS",
+    parser.add_argument("--length", type=number(int, 2), required=True, metavar="STEPS",
                         help="window length in steps, a multiple of --blocks")
-    parser.add_argument("--end", type=_number(int, 2), default=None, metavar="STEP",
+    parser.add_argument("--end", type=number(int, 2), default=None, metavar="STEP",
                         help="last step of the window (default: each run's last step)")
-    parser.add_argument("--blocks", type=_number(int, 2), default=5, metavar="N",
+    parser.add_argument("--blocks", type=number(int, 2), default=5, metavar="N",
                         help="blocks of steps the window is cut into (default: 5)")
     parser.add_argument("--series", choices=WINDOW_SERIES, default="flow_rate",
                         help="the sampled quantity (default: flow_rate)")
