@@ -3,7 +3,8 @@
 1. The poster's push-pull (gluey contact), against its exact solution.
 2. A settling pile of polydisperse disks with gluey lubrication, and a table
    of every registered solver on its last step (time and error side by side).
-3. When available, the inclined-flow demo of :mod:`lubcontact.flow.demo`.
+3. A gluey + friction flow down an incline (``lubcontact.flow.demo``), with a fast solver and
+   periodic Clarabel cross-checks.
 """
 from __future__ import annotations
 
@@ -15,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from . import scenes
-from .bench.harness import compare_methods
+from .bench.harness import MethodRow, compare_methods
 from .bench.options import plain
 from .bench.tables import format_table
 from .model.laws import GlueyLubrication
@@ -80,18 +81,31 @@ def pile_section(out: Path, n_grains: int = 200, steps: int = 80) -> str:
     table = format_table(rows, ["method", "status", "iterations", "setup_s", "solve_s",
                                 "velocity_error", "residual", "min_gap"])
     glued = int(np.count_nonzero(report.gamma < 0))
+    between_grains = int(np.count_nonzero(report.contacts.a_is_free))
     return "\n".join([
         f"Settling pile: {n_grains} disks, gluey lubrication, {steps} steps of dt = 0.05 "
         f"({elapsed:.1f} s with clarabel)",
-        f"  last step: {report.problem.n_contacts} contacts, {glued} glued, "
+        f"  last step: {report.problem.n_contacts} contacts ({between_grains} between grains, "
+        f"{report.problem.n_contacts - between_grains} with the walls), {glued} glued, "
         f"most negative gap {report.gaps_after.min():.1e}",
         f"  plot: {out / 'pile.png'}",
         "", "Solvers on the last step (tol 1e-6; error = relative velocity error vs Clarabel 1e-10):",
-        table])
+        table, *_unconverged_note(rows)])
+
+
+def _unconverged_note(rows: list[MethodRow]) -> list[str]:
+    """A line under the solver table naming the methods that did not converge on the step, or
+    none: their rows are the answers they stopped at, not failures of the table."""
+    stopped = [f"{row.method} ({row.status})" for row in rows if row.status != "converged"]
+    if not stopped:
+        return []
+    return [f"Not converged on this step: {', '.join(stopped)}; their errors are those of the answer "
+            "they stopped at (which method suits which problem: docs/guide/choosing-a-solver.md)."]
 
 
 def _plot_pile(path: Path, sim: Simulation, report: StepReport) -> None:
-    """The pile with its grain-grain contacts: unglued in grey, glued coloured by ``log10 |gamma|``.
+    """The pile with its contacts between grains (those with the walls are not drawn): unglued in
+    grey, glued coloured by ``log10 |gamma|``.
 
     A linear scale drawn to the deepest glue (gamma near -100) painted the common glued
     contacts (-5 < gamma < 0) in the colour of unglued ones; a log scale and a separate
@@ -114,22 +128,23 @@ def _plot_pile(path: Path, sim: Simulation, report: StepReport) -> None:
     gamma = report.gamma[pairs]
     glued = gamma < 0
     ax.add_collection(LineCollection(segments[~glued], colors="#9a9a9a", lw=1.0,
-                                     label=f"unglued (gamma = 0): {np.count_nonzero(~glued)}"))
+                                     label=f"between grains, unglued (gamma = 0): "
+                                           f"{np.count_nonzero(~glued)}"))
     if glued.any():
         lines = LineCollection(segments[glued], array=-gamma[glued], cmap="viridis", lw=1.6,
                                norm=LogNorm(vmin=(-gamma[glued]).min(), vmax=(-gamma[glued]).max()),
-                               label=f"glued (gamma < 0): {np.count_nonzero(glued)}")
+                               label=f"between grains, glued (gamma < 0): {np.count_nonzero(glued)}")
         ax.add_collection(lines)
         fig.colorbar(lines, ax=ax,
                      label=r"glue depth $|\gamma|$ (impulse; units $\rho = g = d = 1$; log scale)")
-    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.1), ncol=2, fontsize=8)
+    fig.legend(loc="lower center", ncol=2, fontsize=8)          # below the axis label
     ax.set_xlim(0, sim.scene.metadata["width"])
     ax.set_ylim(0, grains.positions[:, 1].max() + 1)
     ax.set_aspect("equal")
     ax.set_xlabel("x (grain diameters)")
     ax.set_ylabel("y (grain diameters)")
     ax.set_title(f"Gluey pile at t = {sim.scene.time:.2f}: contacts coloured by glue state")
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, 0.06, 1, 1))
     fig.savefig(path, dpi=120)
     plt.close(fig)
 

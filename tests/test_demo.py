@@ -34,10 +34,26 @@ def test_the_pile_plot_separates_unglued_from_glued_contacts(tmp_path, monkeypat
     figures = []
     monkeypatch.setattr(matplotlib.figure.Figure, "savefig",
                         lambda fig, *args, **kwargs: figures.append(fig))
-    pile_section(Path(tmp_path), n_grains=60, steps=30)
+    text = pile_section(Path(tmp_path), n_grains=60, steps=30)
     ax = figures[0].axes[0]
     assert ax.get_xlabel() == "x (grain diameters)" and ax.get_ylabel() == "y (grain diameters)"
-    lines = [c for c in ax.collections if c.get_label().startswith(("unglued", "glued"))]
+    lines = [c for c in ax.collections if c.get_label().startswith("between grains")]
     unglued, glued = lines
-    assert unglued.get_label().startswith("unglued (gamma = 0)") and unglued.get_array() is None
+    assert unglued.get_label().startswith("between grains, unglued (gamma = 0)")
+    assert unglued.get_array() is None
     assert isinstance(glued.norm, LogNorm) and glued.get_array().min() > 0
+    # the legend's counts are the report's contacts between grains (those with the walls not drawn)
+    drawn = sum(int(line.get_label().rsplit(": ", 1)[1]) for line in lines)
+    assert f"({drawn} between grains, " in text
+
+
+def test_the_demo_names_the_methods_that_did_not_converge():
+    """A row stopped at its cap is named under the table, not left for the reader to spot."""
+    from lubcontact.bench.harness import MethodRow
+    from lubcontact.demo import _unconverged_note
+
+    rows = [MethodRow("apgd", "converged", 10, 0.0, 0.0, 0.0, 1e-14, 1e-14, 0.0),
+            MethodRow("nsgs", "max_iter", 20000, 0.0, 0.0, 0.0, 5e-3, 1e-3, -4e-6)]
+    note = _unconverged_note(rows)
+    assert len(note) == 1 and note[0].startswith("Not converged on this step: nsgs (max_iter);")
+    assert _unconverged_note(rows[:1]) == []
