@@ -45,7 +45,7 @@ from ..solvers import methods as registered
 from ..solvers import reference_method
 from ..solvers.siconos_peer import available_methods, register_siconos, siconos_status
 from . import problem_sets
-from .options import check_methods, data_folder, plain
+from .options import check_methods, data_folder, names, plain
 from .problem_sets import PACKAGE_DATA, ProblemSet, SetUnavailable
 from .report import environment, replot, write_outputs
 from .runs import MAX_OUTER, REFERENCE_TOL, SUCCESS_SLACK, run_set, variants
@@ -62,7 +62,8 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--set", dest="sets", action="append", metavar="NAME",
                    help=f"problem set (repeatable): {', '.join(problem_sets.SETS)}; default piles")
     p.add_argument("--solvers", nargs="+", metavar="METHOD",
-                   help="registered methods (default: all of lubcontact.solvers.methods())")
+                   help="registered methods, space or comma separated (default: all of "
+                        "lubcontact.solvers.methods())")
     p.add_argument("--tolerances", nargs="+", type=float, metavar="TOL",
                    default=list(DEFAULT_TOLERANCES), help="default 1e-2 1e-4 1e-6 1e-8 1e-10")
     p.add_argument("--repeats", type=int, default=3, help="timed repeats per solve (default 3)")
@@ -181,7 +182,8 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     args.sets = args.sets or ["piles"]
     register_siconos()                   # the field's reference library, when installed
-    args.solvers = args.solvers or registered()
+    args.solvers = [name for token in args.solvers for name in names(token)] if args.solvers \
+        else registered()
     try:
         _check_args(args)
         data = data_folder(args.data_dir)

@@ -248,7 +248,8 @@ def main(argv: list[str] | None = None) -> int:
     """``lubcontact check-hard``: print the case x solver matrix; exit 1 on a wrong or crashed cell."""
     parser = argparse.ArgumentParser(prog="lubcontact check-hard", description=plain(__doc__.splitlines()[0]))
     parser.add_argument("--cases", help="comma-separated case names (default: all)")
-    parser.add_argument("--solvers", help="comma-separated method names (default: all registered)")
+    parser.add_argument("--solvers", nargs="+", metavar="METHOD",
+                        help="method names, space or comma separated (default: all registered)")
     parser.add_argument("--tol", type=number(float, 0, above=True), default=1e-9,
                         help="solver tolerance (default 1e-9)")
     parser.add_argument("--max-iter", type=int, default=None, help="iteration cap (method default)")
@@ -261,7 +262,7 @@ def main(argv: list[str] | None = None) -> int:
         for name, case in load_cases().items():
             print(f"{name}\n    hard:     {case.hard}\n    expected: {case.expected}")
         return 0
-    solvers = names(args.solvers)
+    solvers = [name for token in args.solvers for name in names(token)] if args.solvers else None
     try:
         check_methods("--solvers", solvers or [])
     except ValueError as exc:

@@ -9,6 +9,7 @@ import pytest
 
 from lubcontact import Inelastic, Simulation, scenes, solve
 from lubcontact.bench import compare, hard, verify
+from lubcontact.problem import ConeKind
 from lubcontact.problem.metrics import velocity_error
 from lubcontact.solvers import methods, solver_info, unregister
 
@@ -27,7 +28,9 @@ def user_solver():
 def test_the_example_solver_is_short(user_solver):
     source = EXAMPLE.read_text().split("@register")[1].split("\n\n\ndef main")[0]
     assert len(source.strip().splitlines()) <= 13          # decorator + a dozen lines
-    assert solver_info("my-pgd").kind == "first-order"
+    info = solver_info("my-pgd")
+    assert info.kind == "first-order" and info.warm_start and info.second_order
+    assert ConeKind.UNION not in info.cones        # the convex sets only, as the guide says
 
 
 def test_it_steps_a_simulation_and_matches_clarabel(user_solver):
