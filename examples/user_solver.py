@@ -9,13 +9,10 @@ Run: ``python examples/user_solver.py`` (about 10 s).
 """
 import numpy as np
 
-from lubcontact.problem import ConeKind
-from lubcontact.solvers import CONVERGED, MAX_ITER, MethodOutput, register
-
-CONVEX = [ConeKind.NONNEG, ConeKind.FREE, ConeKind.NONPOS, ConeKind.COULOMB]   # not UNION (non-convex)
+from lubcontact.solvers import CONVERGED, CONVEX_CONES, MAX_ITER, MethodOutput, register
 
 
-@register("my-pgd", kind="first-order", cones=CONVEX, second_order=True, warm_start=True)
+@register("my-pgd", kind="first-order", cones=CONVEX_CONES)      # every force set but UNION
 def my_pgd(problem, *, tol, max_iter=200_000, warm_start=None):
     """Projected gradient on the dual: ``lam <- P_K(lam - (W lam + b) / L)``."""
     W, b, project = problem.delassus, problem.offset, problem.cones.project

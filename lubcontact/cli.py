@@ -28,12 +28,13 @@ COMMANDS = {
 
 
 BLAS_THREADS = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
-"""The environment variables of the BLAS libraries' thread counts. A command runs them on one
-thread, unless the environment sets them (:func:`main`, before numpy is imported): a dense
-product split over threads sums in another order, and over the demo's 150-step flow that
-rounding changed the flow rate by 3 % and the steady/transient verdict. One thread makes a
-command's numbers repeat whatever the machine's cores, and its benchmarks time one core, as the
-records do (the solvers' loops are compiled or sparse, on one thread either way)."""
+"""The environment variables of the BLAS libraries' thread counts. Where none of them is set, a
+command sets them all to one thread (:func:`main`, before numpy is imported): a dense product
+split over threads sums in another order, and over the demo's 150-step flow that rounding
+changed the flow rate by 3 % and the steady/transient verdict. One thread makes a command's
+results independent of the machine's core count (another CPU or BLAS build may still round
+differently), and its benchmarks time one core, as the records do (the solvers' loops are
+compiled or sparse, on one thread either way). Any of them set: the environment decides."""
 
 SOLVER_ENTRY_POINTS = "lubcontact.solvers"
 """Entry-point group of installed packages that register solvers (loaded by every command)."""
@@ -100,8 +101,8 @@ def _solver_modules(argv: list[str]) -> tuple[list[str], list[str]]:
 def main(argv: list[str] | None = None) -> int:
     """Dispatch ``lubcontact COMMAND ...``; returns the exit status."""
     argv = sys.argv[1:] if argv is None else list(argv)
-    for variable in BLAS_THREADS:                   # before numpy is imported (BLAS_THREADS)
-        os.environ.setdefault(variable, "1")
+    if not any(variable in os.environ for variable in BLAS_THREADS):   # before numpy loads
+        os.environ.update(dict.fromkeys(BLAS_THREADS, "1"))
     if argv[:1] == ["--version"]:
         from . import __version__
 

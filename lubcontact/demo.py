@@ -22,7 +22,7 @@ from .bench.tables import format_table
 from .model.laws import GlueyLubrication
 from .sim.simulation import Simulation
 from .sim.trajectory import StepReport
-from .solvers import methods
+from .solvers import CONVERGED, methods
 
 
 def push_pull_section(out: Path, dt: float = 1e-2) -> str:
@@ -81,12 +81,13 @@ def pile_section(out: Path, n_grains: int = 200, steps: int = 80) -> str:
     table = format_table(rows, ["method", "status", "iterations", "setup_s", "solve_s",
                                 "velocity_error", "residual", "min_gap"])
     glued = int(np.count_nonzero(report.gamma < 0))
+    contacts = report.contacts.count
     between_grains = int(np.count_nonzero(report.contacts.a_is_free))
     return "\n".join([
         f"Settling pile: {n_grains} disks, gluey lubrication, {steps} steps of dt = 0.05 "
         f"({elapsed:.1f} s with clarabel)",
-        f"  last step: {report.problem.n_contacts} contacts ({between_grains} between grains, "
-        f"{report.problem.n_contacts - between_grains} with the walls), {glued} glued, "
+        f"  last step: {contacts} contacts ({between_grains} between grains, "
+        f"{contacts - between_grains} with the walls), {glued} glued, "
         f"most negative gap {report.gaps_after.min():.1e}",
         f"  plot: {out / 'pile.png'}",
         "", "Solvers on the last step (tol 1e-6; error = relative velocity error vs Clarabel 1e-10):",
@@ -96,7 +97,7 @@ def pile_section(out: Path, n_grains: int = 200, steps: int = 80) -> str:
 def _unconverged_note(rows: list[MethodRow]) -> list[str]:
     """A line under the solver table naming the methods that did not converge on the step, or
     none: their rows are the answers they stopped at, not failures of the table."""
-    stopped = [f"{row.method} ({row.status})" for row in rows if row.status != "converged"]
+    stopped = [f"{row.method} ({row.status})" for row in rows if row.status != CONVERGED]
     if not stopped:
         return []
     return [f"Not converged on this step: {', '.join(stopped)}; their errors are those of the answer "

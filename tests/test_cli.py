@@ -9,12 +9,25 @@ import lubcontact
 from lubcontact.cli import BLAS_THREADS, main
 
 
+@pytest.fixture(autouse=True)
+def _blas_environment_restored():
+    """``main`` sets the BLAS thread variables where none is set: put them back after each test."""
+    saved = {name: os.environ.get(name) for name in BLAS_THREADS}
+    yield
+    for name, value in saved.items():
+        if value is None:
+            os.environ.pop(name, None)
+        else:
+            os.environ[name] = value
+
+
 def test_help_imports_neither_cvxpy_nor_numba():
-    script = ("import sys; from lubcontact.cli import main; main(['--help']); "
-              "print('cvxpy' in sys.modules, 'numba' in sys.modules)")
+    """Nor numpy: the BLAS thread default (``BLAS_THREADS``) must be set before it loads."""
+    script = ("import sys; from lubcontact.cli import main; print('numpy' in sys.modules); "
+              "main(['--help']); print('cvxpy' in sys.modules, 'numba' in sys.modules)")
     out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
-                         check=True).stdout
-    assert out.strip().splitlines()[-1] == "False False"
+                         check=True).stdout.strip().splitlines()
+    assert out[0] == "False" and out[-1] == "False False"
 
 
 def test_the_solvers_import_numba_only_when_a_kernel_runs():
@@ -56,18 +69,18 @@ def test_help_has_no_markup(command, capsys):
 
 
 def test_blas_runs_on_one_thread_unless_the_environment_says_otherwise():
-    """A command's numbers repeat whatever the machine's cores: BLAS on one thread by default
-    (set before numpy loads), an explicit setting kept. In a fresh interpreter, where numpy is
-    not yet imported, as for the ``lubcontact`` script."""
+    """A command's results do not depend on the core count: BLAS on one thread where none of the
+    variables is set (set before numpy loads); any of them set, the environment decides. In a
+    fresh interpreter, where numpy is not yet imported, as for the ``lubcontact`` script."""
     script = ("import os; from lubcontact.cli import BLAS_THREADS, main; main(['--help']); "
-              "print(','.join(os.environ[name] for name in BLAS_THREADS))")
+              "print(','.join(os.environ.get(name, 'unset') for name in BLAS_THREADS))")
     clean = {k: v for k, v in os.environ.items() if k not in BLAS_THREADS}
     out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
                          check=True, env=clean).stdout
     assert out.strip().splitlines()[-1] == "1,1,1"
     out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
                          check=True, env={**clean, "OPENBLAS_NUM_THREADS": "4"}).stdout
-    assert out.strip().splitlines()[-1] == "4,1,1"
+    assert out.strip().splitlines()[-1] == "4,unset,unset"
 
 
 @pytest.mark.parametrize("argv, flag", [
@@ -75,6 +88,8 @@ def test_blas_runs_on_one_thread_unless_the_environment_says_otherwise():
     (["bench", "small", "--sizes", "4,x"], "--sizes"),
     (["bench", "flow", "--sizes", "0"], "--sizes"),
     (["check-hard", "--tol", "-1"], "--tol"),
+    (["check-hard", "--tol", "inf"], "--tol"),
+    (["check-hard", "--solvers", ","], "--solvers"),
     (["bench", "small", "--tol", "0"], "--tol"),
     (["verify", "p.npz", "s.npz", "--tol", "nan"], "--tol"),
 ])

@@ -184,6 +184,9 @@ def main(argv: list[str] | None = None) -> int:
     register_siconos()                   # the field's reference library, when installed
     args.solvers = [name for token in args.solvers for name in names(token)] if args.solvers \
         else registered()
+    if not args.solvers:
+        print("lubcontact compare: --solvers: expected at least one method", file=sys.stderr)
+        return 2
     try:
         _check_args(args)
         data = data_folder(args.data_dir)

@@ -281,7 +281,7 @@ def parser() -> argparse.ArgumentParser:
                         help=f"pile snapshots, comma separated: {', '.join(PILE_KINDS)}")
     parser.add_argument("--pile-methods", default=",".join(DEFAULT_METHODS),
                         help="methods timed on the pile step, comma separated")
-    parser.add_argument("--pile-tol", type=float, default=1e-6,
+    parser.add_argument("--pile-tol", type=number(float, 0, above=True), default=1e-6,
                         help="inner and fixed-point tolerance of the pile step")
     parser.add_argument("--pile-max-outer", type=int, default=100,
                         help="cap on the outer iterations of the fixed point on the pile step")
@@ -298,11 +298,6 @@ def _check(args: argparse.Namespace) -> None:
     if kinds:
         raise ValueError(f"--pile-kinds: unknown {', '.join(sorted(kinds))}; "
                          f"known: {', '.join(PILE_KINDS)}")
-    for option in ("tol", "pile_tol"):
-        if not getattr(args, option) > 0:
-            raise ValueError(f"--{option.replace('_', '-')}: must be > 0, got {getattr(args, option)}")
-    if args.tol_fp is not None and not args.tol_fp > 0:
-        raise ValueError(f"--tol-fp: must be > 0, got {args.tol_fp}")
     if args.joint < 0:
         raise ValueError(f"--joint: must be >= 0, got {args.joint}")
     optional = [value for value in (args.max_iter, args.pile) if value is not None]

@@ -263,6 +263,8 @@ def main(argv: list[str] | None = None) -> int:
             print(f"{name}\n    hard:     {case.hard}\n    expected: {case.expected}")
         return 0
     solvers = [name for token in args.solvers for name in names(token)] if args.solvers else None
+    if solvers == []:
+        parser.error("argument --solvers: expected at least one method")
     try:
         check_methods("--solvers", solvers or [])
     except ValueError as exc:

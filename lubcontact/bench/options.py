@@ -4,6 +4,7 @@ sets are imported where they are used."""
 from __future__ import annotations
 
 import argparse
+import math
 import re
 from collections.abc import Callable
 from pathlib import Path
@@ -26,8 +27,8 @@ def number(kind: type, low: float | None = None, *, above: bool = False,
         except ValueError:
             raise argparse.ArgumentTypeError(
                 f"expected {'an integer' if kind is int else 'a number'}, got {text!r}") from None
-        if kind is float and value != value:
-            raise argparse.ArgumentTypeError(f"expected a number, got {text!r}")
+        if kind is float and not math.isfinite(value):
+            raise argparse.ArgumentTypeError(f"expected a finite number, got {text!r}")
         if low is not None and (value <= low if above else value < low):
             raise argparse.ArgumentTypeError(f"must be {'>' if above else '>='} {low:g}, "
                                              f"got {text}")

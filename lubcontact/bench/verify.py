@@ -112,8 +112,6 @@ def parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     cli = parser()
     args = cli.parse_args(argv)
-    if not args.tol > 0:
-        cli.error(f"--tol: must be > 0, got {args.tol}")
     reference = None if args.reference == "none" else args.reference
     if reference not in (None, "auto") and reference not in methods():
         cli.error(f"--reference: unknown method {reference!r}; registered: {', '.join(methods())}")

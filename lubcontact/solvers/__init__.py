@@ -16,6 +16,7 @@ from . import (
 )
 from .coulomb import solve_coulomb
 from .registry import (
+    CONVEX_CONES,
     FIRST_ORDER,
     INTERIOR_POINT,
     KINDS,
@@ -50,4 +51,4 @@ __all__ = ["solve", "solve_coulomb", "SolveSettings", "CoulombResult", "methods"
     "unregister", "solver_info", "capable_methods", "reference_method", "SolverInfo",
     "FIRST_ORDER", "INTERIOR_POINT", "QP", "NEWTON", "KINDS", "check_status", "MethodOutput",
     "SolveResult", "SolverError", "SolverWarning", "CONVERGED", "DIVERGED", "FAILED",
-    "INACCURATE", "MAX_ITER", "STATUSES"]
+    "INACCURATE", "MAX_ITER", "STATUSES", "CONVEX_CONES"]

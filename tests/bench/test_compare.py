@@ -143,6 +143,7 @@ def test_missing_sources_and_bad_arguments(tmp_path, monkeypatch, capsys):
     assert "--set: unknown set 'nonsense'" in capsys.readouterr().err
     assert compare.main(["--set", "tiny", "--solvers", "nonsense"]) == 2
     assert compare.main(["--set", "tiny", "--tolerances", "-1"]) == 2
+    assert compare.main(["--set", "tiny", "--solvers", ","]) == 2          # no method left
     capsys.readouterr()
     assert compare.main(["--set", "tiny", "--data-dir", str(tmp_path / "nowhere")]) == 2
     assert "--data-dir: not a directory" in capsys.readouterr().err
