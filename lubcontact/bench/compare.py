@@ -45,7 +45,7 @@ from ..solvers import methods as registered
 from ..solvers import reference_method
 from ..solvers.siconos_peer import available_methods, register_siconos, siconos_status
 from . import problem_sets
-from .options import check_methods, data_folder, names, plain
+from .options import check_methods, data_folder, items, plain
 from .problem_sets import PACKAGE_DATA, ProblemSet, SetUnavailable
 from .report import environment, replot, write_outputs
 from .runs import MAX_OUTER, REFERENCE_TOL, SUCCESS_SLACK, run_set, variants
@@ -182,8 +182,7 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     args.sets = args.sets or ["piles"]
     register_siconos()                   # the field's reference library, when installed
-    args.solvers = [name for token in args.solvers for name in names(token)] if args.solvers \
-        else registered()
+    args.solvers = items(args.solvers) if args.solvers else registered()
     if not args.solvers:
         print("lubcontact compare: --solvers: expected at least one method", file=sys.stderr)
         return 2

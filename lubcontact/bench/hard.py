@@ -46,7 +46,7 @@ from ..solvers import (
     reference_method,
 )
 from .harness import timed_solve
-from .options import check_methods, names, number, plain
+from .options import check_methods, items, names, number, plain
 
 if TYPE_CHECKING:
     from .cases.hard import HardCase
@@ -262,7 +262,7 @@ def main(argv: list[str] | None = None) -> int:
         for name, case in load_cases().items():
             print(f"{name}\n    hard:     {case.hard}\n    expected: {case.expected}")
         return 0
-    solvers = [name for token in args.solvers for name in names(token)] if args.solvers else None
+    solvers = items(args.solvers) if args.solvers else None
     if solvers == []:
         parser.error("argument --solvers: expected at least one method")
     try:

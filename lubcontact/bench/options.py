@@ -38,6 +38,12 @@ def number(kind: type, low: float | None = None, *, above: bool = False,
     return parse
 
 
+def items(tokens: list[str]) -> list[str]:
+    """The items of an option given with ``nargs="+"`` whose values may also be comma separated
+    (``--solvers a b``, ``--solvers a,b`` or both mixed), in order."""
+    return [item for token in tokens for item in names(token)]
+
+
 def counts(option: str, tokens: list[str]) -> list[int]:
     """Positive integers given after ``option`` (``--sizes 4 10 20`` or ``--sizes 4,10,20``, or both
     mixed), in order.
@@ -48,16 +54,15 @@ def counts(option: str, tokens: list[str]) -> list[int]:
         Naming ``option`` and the token that is not a positive integer.
     """
     values = []
-    for token in tokens:
-        for item in names(token):
-            try:
-                value = int(item)
-            except ValueError:
-                raise ValueError(f"{option}: expected positive integers (spaces or commas between "
-                                 f"them), got {item!r}") from None
-            if value < 1:
-                raise ValueError(f"{option}: must be >= 1, got {value}")
-            values.append(value)
+    for item in items(tokens):
+        try:
+            value = int(item)
+        except ValueError:
+            raise ValueError(f"{option}: expected positive integers (spaces or commas between "
+                             f"them), got {item!r}") from None
+        if value < 1:
+            raise ValueError(f"{option}: must be >= 1, got {value}")
+        values.append(value)
     if not values:
         raise ValueError(f"{option}: expected at least one positive integer")
     return values
