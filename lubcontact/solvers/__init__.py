@@ -12,6 +12,7 @@ from . import (
     gauss_seidel,  # noqa: F401  (registers nsgs)
     gradient,  # noqa: F401  (registers pgd, apgd, bb, apgd-jacobi, apgd-as)
     newton,  # noqa: F401  (registers newton-ac)
+    newton_first_try,  # noqa: F401  (newton-ac's first try on small 2D steps)
     reference,  # noqa: F401  (registers clarabel, clarabel-dual)
 )
 from .coulomb import solve_coulomb

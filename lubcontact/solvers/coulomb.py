@@ -219,6 +219,9 @@ def solve_native_coulomb(problem: ConicProblem, method: str, *, tol: float = 1e-
     the last forces, until no contact flips (at most ``max_outer`` solves;
     ``outer_iterations`` counts them).
 
+    A method with a first try (:func:`~lubcontact.solvers.registry.register_first_try`) is given
+    the problem first, once the arguments are checked; its result is returned where it gives one.
+
     Returns
     -------
     CoulombResult
@@ -228,6 +231,16 @@ def solve_native_coulomb(problem: ConicProblem, method: str, *, tol: float = 1e-
         ``setup_time`` (normalising included) and ``solve_time`` summed over the method's calls.
     """
     info = solver_info(method)
+    tol = checks.positive_scalar("tol", tol)
+    if max_iter is not None:
+        max_iter = checks.integer("max_iter", max_iter, minimum=1)
+    max_outer = checks.integer("max_outer", max_outer, minimum=1)
+    if warm_start is not None:
+        warm_start = checks.as_array("warm_start", warm_start, shape=(problem.n_rows,))
+    if info.first_try is not None and info.rejection(problem) is None:
+        first = info.first_try(problem, tol=tol, max_iter=max_iter, warm_start=warm_start, **options)
+        if first is not None:
+            return first
     branches = _Branches(problem, warm_start, threshold=max(1e3 * tol, 1e-7))
     native_union = ConeKind.UNION in info.cones
     if not branches.convex and not native_union and not {ConeKind.COULOMB, ConeKind.NONPOS} <= info.cones:
@@ -239,14 +252,12 @@ def solve_native_coulomb(problem: ConicProblem, method: str, *, tol: float = 1e-
     scaled = unshifted.normalized()
     setup_time, solve_time = time.perf_counter() - clock, 0.0
     force, length = scaled.scaling.force, scaled.scaling.length
-    start = None
-    if warm_start is not None:
-        start = checks.as_array("warm_start", warm_start, shape=(problem.n_rows,)) / force
-    kwargs = dict(options, tol=checks.positive_scalar("tol", tol))
+    start = None if warm_start is None else warm_start / force
+    kwargs = dict(options, tol=tol)
     if max_iter is not None:
-        kwargs["max_iter"] = checks.integer("max_iter", max_iter, minimum=1)
+        kwargs["max_iter"] = max_iter
     iterations, settled = 0, False
-    for outer in range(1, checks.integer("max_outer", max_outer, minimum=1) + 1):  # noqa: B007
+    for outer in range(1, max_outer + 1):  # noqa: B007
         clock = time.perf_counter()
         out = info.function(scaled if native_union else branches.on(scaled), warm_start=start, **kwargs)
         setup, solving = out.times(time.perf_counter() - clock)

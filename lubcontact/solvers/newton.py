@@ -115,6 +115,9 @@ phase, which costs more than it saves there: 42.5 ms per step against 51.5 with 
 settling piles of 200 and 230 grains (600-680 rows) 0.96-1.0, a gluey 250-grain flow (866-937
 rows) 1.0 (docs/records/benchmarks.md, "the compiled lane to 700 rows")."""
 
+MAX_ITERATIONS = 1000
+"""``newton_alart_curnier``'s default cap on Newton iterations (its ``max_iter``)."""
+
 STATIC_DENSE_ROWS = 96
 """On the compiled lane (a 2D problem of at most :data:`COMPILED_LIMIT` rows), the rows from which
 the products ``W x`` read ``W`` by its rows and the Newton blocks are factorised sparse, without
@@ -554,9 +557,7 @@ class AlartCurnier:
         # of up to COMPILED_LIMIT rows runs each Newton phase in one compiled call (kernels),
         # 2-3x faster than the sparse lane at 190-300 rows, 1.3-2x at 300-660 on flows
         # (docs/records/benchmarks.md)
-        self.planar = dim_t == 1
-        self.compiled = self.planar and problem.n_rows <= COMPILED_LIMIT
-        self.small = is_small(problem) or self.planar and problem.n_rows <= DENSE_LIMIT
+        self.planar, self.compiled, self.small = lanes(problem)
         self.flow_step = self.planar and not self.small
         self.dense = self.compiled or self.small
         self.W = problem.dense_delassus if self.dense else problem.delassus.tocsr()
@@ -568,20 +569,10 @@ class AlartCurnier:
         self.lower, self.upper = projector.lower.copy(), projector.upper.copy()
         self.cone_n, self.cone_t = projector.friction_normal, projector.friction_tangent
         self.cone_mu, self.unilateral = projector.friction_mu, ~projector.friction_union
-        self.box = np.ones(self.n_rows, dtype=bool)
-        self.box[self.cone_n[self.unilateral]] = False
-        self.box[self.cone_t.ravel()] = False
+        self.box = box_rows(cones)
         self.diagonal = self.W.diagonal()      # (a sparse W's: a pass over its entries)
-        diagonal = self.diagonal[:nc]
-        largest = diagonal.max(initial=0.0)
-        floor = 1e-12 * (largest if largest > 0 else 1.0)
-        rho_contact = 1.0 / np.maximum(diagonal, floor)
-        self.rho = np.concatenate([rho_contact, np.repeat(rho_contact[cones.tangential], dim_t)])
+        self.rho, self.typical = contact_steps(self.diagonal[:nc], cones)
         self.dim_t = dim_t
-        ordered = np.sort(diagonal)             # its median (np.median costs 8 us on a few values)
-        middle = nc // 2
-        self.typical = 1.0 if nc == 0 else float(ordered[middle]) if nc % 2 else \
-            float(0.5 * (ordered[middle - 1] + ordered[middle]))
         self.sigma, self.center = 0.0, np.zeros(self.n_rows)
         # on the sparse lane, a 2D problem's Newton systems, Jacobian rows and residuals are
         # assembled compiled (a numpy sparse product G W and sum cost as much as the LU on
@@ -607,18 +598,12 @@ class AlartCurnier:
                     factor.nnz + transpose.nnz <= FACTOR_PRODUCT_SHARE * self.W.nnz:
                 self.factor_arrays = operator_arrays(factor, transpose)
             self.reduced_blocks = _ReducedBlocks(self.w_arrays, self.rho, self.factor_arrays)
-        self.q_scale = 1.0 + float(np.sqrt(self.q @ self.q))
+        self.q_scale = fclib_scale(self.q)
         if self.planar:             # one tangential row per contact, as the kernels take them
             self.tangent_rows = projector.planar_tangent
         if self.compiled:
             self.W = np.ascontiguousarray(self.W)
-            self.w_arrays, self.elimination_places = _NOT_BY_ROWS, _NO_PLACES
-            if self.n_rows >= STATIC_DENSE_ROWS:
-                compiled = kernels()
-                self.w_arrays = compiled.compressed_rows(self.W)
-                order = ordering().approximate_minimum_degree(
-                    *compiled.symmetrised_pattern(*self.w_arrays[:2]))
-                self.elimination_places = places_of(order)
+            self.w_arrays, self.elimination_places = dense_elimination(self.W)
 
     @cached_property
     def scaled_W(self) -> sp.csr_matrix | np.ndarray:
@@ -929,6 +914,50 @@ class AlartCurnier:
         return self.sigma == 0.0 and plain > self.rank_bound
 
 
+def lanes(problem: ConicProblem) -> tuple[bool, bool, bool]:
+    """Which lanes of :class:`AlartCurnier` ``problem`` takes: ``(planar, compiled, small)``
+    (the attributes of the same names)."""
+    planar = problem.cones.tangent_dim == 1
+    return (planar, planar and problem.n_rows <= COMPILED_LIMIT,
+            is_small(problem) or planar and problem.n_rows <= DENSE_LIMIT)
+
+
+def box_rows(cones: Cones) -> np.ndarray:
+    """The rows outside the friction cones (box rows, the bilateral normal rows of UNION contacts
+    among them), bool, shape (n_rows,)."""
+    projector = cones.projector
+    box = np.ones(cones.n_rows, dtype=bool)
+    box[projector.friction_normal[~projector.friction_union]] = False
+    box[projector.friction_tangent.ravel()] = False
+    return box
+
+
+def contact_steps(diagonal: np.ndarray, cones: Cones) -> tuple[np.ndarray, float]:
+    """Each row's step ``rho = 1 / W_nn`` of its contact (``W_nn`` floored at ``1e-12`` of the
+    largest), shape (n_rows,), and the median ``W_nn`` (1 without contacts), from the normal
+    rows' diagonal of ``W``, shape (nc,) (compiled: :func:`~.kernels.contact_steps`)."""
+    rho, typical = kernels().contact_steps(np.ascontiguousarray(diagonal), cones.tangential,
+                                           cones.tangent_dim)
+    return rho, float(typical)
+
+
+def fclib_scale(q: np.ndarray) -> float:
+    """``1 + |q|``, the FCLIB error's denominator."""
+    return 1.0 + float(np.sqrt(q @ q))
+
+
+def dense_elimination(W: np.ndarray) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarray], np.ndarray]:
+    """The compiled lane's ``w_arrays`` and ``elimination_places`` of a dense ``W``
+    (:class:`AlartCurnier`): from :data:`STATIC_DENSE_ROWS` rows its nonzero entries by rows
+    and each row's place in a minimum-degree order of its pattern; below, empty."""
+    if W.shape[0] < STATIC_DENSE_ROWS:
+        return _NOT_BY_ROWS, _NO_PLACES
+    compiled = kernels()
+    w_arrays = compiled.compressed_rows(W)
+    order = ordering().approximate_minimum_degree(*compiled.symmetrised_pattern(*w_arrays[:2]))
+    return w_arrays, places_of(order)
+
+
 class _ReducedBlocks:
     """The reduced Newton blocks of a 2D problem on the sparse lane
     (:func:`~lubcontact.solvers.kernels.reduced_block_2d`), with the folded rows of the last one
@@ -1047,7 +1076,7 @@ def _block_solve(block: sp.spmatrix | np.ndarray, rhs: np.ndarray, rows: np.ndar
     return None
 
 @register("newton-ac", kind=NEWTON, cones=ALL_CONES, warm_start=True, native_coulomb=True)
-def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = 1000,
+def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = MAX_ITERATIONS,
                          warm_start: np.ndarray | None = None, fallback: str | None = "auto",
                          joint: int = 0) -> MethodOutput:
     """Semismooth Newton on the Alart-Curnier function (exact Coulomb, one LU per iteration).
@@ -1150,10 +1179,7 @@ def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = 1
         (joint_start.iterations, joint_start.taken)
     forces, iterations, history = phase.forces, phase.iterations + joint_iterations, phase.history
     status = INACCURATE if phase.status == STALLED else phase.status
-    info = {"newton_iterations": phase.iterations, "gradient_steps": phase.gradient_steps,
-            "proximal_steps": phase.proximal_steps, "strategies": phase.strategies,
-            "newton_status": phase.status, "error": phase.error,
-            "joint_iterations": joint_iterations}
+    info = phase_info(phase, joint_iterations)
     if joined_start and phase.status == CONVERGED and phase.error > JOINT_FINISH * tol \
             and not function.hyperstatic(forces):
         finish = _proximal_newton(function, unshifted, forces, JOINT_FINISH * tol, POLISH_ITERATIONS,
@@ -1190,14 +1216,22 @@ def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = 1
             origin = rescue.forces               # the next round goes on from the fallback's own
         if status == CONVERGED or kept and best_error <= FALLBACK_GAP * tol:
             break
-    info["reused_factorisations"] = function.factorisations.reused     # the polishes' too
-    info["carried_orderings"] = function.factorisations.carried
-    info["pivoted_factorisations"] = function.factorisations.pivoted
-    info["local_sweeps"] = function.sweeps_kept
-    info["corrected_steps"] = function.corrections_kept
+    info.update(reused_factorisations=function.factorisations.reused,     # the polishes' too
+                carried_orderings=function.factorisations.carried,
+                pivoted_factorisations=function.factorisations.pivoted,
+                local_sweeps=function.sweeps_kept, corrected_steps=function.corrections_kept)
     return MethodOutput(forces, status, iterations, setup_time=setup_time,
                         solve_time=time.perf_counter() - start - setup_time,
                         residual_history=history, info=info)
+
+
+def phase_info(phase: _Phase, joint_iterations: int) -> dict:
+    """The part of :func:`newton_alart_curnier`'s ``info`` that its Newton phase gives (its
+    docstring): ``newton_iterations`` to ``joint_iterations``."""
+    return {"newton_iterations": phase.iterations, "gradient_steps": phase.gradient_steps,
+            "proximal_steps": phase.proximal_steps, "strategies": phase.strategies,
+            "newton_status": phase.status, "error": phase.error,
+            "joint_iterations": joint_iterations}
 
 
 def fallback_rounds(name: str) -> tuple[int | None, ...]:

@@ -25,7 +25,7 @@ from __future__ import annotations
 import inspect
 import time
 from collections.abc import Callable, Iterable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -40,6 +40,7 @@ from .result import (
     FAILED,
     INACCURATE,
     SUSPICIOUS_RESIDUAL,
+    CoulombResult,
     MethodOutput,
     SolveResult,
     residual_per_row,
@@ -57,6 +58,7 @@ ALL_CONES = frozenset(ConeKind)
 CONVEX_CONES = frozenset(ConeKind) - {ConeKind.UNION}
 
 Method = Callable[..., MethodOutput]
+FirstTry = Callable[..., CoulombResult | None]
 
 
 @dataclass(frozen=True)
@@ -93,6 +95,10 @@ class SolverInfo:
         One line for tables and ``--help``.
     parameters : frozenset of str
         The keyword parameters of ``function`` (read once, at registration).
+    first_try : callable or None
+        A native Coulomb method's quick solve of its common case
+        (:func:`register_first_try`), which
+        :func:`~lubcontact.solvers.coulomb.solve_native_coulomb` tries first; None: none.
     """
 
     name: str
@@ -106,6 +112,7 @@ class SolverInfo:
     native_coulomb: bool
     description: str
     parameters: frozenset = frozenset()
+    first_try: FirstTry | None = None
 
     def rejection(self, problem: ConicProblem) -> str | None:
         """Why this method cannot solve ``problem``, or None when it can."""
@@ -160,6 +167,32 @@ def register(name: str, *, kind: str = FIRST_ORDER, cones: Iterable[ConeKind] = 
                                      native_coulomb=native_coulomb,
                                      description=description or (doc[0] if doc else ""),
                                      parameters=frozenset(inspect.signature(function).parameters))
+        return function
+
+    return wrap
+
+
+def register_first_try(name: str) -> Callable[[FirstTry], FirstTry]:
+    """Decorator giving the registered native Coulomb method ``name`` a first try.
+
+    ``first_try(problem, *, tol, max_iter, warm_start, **options) -> CoulombResult or None`` is
+    called by :func:`~lubcontact.solvers.coulomb.solve_native_coulomb` on the physical problem,
+    with the arguments checked and the method's options, before anything else. It returns the
+    result of the method's common case, computed and checked as the general path computes and
+    checks it (the same forces, status and record), or None where that case does not apply
+    or did not converge: the general path then solves the problem from the start.
+
+    Raises
+    ------
+    ValueError
+        For a method that is not registered, or one that does not solve exact Coulomb itself.
+    """
+    info = solver_info(name)
+    if not info.native_coulomb:
+        raise ValueError(f"name: {name!r} does not solve exact Coulomb itself (native_coulomb)")
+
+    def wrap(function: FirstTry) -> FirstTry:
+        _REGISTRY[name] = replace(info, first_try=function)
         return function
 
     return wrap
