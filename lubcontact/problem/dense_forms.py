@@ -91,3 +91,32 @@ def weighted_gram(block: np.ndarray, weights: np.ndarray) -> np.ndarray:
                 if second != first:
                     gram[second, first] += value
     return gram
+
+
+@numba.njit(cache=True)
+def scaled_forms(indptr: np.ndarray, indices: np.ndarray, data: np.ndarray, n_dof: int,
+                 factors: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The dense forms of a normalised problem from its source's Jacobian, in one call.
+
+    Parameters
+    ----------
+    indptr, indices, data : ndarray
+        The CSR arrays of the source problem's ``H`` (``n_dof`` columns).
+    n_dof : int
+        Its number of columns.
+    factors : ndarray, shape (n_dof,)
+        The normalised problem's column scale (``S_i / V``,
+        :meth:`~lubcontact.problem.StepProblem.normalized`).
+
+    Returns
+    -------
+    (ndarray of int, ndarray, ndarray)
+        ``columns`` and ``block`` (:func:`dense_rows`, its columns scaled by ``factors``) and
+        ``W = block block^T`` (:func:`weighted_gram`, unit weights): the same arrays as the
+        normalised problem's ``dense_jacobian`` and ``dense_delassus`` built one by one.
+    """
+    columns, block = dense_rows(indptr, indices, data, n_dof)
+    for row in range(block.shape[0]):
+        for place in range(columns.size):
+            block[row, place] *= factors[columns[place]]
+    return columns, block, weighted_gram(block, np.ones(columns.size))

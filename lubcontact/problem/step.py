@@ -225,7 +225,7 @@ class StepProblem(ConicProblemMixin):
             gaps += self.obstacle_offset[: self.n_contacts]
         return gaps
 
-    def normalized(self) -> StepProblem:
+    def normalized(self, dense: bool = False) -> StepProblem:
         """The same problem in scaled units: ``M = I``, ``dt = 1``, velocities O(1).
 
         With a velocity scale ``V`` (the mass-weighted rms of ``U``), each
@@ -236,6 +236,12 @@ class StepProblem(ConicProblemMixin):
         problem by a method of the solvers' dense lane uses the dense one
         (:attr:`dense_jacobian`) and never asks for it (the fixed point on s builds it once,
         for the methods that use the sparse ``W``).
+
+        With ``dense``, where this problem holds no dense Jacobian, the normalised problem's
+        dense forms (:attr:`dense_jacobian`, :attr:`dense_delassus`) are built now, the same
+        arrays, in one compiled call (:func:`~lubcontact.problem.dense_forms.scaled_forms`) that
+        leaves none cached on this problem: for a small solve that knows it takes the dense lane
+        (where this problem holds one, they are built from it on first use, as without ``dense``).
         """
         n_dof = self.n_dof                 # means as sum / n: np.mean's own overhead is 2 us each
         m_ref = float(self.mass.sum() / n_dof) if n_dof else 1.0
@@ -246,14 +252,23 @@ class StepProblem(ConicProblemMixin):
         velocity_scale = speed * np.sqrt(m_ref / self.mass)
         length = self.dt * speed
         scaling = Scaling(velocity=velocity_scale, force=m_ref * speed / self.dt, length=length)
-        return StepProblem._derived(mass=np.ones(self.n_dof),
-                                    free_velocity=self.free_velocity / velocity_scale,
-                                    _jacobian_source=(self, velocity_scale / speed),
-                                    gaps=self.gaps / length, cones=self.cones,
-                                    dt=1.0, shift=self.shift / length, keys=self.keys,
-                                    scaling=scaling, _factor_weight=None,   # M = I, dt = 1
-                                    obstacle_offset=None if self.obstacle_offset is None
-                                    else self.obstacle_offset / length)
+        factors = velocity_scale / speed
+        scaled = StepProblem._derived(mass=np.ones(self.n_dof),
+                                      free_velocity=self.free_velocity / velocity_scale,
+                                      _jacobian_source=(self, factors),
+                                      gaps=self.gaps / length, cones=self.cones,
+                                      dt=1.0, shift=self.shift / length, keys=self.keys,
+                                      scaling=scaling, _factor_weight=None,   # M = I, dt = 1
+                                      obstacle_offset=None if self.obstacle_offset is None
+                                      else self.obstacle_offset / length)
+        if dense and "dense_jacobian" not in self.__dict__:
+            from .dense_forms import scaled_forms  # numba, imported on first use
+
+            jacobian = self.jacobian
+            columns, block, delassus = scaled_forms(jacobian.indptr, jacobian.indices,
+                                                    jacobian.data, n_dof, factors)
+            scaled.__dict__.update(dense_jacobian=(columns, block), dense_delassus=delassus)
+        return scaled
 
     @classmethod
     def _derived(cls, **fields: Any) -> StepProblem:

@@ -6,13 +6,15 @@ its first strategy (the proximal loop at :data:`~.newton.WARM_DENSE_WEIGHT` from
 converges in its first compiled call on almost every step. Around that call the general path
 (:func:`~lubcontact.solvers.coulomb.solve_native_coulomb`, :func:`~.newton.newton_alart_curnier`,
 :func:`~.newton._strategies`, :func:`~.newton._proximal_newton`, the registry's check) spent more
-than the call itself: on a settled 4-grain pile 250-290 us a solve, of which the Newton phase
-took 25 us.
+than the call itself: on steps of a settling 4-grain pile (6 contacts) 250-290 us a solve, of
+which the Newton phase took 25 us; the first try takes 0.58-0.69 of that time at 6-66 contacts
+(docs/records/benchmarks.md, "newton-ac's first try on small steps").
 
 :func:`first_try` runs that call on arrays prepared by the same functions as the general path
-(the normalised problem's dense ``W`` and ``b``, :func:`~.newton.contact_steps`,
-:func:`~.newton.box_rows`, :func:`~.newton.dense_elimination`), so where it converges its forces,
-iterations and record are the general path's. It checks them as the general path does, at their
+(the normalised problem's dense ``W``, built at once: ``StepProblem.normalized(dense=True)``,
+its ``b``, :func:`~.newton.contact_steps`, :func:`~.newton.box_rows`,
+:func:`~.newton.dense_elimination`), so where it converges its forces, iterations and record are
+the general path's. It checks them as the general path does, at their
 own shift ``s* = mu |u_T|`` (:func:`~lubcontact.problem.metrics.coulomb_shift`): the natural
 residual from the forces, and the same test of a suspicious residual. Where the call does not
 converge, or the check would change the status, it returns None and the general path solves the
@@ -94,7 +96,8 @@ def first_try(problem: ConicProblem, *, tol: float, max_iter: int | None = None,
         return None
     max_iter = newton.MAX_ITERATIONS if max_iter is None else max_iter
     clock = time.perf_counter()
-    scaled = problem.with_shift(np.zeros(cones.count)).normalized()   # as the general path
+    unshifted = problem if not problem.shift.any() else problem.with_shift(np.zeros(cones.count))
+    scaled = unshifted.normalized(dense=True)  # as the general path's copy: no cache on the caller's
     forces = warm_start / scaled.scaling.force
     if not forces.any():
         return None
@@ -152,13 +155,11 @@ def _checked(problem: StepProblem, scaled: StepProblem, phase: _Phase, setup_tim
              solve_time: float) -> CoulombResult | None:
     """``phase``'s forces checked at their own shift and mapped back (the general path's
     check, :func:`~lubcontact.solvers.registry.checked`), or None where the check would not
-    keep them ``converged`` (forces or shift not finite, a suspicious residual)."""
+    keep them ``converged`` (a suspicious residual). Their FCLIB error, from them and their
+    velocity ``W r + b``, is within ``tol``: both are finite, and so is their shift."""
     forces = phase.forces
-    with np.errstate(over="ignore", invalid="ignore"):
-        gradient = scaled.dense_delassus @ forces + scaled.offset
-        shift = coulomb_shift(scaled, forces, gradient)
-    if not (np.isfinite(forces).all() and np.isfinite(shift).all()):
-        return None
+    gradient = scaled.dense_delassus @ forces + scaled.offset
+    shift = coulomb_shift(scaled, forces, gradient)
     gradient[:problem.n_contacts] += shift            # g at the shift: W r + b + [s, 0]
     residual = problem.cones.natural_residual(forces, gradient, project=compiled_projection)
     if residual_per_row(residual, forces.size) > SUSPICIOUS_RESIDUAL:

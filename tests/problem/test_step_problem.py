@@ -154,6 +154,31 @@ def test_the_dense_forms_sum_entries_stored_twice_and_weight_the_columns():
     assert np.allclose(dense, sparse, rtol=1e-14, atol=1e-14 * np.abs(sparse).max())
 
 
+@pytest.mark.parametrize("seed, doubled", [(6, False), (7, True)])
+def test_dense_normalising_builds_the_lazy_dense_forms_at_once_none_on_the_source(seed, doubled):
+    """``normalized(dense=True)`` gives the dense Jacobian and ``W`` that the lazy properties
+    build, to the bit (a Jacobian with entries stored twice too), without caching a dense form
+    on the problem normalised; where that problem holds its dense Jacobian, the forms come from
+    it on first use as without ``dense``."""
+    problem = _frictional_problem(seed, n_dof=40)
+    if doubled:
+        source = problem.jacobian
+        twice = sp.csr_matrix((np.repeat(source.data / 2.0, 2), np.repeat(source.indices, 2),
+                               2 * source.indptr), shape=source.shape)
+        problem = replace(problem, jacobian=twice)
+    eager = problem.normalized(dense=True)
+    assert {"dense_jacobian", "dense_delassus"} <= set(eager.__dict__)
+    assert "dense_jacobian" not in problem.__dict__
+    lazy = problem.normalized()
+    (columns, block), (lazy_columns, lazy_block) = eager.dense_jacobian, lazy.dense_jacobian
+    assert np.array_equal(columns, lazy_columns) and np.array_equal(block, lazy_block)
+    assert np.array_equal(eager.dense_delassus, lazy.dense_delassus)
+    assert "dense_jacobian" in problem.__dict__          # the lazy forms' source block
+    held = problem.normalized(dense=True)
+    assert "dense_jacobian" not in held.__dict__
+    assert np.array_equal(held.dense_delassus, lazy.dense_delassus)
+
+
 def test_a_problem_without_rows_has_an_empty_dense_lane():
     """No contact: an empty dense Jacobian and ``W``, and the free velocity back."""
     problem = StepProblem(mass=np.ones(4), free_velocity=np.arange(4.0), jacobian=sp.csr_matrix((0, 4)),
