@@ -1,7 +1,7 @@
 """``newton-ac``'s first try: a small 2D exact-Coulomb step solved without the general layers.
 
-A small system's step (a 2D problem on the compiled lane with friction cones, no UNION contact,
-warm-started from the previous step) is the common case of exact Coulomb by ``newton-ac``:
+A small system's step (a 2D problem on the compiled lane with friction cones, warm-started from
+the previous step) is the common case of exact Coulomb by ``newton-ac``:
 its first strategy (the proximal loop at :data:`~.newton.WARM_DENSE_WEIGHT` from the warm start)
 converges in its first compiled call on almost every step. Around that call the general path
 (:func:`~lubcontact.solvers.coulomb.solve_native_coulomb`, :func:`~.newton.newton_alart_curnier`,
@@ -15,8 +15,9 @@ which the Newton phase took 25 us; the first try takes 0.58-0.69 of that time at
 its ``b``, :func:`~.newton.contact_steps`, :func:`~.newton.box_rows`,
 :func:`~.newton.dense_elimination`), so where it converges its forces, iterations and record are
 the general path's. It checks them as the general path does, at their
-own shift ``s* = mu |u_T|`` (:func:`~lubcontact.problem.metrics.coulomb_shift`): the natural
-residual from the forces, and the same test of a suspicious residual. Where the call does not
+own shift ``s* = mu |u_T|`` (:func:`~lubcontact.problem.metrics.coulomb_shift`), each UNION
+contact on the piece of its force: the natural residual from the forces, and the same test of a
+suspicious residual. Where the call does not
 converge, or the check would change the status, it returns None and the general path solves the
 step from the start (its first call then repeats this one). It reads :mod:`.newton`'s rules
 (its constants) at each call, as the general path does, and applies only where the general path
@@ -86,13 +87,15 @@ def first_try(problem: ConicProblem, *, tol: float, max_iter: int | None = None,
     -------
     CoulombResult or None
         ``converged``, with the general path's forces, iterations and ``info``; None where the
-        problem is not such a step (a local problem, 3D cones, no friction cone, UNION contacts,
-        more rows than the small compiled lane takes, no warm start), where the first compiled
-        call did not converge, or where its forces would not pass the check as ``converged``.
+        problem is not such a step (a local problem, 3D cones, no friction cone, more rows than
+        the small compiled lane takes, no warm start), where the first compiled call did not
+        converge, or where its forces would not pass the check as ``converged``. UNION contacts
+        are solved natively, as by the general path, and checked on the piece of their force
+        (``pulled`` lists those pulled).
     """
     cones = problem.cones
     if warm_start is None or not newton.CHAINED_SUBPROBLEMS or not isinstance(problem, StepProblem) \
-            or not cones.has_friction or not cones.is_convex or not all(newton.lanes(problem)):
+            or not cones.has_friction or not all(newton.lanes(problem)):
         return None
     max_iter = newton.MAX_ITERATIONS if max_iter is None else max_iter
     clock = time.perf_counter()
@@ -158,10 +161,13 @@ def _checked(problem: StepProblem, scaled: StepProblem, phase: _Phase, setup_tim
     keep them ``converged`` (a suspicious residual). Their FCLIB error, from them and their
     velocity ``W r + b``, is within ``tol``: both are finite, and so is their shift."""
     forces = phase.forces
+    cones = scaled.cones
+    pulled = cones.pulled(forces)             # each UNION contact on the piece of its force
+    prepared = scaled if cones.is_convex else scaled.with_cones(cones.with_branches(pulled))
     gradient = scaled.dense_delassus @ forces + scaled.offset
-    shift = coulomb_shift(scaled, forces, gradient)
+    shift = coulomb_shift(prepared, forces, gradient)       # none on a pulled piece
     gradient[:problem.n_contacts] += shift            # g at the shift: W r + b + [s, 0]
-    residual = problem.cones.natural_residual(forces, gradient, project=compiled_projection)
+    residual = prepared.cones.natural_residual(forces, gradient, project=compiled_projection)
     if residual_per_row(residual, forces.size) > SUSPICIOUS_RESIDUAL:
         return None
     scale = scaled.scaling
@@ -175,4 +181,5 @@ def _checked(problem: StepProblem, scaled: StepProblem, phase: _Phase, setup_tim
                          residual_history=phase.history, info=info, shift=shift * scale.length,
                          outer_iterations=1, shift_change=0.0, inner_status=CONVERGED,
                          fixed_point_converged=True, shift_history=np.zeros(1),
-                         pulled=np.zeros(0, dtype=int), branch_flips=[], joint_iterations=0)
+                         pulled=np.zeros(0, dtype=int) if cones.is_convex else np.flatnonzero(pulled),
+                         branch_flips=[], joint_iterations=0)

@@ -6,7 +6,8 @@ import pytest
 
 from lubcontact import scenes
 from lubcontact.bench.hard import load_cases
-from lubcontact.model.laws import Coulomb
+from lubcontact.model.laws import Coulomb, GlueyCoulomb
+from lubcontact.problem.cones import ConeKind
 from lubcontact.sim.simulation import Simulation
 from lubcontact.solvers import CONVERGED, newton, registry, solve_coulomb, solver_info
 from lubcontact.solvers.coulomb import solve_native_coulomb
@@ -37,11 +38,11 @@ def without_first_try(problem, monkeypatch, **options):
         return solve_coulomb(problem, "newton-ac", **options)
 
 
-def settling_steps(grains: int, settled: int, count: int):
-    """``count`` warm-started steps of a settling frictional pile after ``settled`` steps:
-    (problem, warm start, shift) of each."""
-    sim = Simulation(scenes.settling_pile(grains, seed=1), Coulomb(0.3), 0.02, solver="newton-ac",
-                     tol=1e-8, fixed_point=True, tol_fp=1e-6, on_failure="ignore")
+def settling_steps(grains: int, settled: int, count: int, law=None):
+    """``count`` warm-started steps of a settling frictional pile (``Coulomb(0.3)`` by default)
+    after ``settled`` steps: (problem, warm start, shift) of each."""
+    sim = Simulation(scenes.settling_pile(grains, seed=1), law or Coulomb(0.3), 0.02,
+                     solver="newton-ac", tol=1e-8, fixed_point=True, tol_fp=1e-6, on_failure="ignore")
     sim.run(settled)
     steps = []
     for _ in range(count):
@@ -51,35 +52,60 @@ def settling_steps(grains: int, settled: int, count: int):
     return steps
 
 
-@pytest.mark.parametrize("grains", [4, 10, 20])
-def test_the_first_try_gives_the_general_paths_answer_on_a_settling_pile(grains, counted_first_try,
+def same_answers(mine, theirs):
+    """Whether the first try's result is the general path's: forces, velocities, shift, record,
+    pulled contacts to the bit, the residual to rounding."""
+    assert mine.status == theirs.status == CONVERGED
+    assert np.array_equal(mine.forces, theirs.forces)
+    assert np.array_equal(mine.velocities, theirs.velocities)
+    assert np.array_equal(mine.shift, theirs.shift)
+    assert np.array_equal(mine.residual_history, theirs.residual_history)
+    assert np.array_equal(mine.pulled, theirs.pulled)
+    assert mine.iterations == theirs.iterations and mine.info == theirs.info
+    assert (mine.outer_iterations, mine.fixed_point_converged, mine.joint_iterations,
+            mine.branch_flips) == (theirs.outer_iterations, theirs.fixed_point_converged,
+                                   theirs.joint_iterations, theirs.branch_flips)
+    assert abs(mine.residual - theirs.residual) <= 1e-13 * (1.0 + theirs.residual)
+    assert (mine.force_scale, mine.length_scale) == (theirs.force_scale, theirs.length_scale)
+
+
+@pytest.mark.parametrize("grains, law", [(4, None), (10, None), (20, None),
+                                         (10, GlueyCoulomb(0.3, gamma_min=-0.01))])
+def test_the_first_try_gives_the_general_paths_answer_on_a_settling_pile(grains, law,
+                                                                         counted_first_try,
                                                                          monkeypatch):
-    """On warm-started steps of settling frictional piles (6-40 contacts) the first try answers
-    nearly every step, with the general path's forces and velocities to the bit, its iterations,
-    record and shift, and its residual to rounding."""
-    steps = settling_steps(grains, 30, 12)
+    """On warm-started steps of settling frictional piles (6-40 contacts; the gluey one with 2-5
+    UNION contacts at the floor of their glue) the first try answers nearly every step, with the
+    general path's answer (:func:`same_answers`)."""
+    steps = settling_steps(grains, 30, 12, law)
+    if law is not None:
+        assert all(np.any(problem.cones.kinds == ConeKind.UNION) for problem, _, _ in steps)
     counted_first_try.clear()
     for problem, forces, shift in steps:
         mine = solve_coulomb(problem, "newton-ac", tol=1e-8, warm_start=forces, shift=shift)
         theirs = without_first_try(problem, monkeypatch, tol=1e-8, warm_start=forces, shift=shift)
-        assert mine.status == theirs.status == CONVERGED
-        assert np.array_equal(mine.forces, theirs.forces)
-        assert np.array_equal(mine.velocities, theirs.velocities)
-        assert np.array_equal(mine.shift, theirs.shift)
-        assert np.array_equal(mine.residual_history, theirs.residual_history)
-        assert mine.iterations == theirs.iterations and mine.info == theirs.info
-        assert (mine.outer_iterations, mine.fixed_point_converged, mine.joint_iterations) == \
-            (theirs.outer_iterations, theirs.fixed_point_converged, theirs.joint_iterations)
-        assert abs(mine.residual - theirs.residual) <= 1e-13 * (1.0 + theirs.residual)
-        assert (mine.force_scale, mine.length_scale) == (theirs.force_scale, theirs.length_scale)
+        same_answers(mine, theirs)
     answered = sum(answer is not None for answer in counted_first_try)
     assert len(counted_first_try) == len(steps) and answered >= len(steps) - 1
 
 
-@pytest.mark.parametrize("name", ["gamma_states_gluey_coulomb", "tetrahedron_3d_friction"])
-def test_no_first_try_on_union_contacts_or_3d_cones(name, counted_first_try):
-    """UNION contacts (their pieces from the forces) and 3D cones take the general path."""
-    problem = load_cases()[name].problem
+def test_union_contacts_pulled_and_pushed_are_checked_on_the_piece_of_their_force(
+        counted_first_try, monkeypatch):
+    """A gluey + friction problem whose UNION contacts end on both pieces, warm-started 10 % off
+    its answer: the first try answers, with the general path's answer, pulled contacts included."""
+    case = load_cases()["gamma_states_gluey_coulomb"]
+    problem = case.problem
+    warm = 0.9 * without_first_try(problem, monkeypatch, tol=1e-10).forces
+    mine = solve_coulomb(problem, "newton-ac", tol=1e-10, warm_start=warm)
+    theirs = without_first_try(problem, monkeypatch, tol=1e-10, warm_start=warm)
+    assert counted_first_try[-1] is mine
+    same_answers(mine, theirs)
+    union = problem.cones.kinds == ConeKind.UNION
+    assert mine.pulled.size and np.any(union & ~problem.cones.pulled(mine.forces))
+
+
+def test_no_first_try_on_3d_cones(counted_first_try):
+    problem = load_cases()["tetrahedron_3d_friction"].problem
     warm = solve_coulomb(problem, "newton-ac", tol=1e-8).forces
     result = solve_coulomb(problem, "newton-ac", tol=1e-8, warm_start=warm)
     assert result.status == CONVERGED
