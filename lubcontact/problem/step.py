@@ -237,11 +237,12 @@ class StepProblem(ConicProblemMixin):
         (:attr:`dense_jacobian`) and never asks for it (the fixed point on s builds it once,
         for the methods that use the sparse ``W``).
 
-        With ``dense``, where this problem holds no dense Jacobian, the normalised problem's
-        dense forms (:attr:`dense_jacobian`, :attr:`dense_delassus`) are built now, the same
-        arrays, in one compiled call (:func:`~lubcontact.problem.dense_forms.scaled_forms`) that
-        leaves none cached on this problem: for a small solve that knows it takes the dense lane
-        (where this problem holds one, they are built from it on first use, as without ``dense``).
+        With ``dense``, where this problem holds no dense Jacobian (and is not itself a normalised
+        problem), the normalised problem's dense forms (:attr:`dense_jacobian`,
+        :attr:`dense_delassus`) are built now, the same arrays, in one compiled call
+        (:func:`~lubcontact.problem.dense_forms.scaled_forms`) that leaves nothing cached on this
+        problem: for a small solve that knows it takes the dense lane (elsewhere they are built
+        on first use, as without ``dense``).
         """
         n_dof = self.n_dof                 # means as sum / n: np.mean's own overhead is 2 us each
         m_ref = float(self.mass.sum() / n_dof) if n_dof else 1.0
@@ -261,7 +262,7 @@ class StepProblem(ConicProblemMixin):
                                       scaling=scaling, _factor_weight=None,   # M = I, dt = 1
                                       obstacle_offset=None if self.obstacle_offset is None
                                       else self.obstacle_offset / length)
-        if dense and "dense_jacobian" not in self.__dict__:
+        if dense and "dense_jacobian" not in self.__dict__ and "_jacobian_source" not in self.__dict__:
             from .dense_forms import scaled_forms  # numba, imported on first use
 
             jacobian = self.jacobian

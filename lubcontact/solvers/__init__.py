@@ -28,6 +28,7 @@ from .registry import (
     methods,
     reference_method,
     register,
+    register_first_try,
     solve,
     solver_info,
     unregister,
@@ -49,7 +50,7 @@ from .result import (
 from .settings import SolveSettings
 
 __all__ = ["solve", "solve_coulomb", "SolveSettings", "CoulombResult", "methods", "register",
-    "unregister", "solver_info", "capable_methods", "reference_method", "SolverInfo",
+    "register_first_try", "unregister", "solver_info", "capable_methods", "reference_method", "SolverInfo",
     "FIRST_ORDER", "INTERIOR_POINT", "QP", "NEWTON", "KINDS", "check_status", "MethodOutput",
     "SolveResult", "SolverError", "SolverWarning", "CONVERGED", "DIVERGED", "FAILED",
     "INACCURATE", "MAX_ITER", "STATUSES", "CONVEX_CONES"]

@@ -220,7 +220,9 @@ def solve_native_coulomb(problem: ConicProblem, method: str, *, tol: float = 1e-
     ``outer_iterations`` counts them).
 
     A method with a first try (:func:`~lubcontact.solvers.registry.register_first_try`) is given
-    the problem first, once the arguments are checked; its result is returned where it gives one.
+    the problem first, once the arguments are checked (not with options the method does not
+    take, which its call then refuses): where it answers, its normalised problem and output are
+    the first pass's, and everything after (the shift, the pieces, the check) is the same.
 
     Returns
     -------
@@ -237,20 +239,24 @@ def solve_native_coulomb(problem: ConicProblem, method: str, *, tol: float = 1e-
     max_outer = checks.integer("max_outer", max_outer, minimum=1)
     if warm_start is not None:
         warm_start = checks.as_array("warm_start", warm_start, shape=(problem.n_rows,))
-    if info.first_try is not None and info.rejection(problem) is None:
-        first = info.first_try(problem, tol=tol, max_iter=max_iter, warm_start=warm_start, **options)
-        if first is not None:
-            return first
     branches = _Branches(problem, warm_start, threshold=max(1e3 * tol, 1e-7))
     native_union = ConeKind.UNION in info.cones
     if not branches.convex and not native_union and not {ConeKind.COULOMB, ConeKind.NONPOS} <= info.cones:
         raise ValueError(f"method: {method!r} cannot solve this problem: UNION contacts need "
                          "both pieces (COULOMB and NONPOS contacts)")
     accepting_solver(method, problem if native_union else branches.on(problem))   # before solving
+    first = None
+    if info.first_try is not None and not options.keys() - info.parameters:
+        first = info.first_try(problem, tol=tol, max_iter=max_iter, warm_start=warm_start, **options)
     clock = time.perf_counter()
-    unshifted = problem.with_shift(np.zeros(problem.cones.count))   # a copy: no cache on the caller's problem
-    scaled = unshifted.normalized()
-    setup_time, solve_time = time.perf_counter() - clock, 0.0
+    if first is None:
+        # a copy: no cache on the caller's problem
+        scaled = problem.with_shift(np.zeros(problem.cones.count)).normalized()
+        setup_time = time.perf_counter() - clock
+    else:
+        scaled, first_output = first
+        setup_time = 0.0                            # normalising is in the first try's set-up
+    solve_time = 0.0
     force, length = scaled.scaling.force, scaled.scaling.length
     start = None if warm_start is None else warm_start / force
     kwargs = dict(options, tol=tol)
@@ -259,11 +265,12 @@ def solve_native_coulomb(problem: ConicProblem, method: str, *, tol: float = 1e-
     iterations, settled = 0, False
     for outer in range(1, max_outer + 1):  # noqa: B007
         clock = time.perf_counter()
-        out = info.function(scaled if native_union else branches.on(scaled), warm_start=start, **kwargs)
+        out = first_output if first is not None and outer == 1 else \
+            info.function(scaled if native_union else branches.on(scaled), warm_start=start, **kwargs)
         setup, solving = out.times(time.perf_counter() - clock)
         setup_time, solve_time = setup_time + setup, solve_time + solving
         iterations += out.iterations
-        shift = np.zeros(problem.cones.count)
+        shift, gradient = np.zeros(problem.cones.count), None
         if out.status == FAILED or not np.isfinite(out.forces).all():
             prepared, settled = branches.on(scaled), True
             break
@@ -279,16 +286,21 @@ def solve_native_coulomb(problem: ConicProblem, method: str, *, tol: float = 1e-
         if not np.isfinite(found).all():     # forces too large for their velocities: as
             out = MethodOutput(np.zeros_like(out.forces), DIVERGED, out.iterations,  # non-finite
                                out.setup_time, out.solve_time, out.residual_history, out.info)
-            settled = True
+            settled, gradient = True, None
             break
         shift = found
+        if gradient is not None:                 # g at the shift s*: W r + b + [s*, 0]
+            gradient[: problem.n_contacts] += shift / length
         start = out.forces
-        if native_union or not branches.update(branches.on(unshifted).with_shift(shift), out.forces * force,
+        if native_union or not branches.update(branches.on(problem).with_shift(shift), out.forces * force,
                                                length, force):
             settled = True
             break
-    # checked on the pieces the forces were solved on (not those of a last flip: max_outer)
-    result = checked(out, prepared.with_shift(shift / length), method, shift, 0.0, 0.0)
+    # checked on the pieces the forces were solved on (not those of a last flip: max_outer), at
+    # s*, through the dense W where the method built one (no copy of the problem at s*)
+    result = checked(out, prepared, method, shift, 0.0, 0.0, constraint=gradient) \
+        if gradient is not None and settled else \
+        checked(out, prepared.with_shift(shift / length), method, shift, 0.0, 0.0)
     status = result.status if settled else MAX_ITER
     return CoulombResult(**{**vars(result), "status": status, "iterations": iterations,
                             "setup_time": setup_time, "solve_time": solve_time},

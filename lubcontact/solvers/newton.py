@@ -1216,6 +1216,14 @@ def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = M
             origin = rescue.forces               # the next round goes on from the fallback's own
         if status == CONVERGED or kept and best_error <= FALLBACK_GAP * tol:
             break
+    return method_output(function, forces, status, iterations, history, info, start, setup_time)
+
+
+def method_output(function: AlartCurnier, forces: np.ndarray, status: str, iterations: int,
+                  history: np.ndarray, info: dict, start: float, setup_time: float) -> MethodOutput:
+    """:func:`newton_alart_curnier`'s output: ``info`` completed with ``function``'s counters
+    (its docstring), ``solve_time`` from ``start`` (a ``time.perf_counter()`` reading, s) less
+    ``setup_time`` (s)."""
     info.update(reused_factorisations=function.factorisations.reused,     # the polishes' too
                 carried_orderings=function.factorisations.carried,
                 pivoted_factorisations=function.factorisations.pivoted,
@@ -1223,6 +1231,20 @@ def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = M
     return MethodOutput(forces, status, iterations, setup_time=setup_time,
                         solve_time=time.perf_counter() - start - setup_time,
                         residual_history=history, info=info)
+
+
+def first_call(function: AlartCurnier, unshifted: ConicProblem, forces: np.ndarray, tol: float,
+               max_iter: int) -> _Phase:
+    """The first call of :func:`_strategies`' first strategy from ``forces``: its first start
+    (:func:`_starts`) by :func:`_proximal_newton` cut at one pass, labelled as
+    :func:`_strategies` labels it. Where it converged, so did that strategy, with this phase,
+    and :func:`_strategies` returns it (on a problem with friction cones, without the plain try;
+    ``newton-ac``'s first try, :mod:`~.newton_first_try`)."""
+    warm = bool(forces.any())
+    sigma = _first_weight(function, warm)
+    phase = _proximal_newton(function, unshifted, forces, tol, max_iter, sigma, finish=sigma > 0, calls=1)
+    phase.strategies = [(sigma, "warm" if warm else "cold")]
+    return phase
 
 
 def phase_info(phase: _Phase, joint_iterations: int) -> dict:
@@ -1335,14 +1357,20 @@ def _starts(function: AlartCurnier, forces: np.ndarray, cold: bool = True
     """The strategies of :func:`_strategies` from ``forces``, in turn: ``(sigma, start, False)``
     (the plain try aside); without the first weight from zero forces unless ``cold``."""
     warm = bool(forces.any())
-    first = STRATEGIES[0]
-    if warm and function.flow_step:
-        first = WARM_FLOW_WEIGHT
-    elif warm and function.planar and function.small:
-        first = WARM_DENSE_WEIGHT
+    first = _first_weight(function, warm)
     return [(first, forces, False)] \
         + ([(STRATEGIES[0], np.zeros_like(forces), False)] if warm and cold else []) \
         + [(STRATEGIES[0] if sigma == first else sigma, forces, False) for sigma in STRATEGIES[1:]]
+
+
+def _first_weight(function: AlartCurnier, warm: bool) -> float:
+    """The first strategy's weight (:func:`_starts`): :data:`STRATEGIES` ``[0]``, from a warm start
+    :data:`WARM_FLOW_WEIGHT` on a flow's step and :data:`WARM_DENSE_WEIGHT` on a small 2D problem."""
+    if warm and function.flow_step:
+        return WARM_FLOW_WEIGHT
+    if warm and function.planar and function.small:
+        return WARM_DENSE_WEIGHT
+    return STRATEGIES[0]
 
 
 @dataclass
@@ -1369,7 +1397,8 @@ class _JointStart:
 
 
 def _proximal_newton(function: AlartCurnier, unshifted: ConicProblem, forces: np.ndarray,
-                     tol: float, max_iter: int, sigma: float, finish: bool = True) -> _Phase:
+                     tol: float, max_iter: int, sigma: float, finish: bool = True,
+                     calls: int | None = None) -> _Phase:
     """Proximal-point iterations, each solved by Newton, until the FCLIB error is below ``tol``.
 
     Each outer iteration solves (approximately: ``|phi_sigma|`` down by :data:`INNER_REDUCTION`, or
@@ -1406,13 +1435,15 @@ def _proximal_newton(function: AlartCurnier, unshifted: ConicProblem, forces: np
     stops at ``tol``. :func:`_strategies` asks for it after a proximal loop and after the plain
     try, not after plain Newton as a strategy (on two hard cases its iterations did not reach
     round-off); the polish to :data:`JOINT_FINISH` ``tol`` does not (that is its target).
+    ``calls``: at most that many passes of the loop (Newton phases), a strategy's start alone
+    (``newton-ac``'s first try, :mod:`~.newton_first_try`); None: no such cap.
     """
     scale = sigma * function.typical
     decrease = UNION_SIGMA_DECREASE if function.gluey_flow else SIGMA_DECREASE
     cap = UNION_INNER_CAP if function.gluey_flow else INNER_CAP
     error, velocity = function.coulomb_error(unshifted, forces), None
     history, best = [error], (error, forces)
-    iterations = gradient_steps = proximal_steps = 0
+    iterations = gradient_steps = proximal_steps = proximal_calls = 0
     status = MAX_ITER
     floor, floor_error = 0.0, np.inf                # the largest weight that failed lately
     rule = _StallRule(tol)
@@ -1477,6 +1508,9 @@ def _proximal_newton(function: AlartCurnier, unshifted: ConicProblem, forces: np
             scale = max(scale / decrease, SIGMA_MIN * function.typical)     # weight that failed
         if inner.iterations == 0:
             status = FAILED
+            break
+        proximal_calls += 1
+        if proximal_calls == calls:
             break
     if best[0] <= tol:
         status = CONVERGED

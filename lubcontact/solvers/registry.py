@@ -40,7 +40,6 @@ from .result import (
     FAILED,
     INACCURATE,
     SUSPICIOUS_RESIDUAL,
-    CoulombResult,
     MethodOutput,
     SolveResult,
     residual_per_row,
@@ -58,7 +57,7 @@ ALL_CONES = frozenset(ConeKind)
 CONVEX_CONES = frozenset(ConeKind) - {ConeKind.UNION}
 
 Method = Callable[..., MethodOutput]
-FirstTry = Callable[..., CoulombResult | None]
+FirstTry = Callable[..., tuple[ConicProblem, MethodOutput] | None]
 
 
 @dataclass(frozen=True)
@@ -96,9 +95,8 @@ class SolverInfo:
     parameters : frozenset of str
         The keyword parameters of ``function`` (read once, at registration).
     first_try : callable or None
-        A native Coulomb method's quick solve of its common case
-        (:func:`register_first_try`), which
-        :func:`~lubcontact.solvers.coulomb.solve_native_coulomb` tries first; None: none.
+        A native Coulomb method's quick solve of its common case (:func:`register_first_try`),
+        which :func:`~lubcontact.solvers.coulomb.solve_native_coulomb` tries first; None: none.
     """
 
     name: str
@@ -175,21 +173,31 @@ def register(name: str, *, kind: str = FIRST_ORDER, cones: Iterable[ConeKind] = 
 def register_first_try(name: str) -> Callable[[FirstTry], FirstTry]:
     """Decorator giving the registered native Coulomb method ``name`` a first try.
 
-    ``first_try(problem, *, tol, max_iter, warm_start, **options) -> CoulombResult or None`` is
-    called by :func:`~lubcontact.solvers.coulomb.solve_native_coulomb` on the physical problem,
-    with the arguments checked and the method's options, before anything else. It returns the
-    result of the method's common case, computed and checked as the general path computes and
-    checks it (the same forces, status and record), or None where that case does not apply
-    or did not converge: the general path then solves the problem from the start.
+    :func:`~lubcontact.solvers.coulomb.solve_native_coulomb` calls
+    ``first_try(problem, *, tol, max_iter, warm_start, **options)`` on the physical problem,
+    with the arguments checked and the method's options, before it normalises the problem. The
+    first try answers the method's common case quickly: the normalised problem without shift
+    (its ``scaling`` maps back) and the method's output on it, exactly what the method called on
+    that problem would return (the general path then takes them as its first pass's, and the
+    shift, the pieces and the check that follow are the same); or None, and the general path
+    solves the problem from the start.
+
+    Parameters
+    ----------
+    name : str
+        A registered method with ``native_coulomb`` and no first try yet.
 
     Raises
     ------
     ValueError
-        For a method that is not registered, or one that does not solve exact Coulomb itself.
+        For a method that is not registered, one that does not solve exact Coulomb itself, or
+        one that has a first try already.
     """
     info = solver_info(name)
     if not info.native_coulomb:
         raise ValueError(f"name: {name!r} does not solve exact Coulomb itself (native_coulomb)")
+    if info.first_try is not None:
+        raise ValueError(f"name: {name!r} has a first try already")
 
     def wrap(function: FirstTry) -> FirstTry:
         _REGISTRY[name] = replace(info, first_try=function)
@@ -297,7 +305,8 @@ def solve(problem: ConicProblem, method: str = "clarabel", *, tol: float = 1e-9,
 
 
 def checked(out: MethodOutput, scaled: ConicProblem, method: str, shift: np.ndarray,
-            call_time: float, normalise_time: float) -> SolveResult:
+            call_time: float, normalise_time: float,
+            constraint: np.ndarray | None = None) -> SolveResult:
     """A method's output checked on the problem it solved and mapped back to physical units.
 
     The check every result goes through (:func:`solve`, and
@@ -320,6 +329,11 @@ def checked(out: MethodOutput, scaled: ConicProblem, method: str, shift: np.ndar
     call_time, normalise_time : float
         Seconds of the method's call (its own split where it gives one: :meth:`MethodOutput.times`)
         and of normalising, counted as set-up.
+    constraint : ndarray, shape (n_rows,), optional
+        ``g`` at the forces on ``scaled``, where the caller has computed it from them (``W r + b``
+        through a dense ``W``, :func:`~lubcontact.solvers.coulomb.solve_native_coulomb`; its
+        shift may differ from ``scaled``'s, which it then replaces); by default
+        ``g(v(r))``, from the velocities.
     """
     scale = scaled.scaling
     status = out.status
@@ -328,8 +342,10 @@ def checked(out: MethodOutput, scaled: ConicProblem, method: str, shift: np.ndar
         status = FAILED if status == FAILED else DIVERGED
         forces = np.zeros_like(forces)
     scaled_velocities = scaled.velocity(forces)      # the residual's and the result's
-    residual = scaled.cones.natural_residual(forces, scaled.constraint_values(scaled_velocities),
-                                             project=compiled_projection) if forces.size else 0.0
+    if constraint is None or forces is not out.forces:
+        constraint = scaled.constraint_values(scaled_velocities)
+    residual = scaled.cones.natural_residual(forces, constraint, project=compiled_projection) \
+        if forces.size else 0.0
     if status == CONVERGED and residual_per_row(residual, forces.size) > SUSPICIOUS_RESIDUAL:
         status = INACCURATE          # the method's claim does not survive an independent check
         out.info["claimed_status"] = CONVERGED

@@ -158,8 +158,9 @@ def test_the_dense_forms_sum_entries_stored_twice_and_weight_the_columns():
 def test_dense_normalising_builds_the_lazy_dense_forms_at_once_none_on_the_source(seed, doubled):
     """``normalized(dense=True)`` gives the dense Jacobian and ``W`` that the lazy properties
     build, to the bit (a Jacobian with entries stored twice too), without caching a dense form
-    on the problem normalised; where that problem holds its dense Jacobian, the forms come from
-    it on first use as without ``dense``."""
+    on the problem normalised; where that problem holds its dense Jacobian, or is itself
+    normalised (its sparse Jacobian built on first use), the forms come on first use as without
+    ``dense``."""
     problem = _frictional_problem(seed, n_dof=40)
     if doubled:
         source = problem.jacobian
@@ -177,6 +178,8 @@ def test_dense_normalising_builds_the_lazy_dense_forms_at_once_none_on_the_sourc
     held = problem.normalized(dense=True)
     assert "dense_jacobian" not in held.__dict__
     assert np.array_equal(held.dense_delassus, lazy.dense_delassus)
+    again = eager.normalized(dense=True)      # of a normalised problem: lazily, as without dense
+    assert "dense_jacobian" not in again.__dict__ and "jacobian" not in eager.__dict__
 
 
 def test_a_problem_without_rows_has_an_empty_dense_lane():
