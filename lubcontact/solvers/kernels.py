@@ -581,7 +581,7 @@ def contact_steps(diagonal, tangential, tangent_dim):
     largest (normal rows, then ``tangent_dim`` rows per contact of ``tangential``), and the
     median ``W_nn`` (1 without contacts), from the normal rows' diagonal of ``W``, shape (nc,)
     (:func:`~lubcontact.solvers.newton.contact_steps`; in numpy its dozen array operations took
-    15 us of a 6-contact solve)."""
+    15 us of a 6-contact solve, line by line over settling steps, against 5 us compiled)."""
     count = diagonal.size
     largest = 0.0
     for contact in range(count):

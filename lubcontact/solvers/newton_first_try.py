@@ -6,8 +6,8 @@ first strategy (:func:`~.newton.first_call`: the proximal loop's first pass from
 converges on almost every step (197-200 of 200 captured steps of settling piles of 4 to 40
 grains). Around that call the general path (:func:`~.newton.newton_alart_curnier`,
 :func:`~.newton._strategies`, and in :func:`~lubcontact.solvers.coulomb.solve_native_coulomb` a
-copy of the problem to normalise) spent a third of a solve (docs/records/benchmarks.md,
-"newton-ac's first try on small steps").
+copy of the problem to normalise) spent a sixth to a third of a solve at 7-66 contacts
+(docs/records/benchmarks.md, "newton-ac's first try on small steps").
 
 :func:`first_try` normalises the problem with its dense ``W`` built at once
 (``StepProblem.normalized(dense=True)``, the same arrays), builds the
@@ -17,8 +17,8 @@ strategy, and on a small problem with friction cones nothing runs before it (no 
 joint phase) and nothing after (no finish, no fallback). ``solve_native_coulomb`` then takes the
 output as its first pass's, and the shift, the pieces of UNION contacts and the check that
 follow are its own. Elsewhere the first try returns None and the general path solves the step
-from the start, repeating the first call: such a step costs more than without the first try
-(about 1.4-1.6 times on the measured steps), and settling piles had 0-3 of them in 200 steps.
+from the start, repeating the first call: such a step cost 1.35-1.65 times a solve without the
+first try, and settling piles had 0-3 of them in 200 steps.
 """
 from __future__ import annotations
 
