@@ -221,8 +221,9 @@ def solve_native_coulomb(problem: ConicProblem, method: str, *, tol: float = 1e-
 
     A method with a first try (:func:`~lubcontact.solvers.registry.register_first_try`) is given
     the problem first, once the arguments are checked (not with options the method does not
-    take, which its call then refuses): where it answers, its normalised problem and output are
-    the first pass's, and everything after (the shift, the pieces, the check) is the same.
+    take, which its call then refuses, nor, for a method that needs the pieces fixed, with UNION
+    contacts): where it answers, its normalised problem and output are the first pass's, and
+    everything after (the shift, the pieces, the check) is the same.
 
     Returns
     -------
@@ -246,7 +247,8 @@ def solve_native_coulomb(problem: ConicProblem, method: str, *, tol: float = 1e-
                          "both pieces (COULOMB and NONPOS contacts)")
     accepting_solver(method, problem if native_union else branches.on(problem))   # before solving
     first = None
-    if info.first_try is not None and not options.keys() - info.parameters:
+    if info.first_try is not None and (native_union or branches.convex) \
+            and not options.keys() - info.parameters:
         first = info.first_try(problem, tol=tol, max_iter=max_iter, warm_start=warm_start, **options)
     clock = time.perf_counter()
     if first is None:
@@ -298,9 +300,10 @@ def solve_native_coulomb(problem: ConicProblem, method: str, *, tol: float = 1e-
             break
     # checked on the pieces the forces were solved on (not those of a last flip: max_outer), at
     # s*, through the dense W where the method built one (no copy of the problem at s*)
-    result = checked(out, prepared, method, shift, 0.0, 0.0, constraint=gradient) \
-        if gradient is not None and settled else \
-        checked(out, prepared.with_shift(shift / length), method, shift, 0.0, 0.0)
+    if gradient is not None:
+        result = checked(out, prepared, method, shift, 0.0, 0.0, constraint=gradient)
+    else:
+        result = checked(out, prepared.with_shift(shift / length), method, shift, 0.0, 0.0)
     status = result.status if settled else MAX_ITER
     return CoulombResult(**{**vars(result), "status": status, "iterations": iterations,
                             "setup_time": setup_time, "solve_time": solve_time},

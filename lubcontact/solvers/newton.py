@@ -569,7 +569,9 @@ class AlartCurnier:
         self.lower, self.upper = projector.lower.copy(), projector.upper.copy()
         self.cone_n, self.cone_t = projector.friction_normal, projector.friction_tangent
         self.cone_mu, self.unilateral = projector.friction_mu, ~projector.friction_union
-        self.box = box_rows(cones)
+        self.box = np.ones(self.n_rows, dtype=bool)
+        self.box[self.cone_n[self.unilateral]] = False
+        self.box[self.cone_t.ravel()] = False
         self.diagonal = self.W.diagonal()      # (a sparse W's: a pass over its entries)
         self.rho, self.typical = contact_steps(self.diagonal[:nc], cones)
         self.dim_t = dim_t
@@ -598,12 +600,18 @@ class AlartCurnier:
                     factor.nnz + transpose.nnz <= FACTOR_PRODUCT_SHARE * self.W.nnz:
                 self.factor_arrays = operator_arrays(factor, transpose)
             self.reduced_blocks = _ReducedBlocks(self.w_arrays, self.rho, self.factor_arrays)
-        self.q_scale = fclib_scale(self.q)
+        self.q_scale = 1.0 + float(np.sqrt(self.q @ self.q))
         if self.planar:             # one tangential row per contact, as the kernels take them
             self.tangent_rows = projector.planar_tangent
         if self.compiled:
             self.W = np.ascontiguousarray(self.W)
-            self.w_arrays, self.elimination_places = dense_elimination(self.W)
+            self.w_arrays, self.elimination_places = _NOT_BY_ROWS, _NO_PLACES
+            if self.n_rows >= STATIC_DENSE_ROWS:
+                compiled = kernels()
+                self.w_arrays = compiled.compressed_rows(self.W)
+                order = ordering().approximate_minimum_degree(
+                    *compiled.symmetrised_pattern(*self.w_arrays[:2]))
+                self.elimination_places = places_of(order)
 
     @cached_property
     def scaled_W(self) -> sp.csr_matrix | np.ndarray:
@@ -922,16 +930,6 @@ def lanes(problem: ConicProblem) -> tuple[bool, bool, bool]:
             is_small(problem) or planar and problem.n_rows <= DENSE_LIMIT)
 
 
-def box_rows(cones: Cones) -> np.ndarray:
-    """The rows outside the friction cones (box rows, the bilateral normal rows of UNION contacts
-    among them), bool, shape (n_rows,)."""
-    projector = cones.projector
-    box = np.ones(cones.n_rows, dtype=bool)
-    box[projector.friction_normal[~projector.friction_union]] = False
-    box[projector.friction_tangent.ravel()] = False
-    return box
-
-
 def contact_steps(diagonal: np.ndarray, cones: Cones) -> tuple[np.ndarray, float]:
     """Each row's step ``rho = 1 / W_nn`` of its contact (``W_nn`` floored at ``1e-12`` of the
     largest), shape (n_rows,), and the median ``W_nn`` (1 without contacts), from the normal
@@ -939,23 +937,6 @@ def contact_steps(diagonal: np.ndarray, cones: Cones) -> tuple[np.ndarray, float
     rho, typical = kernels().contact_steps(np.ascontiguousarray(diagonal), cones.tangential,
                                            cones.tangent_dim)
     return rho, float(typical)
-
-
-def fclib_scale(q: np.ndarray) -> float:
-    """``1 + |q|``, the FCLIB error's denominator."""
-    return 1.0 + float(np.sqrt(q @ q))
-
-
-def dense_elimination(W: np.ndarray) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarray], np.ndarray]:
-    """The compiled lane's ``w_arrays`` and ``elimination_places`` of a dense ``W``
-    (:class:`AlartCurnier`): from :data:`STATIC_DENSE_ROWS` rows its nonzero entries by rows
-    and each row's place in a minimum-degree order of its pattern; below, empty."""
-    if W.shape[0] < STATIC_DENSE_ROWS:
-        return _NOT_BY_ROWS, _NO_PLACES
-    compiled = kernels()
-    w_arrays = compiled.compressed_rows(W)
-    order = ordering().approximate_minimum_degree(*compiled.symmetrised_pattern(*w_arrays[:2]))
-    return w_arrays, places_of(order)
 
 
 class _ReducedBlocks:
@@ -1235,16 +1216,10 @@ def method_output(function: AlartCurnier, forces: np.ndarray, status: str, itera
 
 def first_call(function: AlartCurnier, unshifted: ConicProblem, forces: np.ndarray, tol: float,
                max_iter: int) -> _Phase:
-    """The first call of :func:`_strategies`' first strategy from ``forces``: its first start
-    (:func:`_starts`) by :func:`_proximal_newton` cut at one pass, labelled as
-    :func:`_strategies` labels it. Where it converged, so did that strategy, with this phase,
-    and :func:`_strategies` returns it (on a problem with friction cones, without the plain try;
-    ``newton-ac``'s first try, :mod:`~.newton_first_try`)."""
-    warm = bool(forces.any())
-    sigma = _first_weight(function, warm)
-    phase = _proximal_newton(function, unshifted, forces, tol, max_iter, sigma, finish=sigma > 0, calls=1)
-    phase.strategies = [(sigma, "warm" if warm else "cold")]
-    return phase
+    """The first call of :func:`_strategies`' first start from ``forces``: :func:`_strategies`
+    cut there (``calls`` 1). Where it converged, so did that start, with this phase, and
+    :func:`_strategies` returns it (``newton-ac``'s first try, :mod:`~.newton_first_try`)."""
+    return _strategies(function, unshifted, forces, tol, max_iter, calls=1)
 
 
 def phase_info(phase: _Phase, joint_iterations: int) -> dict:
@@ -1290,7 +1265,8 @@ def fallback_chain(cones: Cones, fallback: str | None) -> tuple[str, ...]:
 
 
 def _strategies(function: AlartCurnier, unshifted: ConicProblem, forces: np.ndarray,
-                tol: float, max_iter: int, rescue: _JointStart | None = None) -> _Phase:
+                tol: float, max_iter: int, rescue: _JointStart | None = None,
+                calls: int | None = None) -> _Phase:
     """:func:`_proximal_newton` with each ``sigma`` of :data:`STRATEGIES` in turn, each from
     ``forces`` (a strategy's stalled iterate is a worse start than the warm start, measured),
     the first also from zero forces when ``forces`` is not zero (from a warm start on a flow's
@@ -1312,7 +1288,9 @@ def _strategies(function: AlartCurnier, unshifted: ConicProblem, forces: np.ndar
     ``rescue`` (the joint phase, on the dense lanes: :class:`_JointStart`) is called once, with
     the warm start, where the first weight has stalled from it and from zero forces; where it
     returns forces, the first weight and the others start from them instead (labelled
-    ``"joint"`` in ``strategies``), as on the sparse lane from the joint phase's forces."""
+    ``"joint"`` in ``strategies``), as on the sparse lane from the joint phase's forces.
+    ``calls``: the first start alone, its loop cut at that many passes (:func:`first_call`); None:
+    every strategy, uncut."""
     best, history, tried = None, [], []
     iterations = gradient_steps = proximal_steps = 0
     warm = bool(forces.any())
@@ -1327,7 +1305,7 @@ def _strategies(function: AlartCurnier, unshifted: ConicProblem, forces: np.ndar
         index += 1
         budget = PLAIN_TRY if is_plain_try else max_iter - iterations
         phase = _proximal_newton(function, unshifted, start, tol, budget, sigma,
-                                 finish=sigma > 0 or is_plain_try)
+                                 finish=sigma > 0 or is_plain_try, calls=calls)
         if is_plain_try and phase.status != CONVERGED:
             phase.status = STALLED                  # its cap, not the solve's max_iter
         tried.append((sigma, label if start is forces else "cold"))
@@ -1340,7 +1318,7 @@ def _strategies(function: AlartCurnier, unshifted: ConicProblem, forces: np.ndar
         zero_forces_next = warm and index < len(starts) and not starts[index][1].any()
         near_tol = not function.compiled and not is_plain_try and best.error <= STRATEGY_GAP * tol \
             and not (function.gluey_flow and zero_forces_next)
-        if phase.status == CONVERGED or iterations >= max_iter or near_tol:
+        if phase.status == CONVERGED or iterations >= max_iter or near_tol or calls is not None:
             break
         if rescue is not None and index == rescue_at:
             joined = rescue(forces)
@@ -1357,20 +1335,14 @@ def _starts(function: AlartCurnier, forces: np.ndarray, cold: bool = True
     """The strategies of :func:`_strategies` from ``forces``, in turn: ``(sigma, start, False)``
     (the plain try aside); without the first weight from zero forces unless ``cold``."""
     warm = bool(forces.any())
-    first = _first_weight(function, warm)
+    first = STRATEGIES[0]
+    if warm and function.flow_step:
+        first = WARM_FLOW_WEIGHT
+    elif warm and function.planar and function.small:
+        first = WARM_DENSE_WEIGHT
     return [(first, forces, False)] \
         + ([(STRATEGIES[0], np.zeros_like(forces), False)] if warm and cold else []) \
         + [(STRATEGIES[0] if sigma == first else sigma, forces, False) for sigma in STRATEGIES[1:]]
-
-
-def _first_weight(function: AlartCurnier, warm: bool) -> float:
-    """The first strategy's weight (:func:`_starts`): :data:`STRATEGIES` ``[0]``, from a warm start
-    :data:`WARM_FLOW_WEIGHT` on a flow's step and :data:`WARM_DENSE_WEIGHT` on a small 2D problem."""
-    if warm and function.flow_step:
-        return WARM_FLOW_WEIGHT
-    if warm and function.planar and function.small:
-        return WARM_DENSE_WEIGHT
-    return STRATEGIES[0]
 
 
 @dataclass
@@ -1510,7 +1482,7 @@ def _proximal_newton(function: AlartCurnier, unshifted: ConicProblem, forces: np
             status = FAILED
             break
         proximal_calls += 1
-        if proximal_calls == calls:
+        if calls is not None and proximal_calls >= calls:
             break
     if best[0] <= tol:
         status = CONVERGED

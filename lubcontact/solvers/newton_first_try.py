@@ -1,13 +1,14 @@
-"""``newton-ac``'s first try: a small 2D exact-Coulomb step solved without the general layers.
+"""``newton-ac``'s first try: a small 2D exact-Coulomb step by its first Newton call alone.
 
 A small system's step (a 2D problem on the compiled lane with friction cones, warm-started from
 the previous step) is the common case of exact Coulomb by ``newton-ac``: the first call of its
 first strategy (:func:`~.newton.first_call`: the proximal loop's first pass from the warm start)
 converges on almost every step (197-200 of 200 captured steps of settling piles of 4 to 40
-grains). Around that call the general path (:func:`~.newton.newton_alart_curnier`,
-:func:`~.newton._strategies`, and in :func:`~lubcontact.solvers.coulomb.solve_native_coulomb` a
-copy of the problem to normalise) spent a sixth to a third of a solve at 7-66 contacts
-(docs/records/benchmarks.md, "newton-ac's first try on small steps").
+grains). Around that call the layers the first try leaves out (:func:`~.newton.newton_alart_curnier`
+and :func:`~.newton._strategies` in full, and in
+:func:`~lubcontact.solvers.coulomb.solve_native_coulomb` a copy of the problem to normalise)
+spent a sixth to a third of a solve at 7-66 contacts (docs/records/benchmarks.md, "newton-ac's
+first try on small steps").
 
 :func:`first_try` normalises the problem with its dense ``W`` built at once
 (``StepProblem.normalized(dense=True)``, the same arrays), builds the
@@ -50,19 +51,20 @@ def first_try(problem: ConicProblem, *, tol: float, max_iter: int | None = None,
         Initial forces (physical units); without one (or with zero forces) there is no first try.
     **options
         ``newton-ac``'s other options (``fallback``, ``joint``): neither acts before its first
-        strategy has run, nor after a converged one.
+        strategy has run, nor after a converged one, and neither is read here (nor checked:
+        ``newton-ac`` has no check of its own for them).
 
     Returns
     -------
     (StepProblem, MethodOutput) or None
         The normalised problem (without shift) and ``newton-ac``'s converged output on it, the
-        general path's; None where the problem is not such a step (a local problem, 3D cones,
-        no friction cone, more rows than the small compiled lane takes, no warm start) or the
-        first call did not converge.
+        general path's; None where the problem is not such a step (a local problem, one already
+        normalised, 3D cones, no friction cone, more rows than the small compiled lane takes, no
+        warm start or zero forces) or the first call did not converge.
     """
     cones = problem.cones
-    if warm_start is None or not isinstance(problem, StepProblem) or not cones.has_friction \
-            or not all(newton.lanes(problem)):
+    if warm_start is None or not isinstance(problem, StepProblem) or problem.scaling is not None \
+            or not cones.has_friction or not all(newton.lanes(problem)):
         return None
     clock = time.perf_counter()
     unshifted = problem if not problem.shift.any() else problem.with_shift(np.zeros(cones.count))

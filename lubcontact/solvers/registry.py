@@ -95,8 +95,9 @@ class SolverInfo:
     parameters : frozenset of str
         The keyword parameters of ``function`` (read once, at registration).
     first_try : callable or None
-        A native Coulomb method's quick solve of its common case (:func:`register_first_try`),
-        which :func:`~lubcontact.solvers.coulomb.solve_native_coulomb` tries first; None: none.
+        A native Coulomb method's quick answer to its common case, the normalised problem and
+        the method's output on it (:func:`register_first_try`), which
+        :func:`~lubcontact.solvers.coulomb.solve_native_coulomb` tries first; None: none.
     """
 
     name: str
@@ -332,8 +333,8 @@ def checked(out: MethodOutput, scaled: ConicProblem, method: str, shift: np.ndar
     constraint : ndarray, shape (n_rows,), optional
         ``g`` at the forces on ``scaled``, where the caller has computed it from them (``W r + b``
         through a dense ``W``, :func:`~lubcontact.solvers.coulomb.solve_native_coulomb`; its
-        shift may differ from ``scaled``'s, which it then replaces); by default
-        ``g(v(r))``, from the velocities.
+        shift may differ from ``scaled``'s, which it then replaces); by default, and where the
+        forces are not finite (replaced by zeros), ``g(v(r))`` from the velocities.
     """
     scale = scaled.scaling
     status = out.status

@@ -88,6 +88,33 @@ def test_the_first_try_gives_the_general_paths_answer_on_a_settling_pile(grains,
     assert len(counted_first_try) == len(steps) and answered(counted_first_try) >= len(steps) - 1
 
 
+@pytest.mark.parametrize("rule, value, answers", [("WARM_DENSE_WEIGHT", 0.0, 4),
+                                                  ("CHAINED_SUBPROBLEMS", False, 0),
+                                                  ("INNER_CAP", 1, 2)])
+def test_the_first_try_follows_newtons_rules_as_they_are(rule, value, answers, counted_first_try,
+                                                        monkeypatch):
+    """With a rule of newton-ac changed (plain Newton as the first weight; the subproblems one
+    call each, where one call no longer reaches tol; one Newton iteration per subproblem), the
+    first try still gives the general path's answer on 40-grain steps at tol 1e-12, where it
+    answers: it makes the first call by the rules, not by a copy of them."""
+    steps = settling_steps(40, 150, 4)
+    monkeypatch.setattr(newton, rule, value)
+    counted_first_try.clear()
+    for problem, forces, shift in steps:
+        mine = solve_coulomb(problem, "newton-ac", tol=1e-12, warm_start=forces, shift=shift)
+        same_answers(mine, without_first_try(problem, monkeypatch, tol=1e-12, warm_start=forces,
+                                             shift=shift))
+    assert len(counted_first_try) == len(steps) and answered(counted_first_try) == answers
+
+
+def test_no_first_try_on_a_problem_already_normalised(counted_first_try):
+    problem, forces, _ = settling_steps(4, 30, 1)[0]
+    scaled = problem.normalized()
+    counted_first_try.clear()
+    result = solve_coulomb(scaled, "newton-ac", tol=1e-8, warm_start=forces / scaled.scaling.force)
+    assert result.status == CONVERGED and counted_first_try == [None]
+
+
 def test_union_contacts_pulled_and_pushed_are_checked_on_the_piece_of_their_force(
         counted_first_try, monkeypatch):
     """A gluey + friction problem whose UNION contacts end on both pieces, warm-started 10 % off
