@@ -7,7 +7,7 @@ converges on almost every step (197-200 of 200 captured steps of settling piles 
 grains). Around that call the layers the first try leaves out (:func:`~.newton.newton_alart_curnier`
 and :func:`~.newton._strategies` in full, and in
 :func:`~lubcontact.solvers.coulomb.solve_native_coulomb` a copy of the problem to normalise)
-spent a sixth to a third of a solve at 7-66 contacts (docs/records/benchmarks.md, "newton-ac's
+spent a tenth to a sixth of a solve at 7-66 contacts (docs/records/benchmarks.md, "newton-ac's
 first try on small steps").
 
 :func:`first_try` normalises the problem with its dense ``W`` built at once
