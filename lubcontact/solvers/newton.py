@@ -1315,9 +1315,8 @@ def _strategies(function: AlartCurnier, unshifted: ConicProblem, forces: np.ndar
         history.extend(phase.history if not history else phase.history[1:])
         if best is None or phase.error < best.error:
             best = phase
-        zero_forces_next = warm and index < len(starts) and not starts[index][1].any()
         near_tol = not function.compiled and not is_plain_try and best.error <= STRATEGY_GAP * tol \
-            and not (function.gluey_flow and zero_forces_next)
+            and not (function.gluey_flow and _zero_forces_next(starts, index, warm))
         if phase.status == CONVERGED or iterations >= max_iter or near_tol or calls is not None:
             break
         if rescue is not None and index == rescue_at:
@@ -1328,6 +1327,12 @@ def _strategies(function: AlartCurnier, unshifted: ConicProblem, forces: np.ndar
     return _Phase(forces=best.forces, status=best.status, iterations=iterations, error=best.error,
                   history=np.asarray(history), gradient_steps=gradient_steps,
                   proximal_steps=proximal_steps, strategies=tried)
+
+
+def _zero_forces_next(starts: list[tuple[float, np.ndarray, bool]], index: int, warm: bool) -> bool:
+    """Whether the next of :func:`_strategies`' ``starts`` (after ``index``) is the first weight
+    from zero forces, which follows a warm start (asked only where it decides: an array pass)."""
+    return warm and index < len(starts) and not starts[index][1].any()
 
 
 def _starts(function: AlartCurnier, forces: np.ndarray, cold: bool = True
