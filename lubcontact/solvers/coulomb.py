@@ -253,10 +253,11 @@ def solve_native_coulomb(problem: ConicProblem, method: str, *, tol: float = 1e-
     clock = time.perf_counter()
     if first is None:
         # a copy: no cache on the caller's problem
-        scaled = problem.with_shift(np.zeros(problem.cones.count)).normalized()
+        unshifted = problem.with_shift(np.zeros(problem.cones.count))
+        scaled = unshifted.normalized()
         setup_time = time.perf_counter() - clock
-    else:
-        scaled, first_output = first
+    else:               # (no piece flips where a first try answers: convex cones, or UNION taken)
+        unshifted, (scaled, first_output) = problem, first
         setup_time = 0.0                            # normalising is in the first try's set-up
     solve_time = 0.0
     force, length = scaled.scaling.force, scaled.scaling.length
@@ -294,7 +295,7 @@ def solve_native_coulomb(problem: ConicProblem, method: str, *, tol: float = 1e-
         if gradient is not None:                 # g at the shift s*: W r + b + [s*, 0]
             gradient[: problem.n_contacts] += shift / length
         start = out.forces
-        if native_union or not branches.update(branches.on(problem).with_shift(shift), out.forces * force,
+        if native_union or not branches.update(branches.on(unshifted).with_shift(shift), out.forces * force,
                                                length, force):
             settled = True
             break
