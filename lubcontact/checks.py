@@ -13,6 +13,8 @@ from numpy.typing import ArrayLike
 
 def _show(value: ArrayLike) -> str:
     arr = np.asarray(value)
+    if arr.dtype.kind not in "iubfc":               # a string, None, an object: as it is
+        return repr(value)
     if arr.size <= 6:
         if not arr.ndim:
             return repr(int(arr)) if arr.dtype.kind in "iub" else repr(float(arr))
@@ -77,7 +79,9 @@ def integer(field: str, value: float, minimum: int = 0) -> int:
     """An integer (an integral float such as 3.0 is accepted) >= ``minimum``."""
     if type(value) is int and value >= minimum:          # the common case, without an array
         return value
-    ok = np.ndim(value) == 0 and np.isfinite(value) and float(value) == int(value)
+    number = np.asarray(value)
+    ok = number.ndim == 0 and number.dtype.kind in "iubf" and np.isfinite(number) \
+        and float(number) == int(number)
     require(bool(ok) and int(value) >= minimum, field, f"must be an integer >= {minimum}", value)
     return int(value)
 

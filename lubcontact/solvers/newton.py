@@ -81,6 +81,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from .. import checks
 from ..problem.cones import Cones
 from ..problem.conic import ConicProblem
 from ..problem.metrics import coulomb_error
@@ -91,7 +92,7 @@ from .coulomb import solve_coulomb
 from .dual_data import DENSE_LIMIT, dense_lu, dense_lu_solve, is_small
 from .factorisations import STATIC_LU_BACKWARD_ERROR, Factorisations, places_of
 from .gauss_seidel import Sweeps
-from .registry import ALL_CONES, NEWTON, register, solver_info
+from .registry import ALL_CONES, NEWTON, methods, register, solver_info
 from .result import CONVERGED, DIVERGED, FAILED, INACCURATE, MAX_ITER, MethodOutput
 
 LINE_SEARCH_MEMORY = 5
@@ -1144,6 +1145,7 @@ def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = M
         ``fallback_status`` (the last call's: for a fallback run in rounds,
         :func:`fallback_rounds`, its last round's) when a fallback ran.
     """
+    joint = checked_options(fallback=fallback, joint=joint)["joint"]
     start = time.perf_counter()
     function = AlartCurnier(problem)
     unshifted = problem.with_shift(np.zeros(problem.cones.count)) if problem.shift.any() else problem
@@ -1198,6 +1200,19 @@ def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = M
         if status == CONVERGED or kept and best_error <= FALLBACK_GAP * tol:
             break
     return method_output(function, forces, status, iterations, history, info, start, setup_time)
+
+
+def checked_options(**options) -> dict:
+    """:func:`newton_alart_curnier`'s ``fallback`` and ``joint`` where given, checked (``joint`` as
+    an int): ``ValueError`` naming the option for a ``fallback`` other than None, ``"auto"`` or a
+    registered method, and for a ``joint`` that is not an integer >= 0."""
+    if "fallback" in options:
+        fallback = options["fallback"]
+        checks.require(fallback is None or fallback == "auto" or fallback in methods(), "fallback",
+                       "must be None, 'auto' or a registered method", fallback)
+    if "joint" in options:
+        options["joint"] = checks.integer("joint", options["joint"], minimum=0)
+    return options
 
 
 def method_output(function: AlartCurnier, forces: np.ndarray, status: str, iterations: int,

@@ -50,9 +50,9 @@ def first_try(problem: ConicProblem, *, tol: float, max_iter: int | None = None,
     warm_start : ndarray, shape (n_rows,), optional
         Initial forces (physical units); without one (or with zero forces) there is no first try.
     **options
-        ``newton-ac``'s other options (``fallback``, ``joint``): neither acts before its first
-        strategy has run, nor after a converged one, and neither is read here (nor checked:
-        ``newton-ac`` has no check of its own for them).
+        ``newton-ac``'s other options (``fallback``, ``joint``), checked as it checks them
+        (:func:`~.newton.checked_options`): neither acts before its first strategy has run, nor
+        after a converged one.
 
     Returns
     -------
@@ -62,6 +62,7 @@ def first_try(problem: ConicProblem, *, tol: float, max_iter: int | None = None,
         normalised, 3D cones, no friction cone, more rows than the small compiled lane takes, no
         warm start or zero forces) or the first call did not converge.
     """
+    newton.checked_options(**options)
     cones = problem.cones
     if warm_start is None or not isinstance(problem, StepProblem) or problem.scaling is not None \
             or not cones.has_friction or not all(newton.lanes(problem)):

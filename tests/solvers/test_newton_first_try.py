@@ -193,6 +193,21 @@ def test_an_option_the_method_does_not_take_is_refused_by_its_call(counted_first
     assert counted_first_try == []
 
 
+@pytest.mark.parametrize("option, value", [("fallback", "nope"), ("fallback", 3), ("joint", -1),
+                                           ("joint", "x"), ("joint", 1.5)])
+@pytest.mark.parametrize("first", [True, False])
+def test_newton_ac_s_options_are_checked_with_or_without_the_first_try(option, value, first,
+                                                                      monkeypatch):
+    """A ``fallback`` that is not None, "auto" or a registered method, and a ``joint`` that is not
+    an integer >= 0, are a ValueError naming the option, on a step the first try would answer and
+    on the general path alike."""
+    problem, forces, shift = settling_steps(4, 30, 1)[0]
+    solve = solve_coulomb if first else lambda *args, **kwargs: without_first_try(
+        *args[:1], monkeypatch, **kwargs)
+    with pytest.raises(ValueError, match=option):
+        solve(problem, "newton-ac", tol=1e-8, warm_start=forces, shift=shift, **{option: value})
+
+
 @pytest.mark.parametrize("field, value", [("warm_start", "short"), ("tol", 0.0), ("max_outer", 0),
                                           ("max_iter", 0)])
 def test_the_arguments_are_checked_before_the_first_try(field, value, counted_first_try):
