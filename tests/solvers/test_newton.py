@@ -2477,3 +2477,26 @@ def test_a_chain_that_ends_on_a_subproblem_not_solved_is_weighed_from_its_centre
     monkeypatch.setattr(newton, "INNER_CAP", 1)
     chains = chained_and_not(load_cases()[name].problem, monkeypatch, tol_fp=1e-8)
     assert any(count > 1 and not solved for count, solved in chains)
+
+
+@pytest.mark.parametrize("contacts", [0, 1, 2, 5, 6, 1001, 25000])
+@pytest.mark.parametrize("tangent_dim", [1, 2])
+def test_the_contact_steps_are_one_over_the_floored_diagonal_and_the_median_its_middle(
+        contacts, tangent_dim):
+    """kernels.contact_steps (compiled; the median by a partition): rho = 1 / max(W_nn, 1e-12 of
+    the largest) on each contact's rows, its tangential rows after the normal ones, and the median
+    of W_nn as the middle of the sorted values (the mean of the two middle ones for an even
+    count; 1 without contacts), exactly."""
+    from lubcontact.solvers.compiled_modules import kernels
+
+    rng = np.random.default_rng(contacts)
+    diagonal = rng.random(contacts)
+    diagonal[: min(3, contacts // 2)] = 0.0                 # floored rows
+    tangential = np.arange(contacts, dtype=np.int64)[::2]
+    rho, typical = kernels().contact_steps(diagonal, tangential, tangent_dim)
+    floored = 1.0 / np.maximum(diagonal, 1e-12 * (diagonal.max() if contacts and diagonal.max() > 0
+                                                  else 1.0))
+    assert np.array_equal(rho, np.concatenate([floored, np.repeat(floored[tangential], tangent_dim)]))
+    ordered, middle = np.sort(diagonal), contacts // 2
+    assert typical == (1.0 if contacts == 0 else ordered[middle] if contacts % 2
+                       else 0.5 * (ordered[middle - 1] + ordered[middle]))
