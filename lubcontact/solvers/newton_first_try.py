@@ -19,7 +19,8 @@ joint phase) and nothing after (no finish, no fallback). ``solve_native_coulomb`
 output as its first pass's, and the shift, the pieces of UNION contacts and the check that
 follow are its own. Elsewhere the first try returns None and the general path solves the step
 from the start, repeating the first call: such a step cost 1.35-1.65 times a solve without the
-first try, and settling piles had 0-3 of them in 200 steps.
+first try. Settling piles had 0-3 of them in 200 steps; a developed 40-grain flow had 8 % of
+them, and there the first try gained nothing beyond the runs' spread.
 """
 from __future__ import annotations
 
