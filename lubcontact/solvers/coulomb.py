@@ -258,7 +258,7 @@ def solve_native_coulomb(problem: ConicProblem, method: str, *, tol: float = 1e-
         setup_time = time.perf_counter() - clock
     else:               # (no piece flips where a first try answers: convex cones, or UNION taken)
         unshifted, (scaled, first_output) = problem, first
-        setup_time = 0.0                            # normalising is in the first try's set-up
+        setup_time = 0.0                            # normalising is in the first try's output
     solve_time = 0.0
     force, length = scaled.scaling.force, scaled.scaling.length
     start = None if warm_start is None else warm_start / force

@@ -1162,7 +1162,10 @@ def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = M
         (joint_start.iterations, joint_start.taken)
     forces, iterations, history = phase.forces, phase.iterations + joint_iterations, phase.history
     status = INACCURATE if phase.status == STALLED else phase.status
-    info = phase_info(phase, joint_iterations)
+    info = {"newton_iterations": phase.iterations, "gradient_steps": phase.gradient_steps,
+            "proximal_steps": phase.proximal_steps, "strategies": phase.strategies,
+            "newton_status": phase.status, "error": phase.error,
+            "joint_iterations": joint_iterations}
     if joined_start and phase.status == CONVERGED and phase.error > JOINT_FINISH * tol \
             and not function.hyperstatic(forces):
         finish = _proximal_newton(function, unshifted, forces, JOINT_FINISH * tol, POLISH_ITERATIONS,
@@ -1199,7 +1202,14 @@ def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = M
             origin = rescue.forces               # the next round goes on from the fallback's own
         if status == CONVERGED or kept and best_error <= FALLBACK_GAP * tol:
             break
-    return method_output(function, forces, status, iterations, history, info, start, setup_time)
+    info["reused_factorisations"] = function.factorisations.reused     # the polishes' too
+    info["carried_orderings"] = function.factorisations.carried
+    info["pivoted_factorisations"] = function.factorisations.pivoted
+    info["local_sweeps"] = function.sweeps_kept
+    info["corrected_steps"] = function.corrections_kept
+    return MethodOutput(forces, status, iterations, setup_time=setup_time,
+                        solve_time=time.perf_counter() - start - setup_time,
+                        residual_history=history, info=info)
 
 
 def checked_options(**options) -> dict:
@@ -1213,37 +1223,6 @@ def checked_options(**options) -> dict:
     if "joint" in options:
         options["joint"] = checks.integer("joint", options["joint"], minimum=0)
     return options
-
-
-def method_output(function: AlartCurnier, forces: np.ndarray, status: str, iterations: int,
-                  history: np.ndarray, info: dict, start: float, setup_time: float) -> MethodOutput:
-    """:func:`newton_alart_curnier`'s output: ``info`` completed with ``function``'s counters
-    (its docstring), ``solve_time`` from ``start`` (a ``time.perf_counter()`` reading, s) less
-    ``setup_time`` (s)."""
-    info.update(reused_factorisations=function.factorisations.reused,     # the polishes' too
-                carried_orderings=function.factorisations.carried,
-                pivoted_factorisations=function.factorisations.pivoted,
-                local_sweeps=function.sweeps_kept, corrected_steps=function.corrections_kept)
-    return MethodOutput(forces, status, iterations, setup_time=setup_time,
-                        solve_time=time.perf_counter() - start - setup_time,
-                        residual_history=history, info=info)
-
-
-def first_call(function: AlartCurnier, unshifted: ConicProblem, forces: np.ndarray, tol: float,
-               max_iter: int) -> _Phase:
-    """The first call of :func:`_strategies`' first start from ``forces``: :func:`_strategies`
-    cut there (``calls`` 1). Where it converged, so did that start, with this phase, and
-    :func:`_strategies` returns it (``newton-ac``'s first try, :mod:`~.newton_first_try`)."""
-    return _strategies(function, unshifted, forces, tol, max_iter, calls=1)
-
-
-def phase_info(phase: _Phase, joint_iterations: int) -> dict:
-    """The part of :func:`newton_alart_curnier`'s ``info`` that its Newton phase gives (its
-    docstring): ``newton_iterations`` to ``joint_iterations``."""
-    return {"newton_iterations": phase.iterations, "gradient_steps": phase.gradient_steps,
-            "proximal_steps": phase.proximal_steps, "strategies": phase.strategies,
-            "newton_status": phase.status, "error": phase.error,
-            "joint_iterations": joint_iterations}
 
 
 def fallback_rounds(name: str) -> tuple[int | None, ...]:
@@ -1280,8 +1259,7 @@ def fallback_chain(cones: Cones, fallback: str | None) -> tuple[str, ...]:
 
 
 def _strategies(function: AlartCurnier, unshifted: ConicProblem, forces: np.ndarray,
-                tol: float, max_iter: int, rescue: _JointStart | None = None,
-                calls: int | None = None) -> _Phase:
+                tol: float, max_iter: int, rescue: _JointStart | None = None) -> _Phase:
     """:func:`_proximal_newton` with each ``sigma`` of :data:`STRATEGIES` in turn, each from
     ``forces`` (a strategy's stalled iterate is a worse start than the warm start, measured),
     the first also from zero forces when ``forces`` is not zero (from a warm start on a flow's
@@ -1303,9 +1281,7 @@ def _strategies(function: AlartCurnier, unshifted: ConicProblem, forces: np.ndar
     ``rescue`` (the joint phase, on the dense lanes: :class:`_JointStart`) is called once, with
     the warm start, where the first weight has stalled from it and from zero forces; where it
     returns forces, the first weight and the others start from them instead (labelled
-    ``"joint"`` in ``strategies``), as on the sparse lane from the joint phase's forces.
-    ``calls``: the first start alone, its loop cut at that many passes (:func:`first_call`); None:
-    every strategy, uncut."""
+    ``"joint"`` in ``strategies``), as on the sparse lane from the joint phase's forces."""
     best, history, tried = None, [], []
     iterations = gradient_steps = proximal_steps = 0
     warm = bool(forces.any())
@@ -1320,7 +1296,7 @@ def _strategies(function: AlartCurnier, unshifted: ConicProblem, forces: np.ndar
         index += 1
         budget = PLAIN_TRY if is_plain_try else max_iter - iterations
         phase = _proximal_newton(function, unshifted, start, tol, budget, sigma,
-                                 finish=sigma > 0 or is_plain_try, calls=calls)
+                                 finish=sigma > 0 or is_plain_try)
         if is_plain_try and phase.status != CONVERGED:
             phase.status = STALLED                  # its cap, not the solve's max_iter
         tried.append((sigma, label if start is forces else "cold"))
@@ -1332,7 +1308,7 @@ def _strategies(function: AlartCurnier, unshifted: ConicProblem, forces: np.ndar
             best = phase
         near_tol = not function.compiled and not is_plain_try and best.error <= STRATEGY_GAP * tol \
             and not (function.gluey_flow and _zero_forces_next(starts, index, warm))
-        if phase.status == CONVERGED or iterations >= max_iter or near_tol or calls is not None:
+        if phase.status == CONVERGED or iterations >= max_iter or near_tol:
             break
         if rescue is not None and index == rescue_at:
             joined = rescue(forces)
@@ -1389,8 +1365,7 @@ class _JointStart:
 
 
 def _proximal_newton(function: AlartCurnier, unshifted: ConicProblem, forces: np.ndarray,
-                     tol: float, max_iter: int, sigma: float, finish: bool = True,
-                     calls: int | None = None) -> _Phase:
+                     tol: float, max_iter: int, sigma: float, finish: bool = True) -> _Phase:
     """Proximal-point iterations, each solved by Newton, until the FCLIB error is below ``tol``.
 
     Each outer iteration solves (approximately: ``|phi_sigma|`` down by :data:`INNER_REDUCTION`, or
@@ -1427,15 +1402,13 @@ def _proximal_newton(function: AlartCurnier, unshifted: ConicProblem, forces: np
     stops at ``tol``. :func:`_strategies` asks for it after a proximal loop and after the plain
     try, not after plain Newton as a strategy (on two hard cases its iterations did not reach
     round-off); the polish to :data:`JOINT_FINISH` ``tol`` does not (that is its target).
-    ``calls``: at most that many passes of the loop (Newton phases), a strategy's start alone
-    (``newton-ac``'s first try, :mod:`~.newton_first_try`); None: no such cap.
     """
     scale = sigma * function.typical
     decrease = UNION_SIGMA_DECREASE if function.gluey_flow else SIGMA_DECREASE
     cap = UNION_INNER_CAP if function.gluey_flow else INNER_CAP
     error, velocity = function.coulomb_error(unshifted, forces), None
     history, best = [error], (error, forces)
-    iterations = gradient_steps = proximal_steps = proximal_calls = 0
+    iterations = gradient_steps = proximal_steps = 0
     status = MAX_ITER
     floor, floor_error = 0.0, np.inf                # the largest weight that failed lately
     rule = _StallRule(tol)
@@ -1500,9 +1473,6 @@ def _proximal_newton(function: AlartCurnier, unshifted: ConicProblem, forces: np
             scale = max(scale / decrease, SIGMA_MIN * function.typical)     # weight that failed
         if inner.iterations == 0:
             status = FAILED
-            break
-        proximal_calls += 1
-        if calls is not None and proximal_calls >= calls:
             break
     if best[0] <= tol:
         status = CONVERGED

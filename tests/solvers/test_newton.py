@@ -2309,7 +2309,7 @@ def test_the_first_weight_from_a_warm_start_depends_on_the_size(settling_step, m
     warm = reference.forces / scaled.scaling.force
     tried = []
 
-    def stalled(function, unshifted, forces, tol, max_iter, sigma, finish=True, calls=None):
+    def stalled(function, unshifted, forces, tol, max_iter, sigma, finish=True):
         tried.append((sigma, "warm" if forces.any() else "cold"))
         return newton._Phase(forces=forces, status=newton.STALLED, iterations=1, error=1.0,
                              history=np.ones(2), gradient_steps=0)
