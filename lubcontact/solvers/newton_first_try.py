@@ -9,7 +9,7 @@ the problem with its dense forms built in one compiled call (``StepProblem.norma
 the same arrays, nothing cached on the caller's problem) and runs ``newton-ac`` on it, whole:
 its output is the general path's by construction, and ``solve_native_coulomb`` takes it as its
 first pass's (the shift, the pieces of UNION contacts and the check that follow are its own).
-On steps of settling piles of 4 to 40 grains a solve took 0.8-0.95 of its time without it
+On steps of settling piles of 4 to 40 grains a solve took 0.80-0.94 of its time without it
 (docs/records/benchmarks.md, "newton-ac's first try on small steps").
 """
 from __future__ import annotations
