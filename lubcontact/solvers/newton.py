@@ -116,9 +116,6 @@ phase, which costs more than it saves there: 42.5 ms per step against 51.5 with 
 settling piles of 200 and 230 grains (600-680 rows) 0.96-1.0, a gluey 250-grain flow (866-937
 rows) 1.0 (docs/records/benchmarks.md, "the compiled lane to 700 rows")."""
 
-MAX_ITERATIONS = 1000
-"""``newton_alart_curnier``'s default cap on Newton iterations (its ``max_iter``)."""
-
 STATIC_DENSE_ROWS = 96
 """On the compiled lane (a 2D problem of at most :data:`COMPILED_LIMIT` rows), the rows from which
 the products ``W x`` read ``W`` by its rows and the Newton blocks are factorised sparse, without
@@ -1058,7 +1055,7 @@ def _block_solve(block: sp.spmatrix | np.ndarray, rhs: np.ndarray, rows: np.ndar
     return None
 
 @register("newton-ac", kind=NEWTON, cones=ALL_CONES, warm_start=True, native_coulomb=True)
-def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = MAX_ITERATIONS,
+def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = 1000,
                          warm_start: np.ndarray | None = None, fallback: str | None = "auto",
                          joint: int = 0) -> MethodOutput:
     """Semismooth Newton on the Alart-Curnier function (exact Coulomb, one LU per iteration).
@@ -1145,7 +1142,7 @@ def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = M
         ``fallback_status`` (the last call's: for a fallback run in rounds,
         :func:`fallback_rounds`, its last round's) when a fallback ran.
     """
-    joint = checked_options(fallback=fallback, joint=joint)["joint"]
+    joint = _checked_options(fallback, joint)
     start = time.perf_counter()
     function = AlartCurnier(problem)
     unshifted = problem.with_shift(np.zeros(problem.cones.count)) if problem.shift.any() else problem
@@ -1212,17 +1209,13 @@ def newton_alart_curnier(problem: ConicProblem, *, tol: float, max_iter: int = M
                         residual_history=history, info=info)
 
 
-def checked_options(**options) -> dict:
-    """:func:`newton_alart_curnier`'s ``fallback`` and ``joint`` where given, checked (``joint`` as
-    an int): ``ValueError`` naming the option for a ``fallback`` other than None, ``"auto"`` or a
+def _checked_options(fallback: str | None, joint: int) -> int:
+    """:func:`newton_alart_curnier`'s ``fallback`` and ``joint`` checked, ``joint`` returned as an
+    int: ``ValueError`` naming the option for a ``fallback`` other than None, ``"auto"`` or a
     registered method, and for a ``joint`` that is not an integer >= 0."""
-    if "fallback" in options:
-        fallback = options["fallback"]
-        checks.require(fallback is None or fallback == "auto" or fallback in methods(), "fallback",
-                       "must be None, 'auto' or a registered method", fallback)
-    if "joint" in options:
-        options["joint"] = checks.integer("joint", options["joint"], minimum=0)
-    return options
+    checks.require(fallback is None or fallback == "auto" or fallback in methods(), "fallback",
+                   "must be None, 'auto' or a registered method", fallback)
+    return checks.integer("joint", joint, minimum=0)
 
 
 def fallback_rounds(name: str) -> tuple[int | None, ...]:
