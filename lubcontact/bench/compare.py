@@ -45,7 +45,7 @@ from ..solvers import methods as registered
 from ..solvers import reference_method
 from ..solvers.siconos_peer import available_methods, register_siconos, siconos_status
 from . import problem_sets
-from .options import check_methods, data_folder, items, plain
+from .options import data_folder, given_methods, plain
 from .problem_sets import PACKAGE_DATA, ProblemSet, SetUnavailable
 from .report import environment, replot, write_outputs
 from .runs import MAX_OUTER, REFERENCE_TOL, SUCCESS_SLACK, run_set, variants
@@ -88,7 +88,6 @@ def _check_args(args: argparse.Namespace) -> None:
     for name in args.sets:
         if name not in problem_sets.SETS:
             raise ValueError(f"--set: unknown set {name!r}; known: {', '.join(problem_sets.SETS)}")
-    check_methods("--solvers", args.solvers)
     if args.repeats < 1:
         raise ValueError(f"--repeats: must be >= 1, got {args.repeats}")
     if args.max_iter is not None and args.max_iter < 1:
@@ -182,11 +181,8 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     args.sets = args.sets or ["piles"]
     register_siconos()                   # the field's reference library, when installed
-    args.solvers = items(args.solvers) if args.solvers else registered()
-    if not args.solvers:
-        print("lubcontact compare: --solvers: expected at least one method", file=sys.stderr)
-        return 2
     try:
+        args.solvers = registered() if args.solvers is None else given_methods("--solvers", args.solvers)
         _check_args(args)
         data = data_folder(args.data_dir)
     except ValueError as exc:

@@ -46,7 +46,7 @@ from ..solvers import (
     reference_method,
 )
 from .harness import timed_solve
-from .options import check_methods, items, names, number, plain
+from .options import given_methods, names, number, plain
 
 if TYPE_CHECKING:
     from .cases.hard import HardCase
@@ -262,13 +262,10 @@ def main(argv: list[str] | None = None) -> int:
         for name, case in load_cases().items():
             print(f"{name}\n    hard:     {case.hard}\n    expected: {case.expected}")
         return 0
-    solvers = items(args.solvers) if args.solvers else None
-    if solvers == []:
-        parser.error("argument --solvers: expected at least one method")
     try:
-        check_methods("--solvers", solvers or [])
+        solvers = None if args.solvers is None else given_methods("--solvers", args.solvers)
     except ValueError as exc:
-        parser.error(str(exc))
+        parser.error(f"argument {exc}")
     start = time.perf_counter()
     cells = run_suite(names(args.cases), solvers, args.tol, args.max_iter, args.fixed_point)
     print(matrix(cells, markdown=args.markdown))

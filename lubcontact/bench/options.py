@@ -68,6 +68,21 @@ def counts(option: str, tokens: list[str]) -> list[int]:
     return values
 
 
+def given_methods(option: str, tokens: list[str]) -> list[str]:
+    """The registered methods given after ``option`` (``nargs="+"``, space or comma separated).
+
+    Raises
+    ------
+    ValueError
+        Naming ``option``, where none is given or one is not registered.
+    """
+    given = items(tokens)
+    if not given:
+        raise ValueError(f"{option}: expected at least one method")
+    check_methods(option, given)
+    return given
+
+
 def check_methods(option: str, given: list[str]) -> None:
     """Raise ``ValueError`` naming ``option`` when a method of ``given`` is not registered."""
     from ..solvers import methods  # the registry, on use: this module stays light (number)

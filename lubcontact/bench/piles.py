@@ -293,7 +293,7 @@ def solvers_main(argv: list[str] | None = None) -> int:
                         help="fraction of closed contacts glued in the 'glued' pile (0: skip it)")
     parser.add_argument("--tol", type=number(float, 0, above=True), default=1e-8,
                         help="tolerance of the iterative (first-order) methods")
-    parser.add_argument("--reference-tol", type=float, default=1e-10,
+    parser.add_argument("--reference-tol", type=number(float, 0, above=True), default=1e-10,
                         help="tolerance of the reference and of the interior-point and QP methods")
     parser.add_argument("--max-iter", type=int, default=None, help="iteration cap (method default)")
     parser.add_argument("--accuracy", type=float, default=1e-6,
@@ -320,8 +320,6 @@ def solvers_main(argv: list[str] | None = None) -> int:
         parser.error(str(exc))
     if args.tiles < 1 or any(n % args.tiles for n in sizes):
         parser.error(f"--tiles: must be >= 1 and divide every size, got {args.tiles}")
-    if not all(t > 0 and math.isfinite(t) for t in (args.tol, args.reference_tol)):
-        parser.error("--tol, --reference-tol: must be finite and > 0")
     print(HEADER)
     measured = []
     for n in sizes:

@@ -135,7 +135,7 @@ def main(argv: list[str] | None = None) -> int:
                              "(default: apgd-jacobi,apgd-as,nsgs)")
     parser.add_argument("--steps", type=number(int, 1), default=300,
                         help="timed steps per method (default: 300)")
-    parser.add_argument("--settle", type=int, default=100,
+    parser.add_argument("--settle", type=number(int, 0), default=100,
                         help="steps before the timed ones (default: 100)")
     parser.add_argument("--tol", type=number(float, 0, above=True), default=1e-8,
                         help="solver tolerance (default: 1e-8)")
