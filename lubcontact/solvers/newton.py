@@ -125,6 +125,10 @@ entries not zero) in 19 us against 33, the order 13 us once per solve; below abo
 order and the sparse bookkeeping cost what they save (docs/records/benchmarks.md, "small
 problems' blocks factorised sparse")."""
 
+KEPT_ORDERS = 4
+"""The compiled lane's elimination orders kept, by the pattern of ``W`` they were found for
+(:func:`elimination_places`)."""
+
 _NOT_BY_ROWS = (np.empty(0, dtype=np.uint32), np.empty(0, dtype=np.uint32), np.empty(0))
 _NO_PLACES = np.empty(0, dtype=np.int32)
 """``W`` not by its rows, no elimination order: the compiled lane below :data:`STATIC_DENSE_ROWS`
@@ -607,9 +611,7 @@ class AlartCurnier:
             if self.n_rows >= STATIC_DENSE_ROWS:
                 compiled = kernels()
                 self.w_arrays = compiled.compressed_rows(self.W)
-                order = ordering().approximate_minimum_degree(
-                    *compiled.symmetrised_pattern(*self.w_arrays[:2]))
-                self.elimination_places = places_of(order)
+                self.elimination_places = elimination_places(*self.w_arrays[:2])
 
     @cached_property
     def scaled_W(self) -> sp.csr_matrix | np.ndarray:
@@ -918,6 +920,33 @@ class AlartCurnier:
         singular (43 200 active rows of a 12 800-grain deposited layer: 1.8 s against 0.17 s),
         so it is regularised at once (:func:`_block_solve`)."""
         return self.sigma == 0.0 and plain > self.rank_bound
+
+
+def elimination_places(pointers: np.ndarray, columns: np.ndarray) -> np.ndarray:
+    """Each row's place in an approximate minimum degree order of a square pattern (``W``'s on
+    the compiled lane, by rows: :func:`~lubcontact.solvers.kernels.compressed_rows`'s
+    ``pointers`` and ``columns``, symmetric), shape (n,), int32, shared by the calls with the same
+    pattern (never written): the orders of the last :data:`KEPT_ORDERS` patterns met are kept
+    and reused, not found again.
+
+    A small system's consecutive steps mostly keep their contacts, hence ``W``'s pattern: on a
+    40-grain settling pile 133 of 200 steps had the pattern of the step before. Finding the
+    order (the symmetrised pattern, then the minimum degree) took 37 us of a 557-us
+    exact-Coulomb solve at 66 contacts (docs/records/benchmarks.md, "small solves: the
+    elimination order kept by W's pattern")."""
+    key = (pointers.tobytes(), columns.tobytes())
+    places = _KEPT_PLACES.pop(key, None)
+    if places is None:
+        places = places_of(ordering().approximate_minimum_degree(
+            *kernels().symmetrised_pattern(pointers, columns)))
+    _KEPT_PLACES[key] = places              # the most recent last
+    while len(_KEPT_PLACES) > KEPT_ORDERS:
+        del _KEPT_PLACES[next(iter(_KEPT_PLACES))]
+    return places
+
+
+_KEPT_PLACES: dict[tuple[bytes, bytes], np.ndarray] = {}
+""":func:`elimination_places`' orders by their pattern's bytes, the least recently used first."""
 
 
 def lanes(problem: ConicProblem) -> tuple[bool, bool, bool]:

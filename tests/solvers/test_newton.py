@@ -1157,6 +1157,80 @@ def test_the_compiled_dense_lane_solves_the_newton_system_without_its_sliding_ro
     assert sliding_rows > 0
 
 
+def grid_pattern(side: int, seed: int):
+    """The rows (32-bit CSR arrays, as kernels.compressed_rows gives them) of a symmetric matrix
+    whose pattern is a ``side`` x ``side`` grid's, a random fifth of its edges left out."""
+    from lubcontact.solvers.kernels import compressed_rows
+
+    n = side * side
+    matrix = 4.0 * np.eye(n)
+    rng = np.random.default_rng(seed)
+    for node in range(n):
+        for other in (node + 1 if (node + 1) % side else -1, node + side if node + side < n else -1):
+            if other >= 0 and rng.random() > 0.2:
+                matrix[node, other] = matrix[other, node] = -1.0
+    return compressed_rows(matrix)[:2]
+
+
+def test_the_compiled_lanes_elimination_order_is_kept_by_the_pattern_of_w(monkeypatch):
+    """The compiled lane's elimination order (newton.elimination_places) of a pattern met again
+    is the one found for it, the same array, whatever arrays hold the pattern; it is the order
+    found afresh; another pattern has its own; past KEPT_ORDERS other patterns the least
+    recently used one is found again."""
+    from lubcontact.solvers.compiled_modules import kernels, ordering
+
+    def fresh(pattern):
+        return factorisations.places_of(ordering().approximate_minimum_degree(
+            *kernels().symmetrised_pattern(*pattern)))
+
+    monkeypatch.setattr(newton, "_KEPT_PLACES", {})
+    first, second = grid_pattern(12, seed=1), grid_pattern(12, seed=2)
+    places = newton.elimination_places(*first)
+    assert np.array_equal(places, fresh(first)) and not np.array_equal(places, fresh(second))
+    assert newton.elimination_places(*(array.copy() for array in first)) is places
+    assert np.array_equal(newton.elimination_places(*second), fresh(second))
+    assert newton.elimination_places(*first) is places             # the most recently used now
+    for seed in range(3, 3 + newton.KEPT_ORDERS - 1):
+        newton.elimination_places(*grid_pattern(12, seed))
+    assert newton.elimination_places(*first) is places             # kept: used after second
+    newton.elimination_places(*grid_pattern(12, 100))
+    again = newton.elimination_places(*second)                     # the least recent: dropped
+    assert np.array_equal(again, fresh(second)) and len(newton._KEPT_PLACES) == newton.KEPT_ORDERS
+
+
+def test_steps_of_a_small_pile_reuse_their_order_and_give_the_same_answers(monkeypatch):
+    """On consecutive steps of a settling 40-grain frictional pile (compiled lane, over
+    STATIC_DENSE_ROWS rows) most solves keep the order of the step before, and each answer is
+    the one found with every order found afresh (KEPT_ORDERS 0), to the bit."""
+    from lubcontact import scenes
+    from lubcontact.model.laws import Coulomb
+    from lubcontact.sim.simulation import Simulation
+
+    sim = Simulation(scenes.settling_pile(40, seed=1), Coulomb(0.3), 0.02, solver="newton-ac",
+                     tol=1e-8, fixed_point=True, tol_fp=1e-6, on_failure="ignore")
+    sim.run(150)
+    steps = []
+    for _ in range(8):
+        steps.append(sim.next_problem()[2:])
+        sim.step()
+    assert min(problem.n_rows for problem, _, _ in steps) >= newton.STATIC_DENSE_ROWS
+    found = []
+    counted = factorisations.places_of
+    monkeypatch.setattr(newton, "places_of", lambda order: found.append(order.size) or counted(order))
+    monkeypatch.setattr(newton, "_KEPT_PLACES", {})
+    kept = [solve_coulomb(problem, "newton-ac", tol=1e-8, warm_start=forces, shift=shift)
+            for problem, forces, shift in steps]
+    assert len(found) <= len(steps) // 2
+    monkeypatch.setattr(newton, "KEPT_ORDERS", 0)
+    monkeypatch.setattr(newton, "_KEPT_PLACES", {})
+    found.clear()
+    for (problem, forces, shift), answer in zip(steps, kept):
+        afresh = solve_coulomb(problem, "newton-ac", tol=1e-8, warm_start=forces, shift=shift)
+        assert answer.status == afresh.status == CONVERGED
+        assert np.array_equal(answer.forces, afresh.forces) and answer.iterations == afresh.iterations
+    assert len(found) == len(steps)
+
+
 @pytest.mark.parametrize("name", [name for name in COMPILED_CASES if name != "mu_zero_friction"])
 @pytest.mark.parametrize("sigma", [1e-4, 1e-2])
 def test_the_sparse_lane_solves_the_newton_system_without_its_sliding_rows(name, sigma, monkeypatch):
