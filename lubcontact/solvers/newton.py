@@ -121,18 +121,20 @@ STATIC_DENSE_ROWS = 96
 the products ``W x`` read ``W`` by its rows and the Newton blocks are factorised sparse, without
 pivoting, in a minimum-degree order of ``W`` (``AlartCurnier.elimination_places``), rather
 than by LAPACK's dense LU: a 40-grain pile's blocks (about 80 of its 130 rows, 6 % of ``W``'s
-entries not zero) in 19 us against 33, the order 13 us once per solve; below about 96 rows the
-order and the sparse bookkeeping cost what they save (docs/records/benchmarks.md, "small
+entries not zero) in 19 us against 33, the order 13 us at 100 rows, found again only where the
+pattern of ``W`` changed (:func:`elimination_places`); below about 96 rows the order and the
+sparse bookkeeping cost what they save (docs/records/benchmarks.md, "small
 problems' blocks factorised sparse")."""
-
-KEPT_ORDERS = 4
-"""The compiled lane's elimination orders kept, by the pattern of ``W`` they were found for
-(:func:`elimination_places`)."""
 
 _NOT_BY_ROWS = (np.empty(0, dtype=np.uint32), np.empty(0, dtype=np.uint32), np.empty(0))
 _NO_PLACES = np.empty(0, dtype=np.int32)
+_NO_PLACES.flags.writeable = False      # read-only, as the kept orders: one type for the kernels
 """``W`` not by its rows, no elimination order: the compiled lane below :data:`STATIC_DENSE_ROWS`
 rows (shared, never written)."""
+
+_last_order = [((b"", b""), _NO_PLACES)]
+"""The pattern (the bytes of its 32-bit CSR arrays) whose order :func:`elimination_places` found
+last, and that order, as one tuple (replaced whole)."""
 
 FACTOR_PRODUCT_SHARE = 0.5
 """On the sparse lane of a 2D problem whose ``W = L^T L`` comes with its factor, the products
@@ -530,7 +532,8 @@ class AlartCurnier:
         6 % full), else empty.
     elimination_places : ndarray of int32, shape (n_rows,) or (0,)
         On the compiled lane from :data:`STATIC_DENSE_ROWS` rows, each row's place in a
-        minimum-degree elimination order of ``W``'s pattern, in which the Newton phases
+        minimum-degree elimination order of ``W``'s pattern (shared, read-only:
+        :func:`elimination_places`), in which the Newton phases
         factorise their blocks without pivoting
         (:func:`~lubcontact.solvers.kernels.newton_direction_2d`); empty (LAPACK's LU) below.
     factor_arrays : tuple of ndarray or None
@@ -923,30 +926,44 @@ class AlartCurnier:
 
 
 def elimination_places(pointers: np.ndarray, columns: np.ndarray) -> np.ndarray:
-    """Each row's place in an approximate minimum degree order of a square pattern (``W``'s on
-    the compiled lane, by rows: :func:`~lubcontact.solvers.kernels.compressed_rows`'s
-    ``pointers`` and ``columns``, symmetric), shape (n,), int32, shared by the calls with the same
-    pattern (never written): the orders of the last :data:`KEPT_ORDERS` patterns met are kept
-    and reused, not found again.
+    """Each row's place in an approximate minimum degree order of a square symmetric pattern
+    (:func:`minimum_degree_places`), kept for the next call with the same pattern.
 
-    A small system's consecutive steps mostly keep their contacts, hence ``W``'s pattern: on a
-    40-grain settling pile 133 of 200 steps had the pattern of the step before. Finding the
-    order (the symmetrised pattern, then the minimum degree) took 37 us of a 557-us
-    exact-Coulomb solve at 66 contacts (docs/records/benchmarks.md, "small solves: the
-    elimination order kept by W's pattern")."""
-    key = (pointers.tobytes(), columns.tobytes())
-    places = _KEPT_PLACES.pop(key, None)
-    if places is None:
-        places = places_of(ordering().approximate_minimum_degree(
-            *kernels().symmetrised_pattern(pointers, columns)))
-    _KEPT_PLACES[key] = places              # the most recent last
-    while len(_KEPT_PLACES) > KEPT_ORDERS:
-        del _KEPT_PLACES[next(iter(_KEPT_PLACES))]
+    A small system's consecutive steps mostly keep their contacts, hence ``W``'s pattern: 133 of
+    200 steps of a settling 40-grain pile had the pattern of the step before, 132 of 200 on a
+    developed 40-grain dry inclined flow, 54 of 196 on a gluey one (keeping the last four
+    patterns' orders: 133, 133 and 56). Finding the order (the symmetrised pattern, then the
+    minimum degree) took 37 us of a 533-us exact-Coulomb solve at 66 contacts
+    (docs/records/benchmarks.md, "small solves: the elimination order kept by W's pattern").
+
+    Parameters
+    ----------
+    pointers, columns : ndarray of int
+        The pattern by rows (``W``'s on the compiled lane:
+        :func:`~lubcontact.solvers.kernels.compressed_rows`), taken as 32-bit unsigned.
+
+    Returns
+    -------
+    ndarray of int32, shape (n,)
+        Read-only: the same array for the same pattern, shared by the calls.
+    """
+    pointers, columns = np.asarray(pointers, dtype=np.uint32), np.asarray(columns, dtype=np.uint32)
+    pattern = (pointers.tobytes(), columns.tobytes())
+    kept, places = _last_order[0]
+    if kept != pattern:
+        places = minimum_degree_places(pointers, columns)
+        places.flags.writeable = False
+        _last_order[0] = (pattern, places)
     return places
 
 
-_KEPT_PLACES: dict[tuple[bytes, bytes], np.ndarray] = {}
-""":func:`elimination_places`' orders by their pattern's bytes, the least recently used first."""
+def minimum_degree_places(pointers: np.ndarray, columns: np.ndarray) -> np.ndarray:
+    """Each row's place (int32, shape (n,)) in an approximate minimum degree order of a square
+    symmetric pattern given by rows as 32-bit unsigned CSR arrays (the order of
+    :func:`~lubcontact.solvers.ordering.approximate_minimum_degree` on
+    :func:`~lubcontact.solvers.kernels.symmetrised_pattern`), found afresh."""
+    return places_of(ordering().approximate_minimum_degree(
+        *kernels().symmetrised_pattern(pointers, columns)))
 
 
 def lanes(problem: ConicProblem) -> tuple[bool, bool, bool]:

@@ -1173,35 +1173,35 @@ def grid_pattern(side: int, seed: int):
 
 
 def test_the_compiled_lanes_elimination_order_is_kept_by_the_pattern_of_w(monkeypatch):
-    """The compiled lane's elimination order (newton.elimination_places) of a pattern met again
-    is the one found for it, the same array, whatever arrays hold the pattern; it is the order
-    found afresh; another pattern has its own; past KEPT_ORDERS other patterns the least
-    recently used one is found again."""
-    from lubcontact.solvers.compiled_modules import kernels, ordering
-
-    def fresh(pattern):
-        return factorisations.places_of(ordering().approximate_minimum_degree(
-            *kernels().symmetrised_pattern(*pattern)))
-
-    monkeypatch.setattr(newton, "_KEPT_PLACES", {})
+    """The compiled lane's elimination order (newton.elimination_places) of the pattern met last
+    is the one found for it, the same read-only array, whatever arrays hold the pattern's
+    values; it is the order found afresh; another pattern, also one with the same row counts,
+    has its own, and the first is then found again."""
+    monkeypatch.setattr(newton, "_last_order", [((b"", b""), np.empty(0, dtype=np.int32))])
     first, second = grid_pattern(12, seed=1), grid_pattern(12, seed=2)
     places = newton.elimination_places(*first)
-    assert np.array_equal(places, fresh(first)) and not np.array_equal(places, fresh(second))
-    assert newton.elimination_places(*(array.copy() for array in first)) is places
-    assert np.array_equal(newton.elimination_places(*second), fresh(second))
-    assert newton.elimination_places(*first) is places             # the most recently used now
-    for seed in range(3, 3 + newton.KEPT_ORDERS - 1):
-        newton.elimination_places(*grid_pattern(12, seed))
-    assert newton.elimination_places(*first) is places             # kept: used after second
-    newton.elimination_places(*grid_pattern(12, 100))
-    again = newton.elimination_places(*second)                     # the least recent: dropped
-    assert np.array_equal(again, fresh(second)) and len(newton._KEPT_PLACES) == newton.KEPT_ORDERS
+    assert np.array_equal(places, newton.minimum_degree_places(*first))
+    assert not np.array_equal(places, newton.minimum_degree_places(*second))
+    assert not places.flags.writeable
+    assert newton.elimination_places(*(array.astype(np.int64) for array in first)) is places
+    others = newton.elimination_places(*second)
+    assert others is not places and np.array_equal(others, newton.minimum_degree_places(*second))
+    again = newton.elimination_places(*first)
+    assert again is not places and np.array_equal(again, places)
+    # a path 0-1-2-3 and the path 0-2-1-3: the same row counts, other columns
+    path = (np.array([0, 2, 5, 8, 10], dtype=np.uint32),
+            np.array([0, 1, 0, 1, 2, 1, 2, 3, 2, 3], dtype=np.uint32))
+    relabelled = (path[0], np.array([0, 2, 1, 2, 3, 0, 1, 2, 1, 3], dtype=np.uint32))
+    straight = newton.elimination_places(*path)
+    crossed = newton.elimination_places(*relabelled)
+    assert crossed is not straight
+    assert np.array_equal(crossed, newton.minimum_degree_places(*relabelled))
 
 
 def test_steps_of_a_small_pile_reuse_their_order_and_give_the_same_answers(monkeypatch):
     """On consecutive steps of a settling 40-grain frictional pile (compiled lane, over
     STATIC_DENSE_ROWS rows) most solves keep the order of the step before, and each answer is
-    the one found with every order found afresh (KEPT_ORDERS 0), to the bit."""
+    the one found with every order found afresh, to the bit."""
     from lubcontact import scenes
     from lubcontact.model.laws import Coulomb
     from lubcontact.sim.simulation import Simulation
@@ -1215,20 +1215,24 @@ def test_steps_of_a_small_pile_reuse_their_order_and_give_the_same_answers(monke
         sim.step()
     assert min(problem.n_rows for problem, _, _ in steps) >= newton.STATIC_DENSE_ROWS
     found = []
-    counted = factorisations.places_of
-    monkeypatch.setattr(newton, "places_of", lambda order: found.append(order.size) or counted(order))
-    monkeypatch.setattr(newton, "_KEPT_PLACES", {})
+    fresh = newton.minimum_degree_places
+    monkeypatch.setattr(newton, "minimum_degree_places",
+                        lambda *pattern: found.append(pattern[0].size) or fresh(*pattern))
+    monkeypatch.setattr(newton, "_last_order", [((b"", b""), np.empty(0, dtype=np.int32))])
     kept = [solve_coulomb(problem, "newton-ac", tol=1e-8, warm_start=forces, shift=shift)
             for problem, forces, shift in steps]
     assert len(found) <= len(steps) // 2
-    monkeypatch.setattr(newton, "KEPT_ORDERS", 0)
-    monkeypatch.setattr(newton, "_KEPT_PLACES", {})
-    found.clear()
+
+    def afresh_places(*pattern):                # read-only, as the kept ones: the same kernels
+        places = fresh(*pattern)
+        places.flags.writeable = False
+        return places
+
+    monkeypatch.setattr(newton, "elimination_places", afresh_places)
     for (problem, forces, shift), answer in zip(steps, kept):
         afresh = solve_coulomb(problem, "newton-ac", tol=1e-8, warm_start=forces, shift=shift)
         assert answer.status == afresh.status == CONVERGED
         assert np.array_equal(answer.forces, afresh.forces) and answer.iterations == afresh.iterations
-    assert len(found) == len(steps)
 
 
 @pytest.mark.parametrize("name", [name for name in COMPILED_CASES if name != "mu_zero_friction"])
