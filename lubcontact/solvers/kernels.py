@@ -951,7 +951,10 @@ def fold_sliding_rows_2d(rows, first_col, first_val, second_col, second_val, phi
         ``normal`` and whose folded coefficients ``mu s`` are ``slope``. The maps let the
         builders add every entry of a row of ``W`` without a branch on its column's kind: with
         branches, half of them mispredicted, the sparse block took twice as long (2.4 against
-        1.3 ms for 20 500 kept rows of a 12 000-grain gluey step).
+        1.3 ms for 20 500 kept rows of a 12 000-grain gluey step). ``target`` is 32-bit, as the
+        block's columns are: at 10^5 grains the block read a column's target at random places
+        of 420 000, and with 64-bit targets it took 20 against 17 ms (docs/records/benchmarks.md,
+        "the reduced block's column maps in 32 bits").
     """
     n = phi.size
     base = -phi
@@ -968,7 +971,7 @@ def fold_sliding_rows_2d(rows, first_col, first_val, second_col, second_val, phi
     sliding = np.empty(n_sliding, dtype=np.int64)
     normal = np.empty(n_sliding, dtype=np.int64)
     slope = np.empty(n_sliding)
-    target = np.full(n, n_kept)
+    target = np.full(n, n_kept, dtype=np.int32)
     factor = np.zeros(n)
     outer = base.copy()
     b = 0
@@ -1074,8 +1077,8 @@ def reduced_block_2d(indptr, indices, data, rho, sigma, kept, target, factor, ou
         columns = np.empty(capacity, dtype=np.int32)
         folded = np.empty(capacity)
     scratch = np.zeros(m + 1)               # the last: where an identity row's entries go
-    seen = np.full(m + 1, -1)
-    pattern = np.empty(m + 1, dtype=np.int64)
+    seen = np.full(m + 1, -1, dtype=np.int32)
+    pattern = np.empty(m + 1, dtype=np.int32)
     # the last block's columns renumbered: a gather in an array of the last block's size
     renumbered = np.empty(0 if same_rows or not reuse else last_kept.size, dtype=np.int32)
     for c in range(renumbered.size):
