@@ -128,9 +128,9 @@ problems' blocks factorised sparse")."""
 
 _NOT_BY_ROWS = (np.empty(0, dtype=np.uint32), np.empty(0, dtype=np.uint32), np.empty(0))
 _NO_PLACES = np.empty(0, dtype=np.int32)
-_NO_PLACES.flags.writeable = False      # read-only, as the kept orders: one type for the kernels
 """``W`` not by its rows, no elimination order: the compiled lane below :data:`STATIC_DENSE_ROWS`
 rows (shared, never written)."""
+_NO_PLACES.flags.writeable = False      # read-only, as the kept orders: one type for the kernels
 
 _last_order = [((b"", b""), _NO_PLACES)]
 """The pattern (the bytes of its 32-bit CSR arrays) whose order :func:`elimination_places` found
@@ -612,8 +612,7 @@ class AlartCurnier:
             self.W = np.ascontiguousarray(self.W)
             self.w_arrays, self.elimination_places = _NOT_BY_ROWS, _NO_PLACES
             if self.n_rows >= STATIC_DENSE_ROWS:
-                compiled = kernels()
-                self.w_arrays = compiled.compressed_rows(self.W)
+                self.w_arrays = kernels().compressed_rows(self.W)
                 self.elimination_places = elimination_places(*self.w_arrays[:2])
 
     @cached_property
